@@ -1,0 +1,11 @@
+//! makeit4d: one still photo to a long, consistent, living fly-through video (Make-It-4D,
+//! ACM MM 2023). This library holds the whole method with no GUI in it; the command line and
+//! the editor are thin front ends over it.
+
+pub mod error;
+pub mod geometry;
+pub mod progress;
+pub mod raster;
+pub mod stages;
+
+pub use error::{Error, Result};

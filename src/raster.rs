@@ -1,0 +1,328 @@
+//! Dense 2-D pixel buffers shared by every stage.
+//!
+//! A [`Raster`] is a row-major grid of `T` (`index = y * width + x`). Colour rasters hold
+//! sRGB-encoded values as `f32` in `[0, 1]` (no linearisation anywhere in the pipeline: the
+//! renderer blends in the same encoding the photo came in, as the papers do). Masks are `f32` in
+//! `[0, 1]` (soft) or `bool` (hard).
+
+use serde::{Deserialize, Serialize};
+
+/// One sRGB-encoded colour, channels in `[0, 1]`.
+pub type Rgb = [f32; 3];
+
+/// A row-major grid of pixels.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Raster<T> {
+    width: usize,
+    height: usize,
+    data: Vec<T>,
+}
+
+/// Colour image, sRGB-encoded, `[0, 1]`.
+pub type RgbRaster = Raster<Rgb>;
+/// Single-channel float image (depth, disparity, masks, confidence).
+pub type GrayRaster = Raster<f32>;
+/// Hard mask.
+pub type MaskRaster = Raster<bool>;
+
+impl<T: Copy> Raster<T> {
+    /// A `width × height` raster filled with `fill`.
+    pub fn new(width: usize, height: usize, fill: T) -> Self {
+        Self {
+            width,
+            height,
+            data: vec![fill; width * height],
+        }
+    }
+
+    /// Wraps a row-major vector; `None` when its length is not `width * height`.
+    pub fn from_vec(width: usize, height: usize, data: Vec<T>) -> Option<Self> {
+        (data.len() == width * height).then_some(Self {
+            width,
+            height,
+            data,
+        })
+    }
+
+    /// Builds a raster by calling `f(x, y)` for every pixel.
+    pub fn from_fn(width: usize, height: usize, mut f: impl FnMut(usize, usize) -> T) -> Self {
+        let mut data = Vec::with_capacity(width * height);
+        for y in 0..height {
+            for x in 0..width {
+                data.push(f(x, y));
+            }
+        }
+        Self {
+            width,
+            height,
+            data,
+        }
+    }
+
+    /// Width in pixels.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    /// Height in pixels.
+    pub fn height(&self) -> usize {
+        self.height
+    }
+
+    /// `(width, height)`.
+    pub fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
+    /// Number of pixels.
+    pub fn len(&self) -> usize {
+        self.data.len()
+    }
+
+    /// True when the raster has no pixels.
+    pub fn is_empty(&self) -> bool {
+        self.data.is_empty()
+    }
+
+    /// The pixels, row-major.
+    pub fn data(&self) -> &[T] {
+        &self.data
+    }
+
+    /// The pixels, row-major, mutable.
+    pub fn data_mut(&mut self) -> &mut [T] {
+        &mut self.data
+    }
+
+    /// Consumes the raster and returns its pixels.
+    pub fn into_vec(self) -> Vec<T> {
+        self.data
+    }
+
+    /// Linear index of `(x, y)`.
+    #[inline]
+    pub fn index(&self, x: usize, y: usize) -> usize {
+        y * self.width + x
+    }
+
+    /// The pixel at `(x, y)`. Panics when out of bounds (a programming error, not user input).
+    #[inline]
+    pub fn at(&self, x: usize, y: usize) -> T {
+        self.data[y * self.width + x]
+    }
+
+    /// Sets the pixel at `(x, y)`.
+    #[inline]
+    pub fn set(&mut self, x: usize, y: usize, value: T) {
+        let i = y * self.width + x;
+        self.data[i] = value;
+    }
+
+    /// The pixel at `(x, y)` with coordinates clamped to the border.
+    #[inline]
+    pub fn at_clamped(&self, x: isize, y: isize) -> T {
+        let x = x.clamp(0, self.width as isize - 1) as usize;
+        let y = y.clamp(0, self.height as isize - 1) as usize;
+        self.data[y * self.width + x]
+    }
+
+    /// Row `y` as a slice.
+    pub fn row(&self, y: usize) -> &[T] {
+        &self.data[y * self.width..(y + 1) * self.width]
+    }
+
+    /// Row `y` as a mutable slice.
+    pub fn row_mut(&mut self, y: usize) -> &mut [T] {
+        &mut self.data[y * self.width..(y + 1) * self.width]
+    }
+
+    /// Same size, every pixel mapped through `f`.
+    pub fn map<U: Copy>(&self, f: impl Fn(T) -> U) -> Raster<U> {
+        Raster {
+            width: self.width,
+            height: self.height,
+            data: self.data.iter().map(|&v| f(v)).collect(),
+        }
+    }
+
+    /// True when `other` has the same width and height.
+    pub fn same_size<U>(&self, other: &Raster<U>) -> bool {
+        self.width == other.width && self.height == other.height
+    }
+}
+
+/// Types that can be blended linearly (for bilinear sampling and resizing).
+pub trait Lerp: Copy {
+    /// `self·(1 − t) + other·t`.
+    fn lerp(self, other: Self, t: f32) -> Self;
+}
+
+impl Lerp for f32 {
+    #[inline]
+    fn lerp(self, other: Self, t: f32) -> Self {
+        self + (other - self) * t
+    }
+}
+
+impl Lerp for Rgb {
+    #[inline]
+    fn lerp(self, other: Self, t: f32) -> Self {
+        [
+            self[0] + (other[0] - self[0]) * t,
+            self[1] + (other[1] - self[1]) * t,
+            self[2] + (other[2] - self[2]) * t,
+        ]
+    }
+}
+
+impl Lerp for [f32; 2] {
+    #[inline]
+    fn lerp(self, other: Self, t: f32) -> Self {
+        [
+            self[0] + (other[0] - self[0]) * t,
+            self[1] + (other[1] - self[1]) * t,
+        ]
+    }
+}
+
+impl<T: Lerp> Raster<T> {
+    /// Bilinear sample at continuous pixel coordinates (pixel centres at integers), clamped to
+    /// the border.
+    #[inline]
+    pub fn sample_bilinear(&self, x: f32, y: f32) -> T {
+        let xc = x.clamp(0.0, (self.width - 1) as f32);
+        let yc = y.clamp(0.0, (self.height - 1) as f32);
+        let x0 = xc.floor() as usize;
+        let y0 = yc.floor() as usize;
+        let x1 = (x0 + 1).min(self.width - 1);
+        let y1 = (y0 + 1).min(self.height - 1);
+        let tx = xc - x0 as f32;
+        let ty = yc - y0 as f32;
+        let top = self.at(x0, y0).lerp(self.at(x1, y0), tx);
+        let bottom = self.at(x0, y1).lerp(self.at(x1, y1), tx);
+        top.lerp(bottom, ty)
+    }
+
+    /// Resized copy by bilinear sampling with pixel-centre alignment. For strong reductions
+    /// (factor > 2) it first box-averages, so no input pixel is skipped.
+    pub fn resized(&self, width: usize, height: usize) -> Raster<T>
+    where
+        T: Send + Sync + BoxAverage,
+    {
+        if width == self.width && height == self.height {
+            return self.clone();
+        }
+        let source = if self.width >= 2 * width && self.height >= 2 * height && width > 0 {
+            let fx = self.width / width;
+            let fy = self.height / height;
+            T::box_reduce(self, fx.max(1), fy.max(1))
+        } else {
+            self.clone()
+        };
+        let sx = source.width as f32 / width as f32;
+        let sy = source.height as f32 / height as f32;
+        Raster::from_fn(width, height, |x, y| {
+            source.sample_bilinear((x as f32 + 0.5) * sx - 0.5, (y as f32 + 0.5) * sy - 0.5)
+        })
+    }
+}
+
+/// Types whose values can be averaged over a box (for downsampling).
+pub trait BoxAverage: Copy + Sized {
+    /// Averages non-overlapping `fx × fy` boxes; the result is `⌊w/fx⌋ × ⌊h/fy⌋`.
+    fn box_reduce(src: &Raster<Self>, fx: usize, fy: usize) -> Raster<Self>;
+}
+
+impl BoxAverage for f32 {
+    fn box_reduce(src: &Raster<f32>, fx: usize, fy: usize) -> Raster<f32> {
+        let (w, h) = (src.width / fx, src.height / fy);
+        let n = (fx * fy) as f32;
+        Raster::from_fn(w, h, |x, y| {
+            let mut s = 0.0;
+            for dy in 0..fy {
+                for dx in 0..fx {
+                    s += src.at(x * fx + dx, y * fy + dy);
+                }
+            }
+            s / n
+        })
+    }
+}
+
+impl BoxAverage for Rgb {
+    fn box_reduce(src: &Raster<Rgb>, fx: usize, fy: usize) -> Raster<Rgb> {
+        let (w, h) = (src.width / fx, src.height / fy);
+        let n = (fx * fy) as f32;
+        Raster::from_fn(w, h, |x, y| {
+            let mut s = [0.0f32; 3];
+            for dy in 0..fy {
+                for dx in 0..fx {
+                    let c = src.at(x * fx + dx, y * fy + dy);
+                    s[0] += c[0];
+                    s[1] += c[1];
+                    s[2] += c[2];
+                }
+            }
+            [s[0] / n, s[1] / n, s[2] / n]
+        })
+    }
+}
+
+/// Rec. 709 luma of an sRGB-encoded colour.
+#[inline]
+pub fn luma(c: Rgb) -> f32 {
+    0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
+}
+
+/// The `q`-quantile (`q` in `[0, 1]`) of the finite values in `values`, by selection
+/// (O(n)); `None` when there are none.
+pub fn quantile(values: &[f32], q: f32) -> Option<f32> {
+    let mut finite: Vec<f32> = values.iter().copied().filter(|v| v.is_finite()).collect();
+    if finite.is_empty() {
+        return None;
+    }
+    let k = ((finite.len() - 1) as f32 * q.clamp(0.0, 1.0)).round() as usize;
+    let (_, v, _) = finite.select_nth_unstable_by(k, f32::total_cmp);
+    Some(*v)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bilinear_hits_pixel_centres_and_midpoints() {
+        let r = Raster::from_vec(2, 2, vec![0.0, 1.0, 2.0, 3.0]).unwrap();
+        assert_eq!(r.sample_bilinear(0.0, 0.0), 0.0);
+        assert_eq!(r.sample_bilinear(1.0, 1.0), 3.0);
+        assert_eq!(r.sample_bilinear(0.5, 0.5), 1.5);
+        // Clamped outside.
+        assert_eq!(r.sample_bilinear(-5.0, 9.0), 2.0);
+    }
+
+    #[test]
+    fn from_vec_rejects_wrong_length() {
+        assert!(Raster::from_vec(2, 2, vec![0.0f32; 3]).is_none());
+    }
+
+    #[test]
+    fn resize_preserves_constant_and_mean() {
+        let r = Raster::new(64, 40, 0.25f32);
+        let s = r.resized(7, 5);
+        assert!(s.data().iter().all(|&v| (v - 0.25).abs() < 1e-6));
+        let ramp = Raster::from_fn(8, 8, |x, _| x as f32);
+        let half = ramp.resized(4, 4);
+        // Box-averaged pairs: 0.5, 2.5, 4.5, 6.5.
+        assert!((half.at(0, 0) - 0.5).abs() < 1e-6);
+        assert!((half.at(3, 0) - 6.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn quantile_ignores_non_finite() {
+        let v = [3.0, f32::NAN, 1.0, 2.0, f32::INFINITY];
+        assert_eq!(quantile(&v, 0.0), Some(1.0));
+        assert_eq!(quantile(&v, 1.0), Some(3.0));
+        assert_eq!(quantile(&v, 0.5), Some(2.0));
+        assert_eq!(quantile(&[f32::NAN], 0.5), None);
+    }
+}

@@ -1,0 +1,39 @@
+//! Image completion: the [`Inpainter`] trait and its implementations.
+
+use crate::error::Result;
+use crate::progress::Progress;
+use crate::raster::{GrayRaster, MaskRaster, RgbRaster};
+
+/// One completion job. Every raster has the image's size.
+#[derive(Clone, Copy, Debug)]
+pub struct InpaintRequest<'a> {
+    /// The image; values inside the hole are ignored.
+    pub image: &'a RgbRaster,
+    /// `true` = fill this pixel.
+    pub hole: &'a MaskRaster,
+    /// `true` = texture may be copied from here. `None`: every pixel outside the hole.
+    pub allowed_source: Option<&'a MaskRaster>,
+    /// Optional guide channel (e.g. depth), known outside the hole; used for matching and
+    /// completed together with the colour.
+    pub guide: Option<&'a GrayRaster>,
+    /// Seed for every random choice: the same request and seed give the same bytes.
+    pub seed: u64,
+}
+
+/// The completed image and, when a guide was given, the completed guide.
+#[derive(Clone, Debug)]
+pub struct InpaintResult {
+    /// The image with the hole filled; pixels outside the hole are unchanged.
+    pub image: RgbRaster,
+    /// The guide with the hole filled, when one was given.
+    pub guide: Option<GrayRaster>,
+}
+
+/// Fills holes in images.
+pub trait Inpainter: Send + Sync {
+    /// A short name for logs and tables.
+    fn name(&self) -> &str;
+
+    /// Fills `request.hole`. Deterministic for a given seed.
+    fn inpaint(&self, request: &InpaintRequest<'_>, progress: &Progress) -> Result<InpaintResult>;
+}

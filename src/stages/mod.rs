@@ -1,0 +1,6 @@
+//! The method, one module per stage. Each stage is a pure function of its inputs and
+//! parameters (`../docs/algorithms.md`).
+
+pub mod depth;
+pub mod inpaint;
+pub mod points;
