@@ -6,6 +6,7 @@ pub mod error;
 pub mod geometry;
 pub mod progress;
 pub mod raster;
+pub mod render;
 pub mod stages;
 
 pub use error::{Error, Result};
