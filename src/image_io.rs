@@ -1,0 +1,377 @@
+//! Reading and writing image files.
+//!
+//! Decoding checks the header against size limits before any pixel buffer is allocated, applies
+//! the EXIF orientation, and accepts 8- and 16-bit, greyscale, RGBA and CMYK images. Colours are
+//! kept sRGB-encoded (converted to `f32` in `[0, 1]`, never linearised). An alpha channel is
+//! kept as per-pixel coverage: the point cloud gives each pixel its alpha as opacity, so a fully
+//! transparent pixel makes no point and renders as a hole (black, coverage 0).
+//!
+//! Writing is atomic: the bytes go to a temporary file in the destination folder, which is then
+//! renamed over the destination, so a folder never holds a half-written image.
+
+use crate::error::{Error, Result};
+use crate::raster::{GrayRaster, Raster, RgbRaster};
+use image::{DynamicImage, ImageDecoder, ImageReader, Limits};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Largest accepted width or height, pixels.
+pub const MAX_SIDE: u32 = 16_384;
+/// Largest accepted pixel count (40 megapixels: the point cloud needs ~100 bytes a pixel).
+pub const MAX_PIXELS: u64 = 40_000_000;
+
+/// A decoded image.
+#[derive(Clone, Debug)]
+pub struct LoadedImage {
+    /// Colour, sRGB-encoded, `[0, 1]`.
+    pub rgb: RgbRaster,
+    /// Alpha in `[0, 1]` when the file has an alpha channel.
+    pub alpha: Option<GrayRaster>,
+    /// Bits per channel in the file (8 or 16; 32 for float formats).
+    pub bits_per_channel: u8,
+}
+
+/// Checks that `path` is a readable, non-empty regular file.
+fn check_regular_file(path: &Path) -> Result<()> {
+    let meta = std::fs::metadata(path).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => Error::file(path, "no such file"),
+        _ => Error::file(path, e),
+    })?;
+    if meta.is_dir() {
+        return Err(Error::file(path, "is a directory, not an image file"));
+    }
+    if meta.len() == 0 {
+        return Err(Error::file(path, "is empty (0 bytes)"));
+    }
+    Ok(())
+}
+
+/// Checks a size read from a header against [`MAX_SIDE`] and [`MAX_PIXELS`].
+pub fn check_size(path: &Path, width: u32, height: u32) -> Result<()> {
+    if width == 0 || height == 0 {
+        return Err(Error::file(path, format!("has no pixels ({width}×{height})")));
+    }
+    if width > MAX_SIDE || height > MAX_SIDE || width as u64 * height as u64 > MAX_PIXELS {
+        return Err(Error::file(
+            path,
+            format!(
+                "is {width}×{height}, larger than the limit ({MAX_SIDE} px a side, {} megapixels)",
+                MAX_PIXELS / 1_000_000
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Decodes an image file (see the module docs for what is accepted and how).
+pub fn load_image(path: &Path) -> Result<LoadedImage> {
+    check_regular_file(path)?;
+    let reader = ImageReader::open(path)
+        .map_err(|e| Error::file(path, e))?
+        .with_guessed_format()
+        .map_err(|e| Error::file(path, e))?;
+    if reader.format().is_none() {
+        return Err(Error::file(path, "is not a recognised image format"));
+    }
+    let mut reader = reader;
+    let mut limits = Limits::default();
+    limits.max_image_width = Some(MAX_SIDE);
+    limits.max_image_height = Some(MAX_SIDE);
+    limits.max_alloc = Some(MAX_PIXELS * 16);
+    reader.limits(limits);
+    let mut decoder = reader
+        .into_decoder()
+        .map_err(|e| Error::file(path, decode_message(&e)))?;
+    let (width, height) = decoder.dimensions();
+    check_size(path, width, height)?;
+    let orientation = decoder
+        .orientation()
+        .map_err(|e| Error::file(path, decode_message(&e)))?;
+    let mut image =
+        DynamicImage::from_decoder(decoder).map_err(|e| Error::file(path, decode_message(&e)))?;
+    image.apply_orientation(orientation);
+    Ok(from_dynamic(&image))
+}
+
+/// Turns an `image` error into one line a user understands.
+fn decode_message(e: &image::ImageError) -> String {
+    match e {
+        image::ImageError::Limits(_) => format!("too large to decode safely ({e})"),
+        image::ImageError::Unsupported(_) => format!("unsupported image ({e})"),
+        image::ImageError::Decoding(_) => format!("corrupt or truncated image ({e})"),
+        _ => e.to_string(),
+    }
+}
+
+/// Converts a decoded image into rasters.
+pub fn from_dynamic(image: &DynamicImage) -> LoadedImage {
+    let (w, h) = (image.width() as usize, image.height() as usize);
+    let bits_per_channel = match image {
+        DynamicImage::ImageLuma8(_)
+        | DynamicImage::ImageLumaA8(_)
+        | DynamicImage::ImageRgb8(_)
+        | DynamicImage::ImageRgba8(_) => 8,
+        DynamicImage::ImageRgb32F(_) | DynamicImage::ImageRgba32F(_) => 32,
+        _ => 16,
+    };
+    let rgb32 = image.to_rgb32f();
+    let rgb = Raster::from_vec(
+        w,
+        h,
+        rgb32
+            .pixels()
+            .map(|p| {
+                [
+                    sanitise_unit(p.0[0]),
+                    sanitise_unit(p.0[1]),
+                    sanitise_unit(p.0[2]),
+                ]
+            })
+            .collect(),
+    )
+    .unwrap_or_else(|| Raster::new(w, h, [0.0; 3]));
+    let alpha = image.color().has_alpha().then(|| {
+        let rgba = image.to_rgba32f();
+        Raster::from_vec(w, h, rgba.pixels().map(|p| sanitise_unit(p.0[3])).collect())
+            .unwrap_or_else(|| Raster::new(w, h, 1.0))
+    });
+    LoadedImage {
+        rgb,
+        alpha,
+        bits_per_channel,
+    }
+}
+
+/// Clamps to `[0, 1]`, mapping NaN to 0.
+fn sanitise_unit(v: f32) -> f32 {
+    if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) }
+}
+
+/// 8-bit sRGB bytes of a colour raster (rounded, clamped).
+pub fn to_rgb8(image: &RgbRaster) -> image::RgbImage {
+    let mut out = image::RgbImage::new(image.width() as u32, image.height() as u32);
+    for (dst, src) in out.pixels_mut().zip(image.data()) {
+        dst.0 = src.map(unit_to_u8);
+    }
+    out
+}
+
+/// 16-bit sRGB of a colour raster (rounded, clamped).
+pub fn to_rgb16(image: &RgbRaster) -> image::ImageBuffer<image::Rgb<u16>, Vec<u16>> {
+    let mut out = image::ImageBuffer::new(image.width() as u32, image.height() as u32);
+    for (dst, src) in out.pixels_mut().zip(image.data()) {
+        let p: &mut image::Rgb<u16> = dst;
+        p.0 = src.map(unit_to_u16);
+    }
+    out
+}
+
+/// `[0, 1]` → `0..=255`, NaN → 0.
+#[inline]
+pub fn unit_to_u8(v: f32) -> u8 {
+    (sanitise_unit(v) * 255.0).round() as u8
+}
+
+/// `[0, 1]` → `0..=65535`, NaN → 0.
+#[inline]
+pub fn unit_to_u16(v: f32) -> u16 {
+    (sanitise_unit(v) * 65535.0).round() as u16
+}
+
+/// Encodes `image` as PNG into memory.
+pub fn encode_png(image: &DynamicImage) -> Result<Vec<u8>> {
+    let mut bytes = Vec::new();
+    image
+        .write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
+        .map_err(|e| Error::invalid(format!("PNG encoding failed: {e}")))?;
+    Ok(bytes)
+}
+
+/// Writes `bytes` to `path` atomically: a temporary file beside it, flushed and synced, then
+/// renamed. On any failure the temporary file is removed and `path` is untouched.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let name = path
+        .file_name()
+        .ok_or_else(|| Error::file(path, "is not a file path"))?
+        .to_string_lossy()
+        .into_owned();
+    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    let result = (|| -> std::io::Result<()> {
+        let mut file = std::fs::File::create(&tmp)?;
+        file.write_all(bytes)?;
+        file.sync_all()?;
+        drop(file);
+        std::fs::rename(&tmp, path)
+    })();
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        let message = if e.raw_os_error() == Some(28) {
+            "no space left on the device".to_string()
+        } else {
+            e.to_string()
+        };
+        return Err(Error::file(path, format!("cannot write: {message}")));
+    }
+    Ok(())
+}
+
+/// Writes a colour raster as an 8- or 16-bit PNG, atomically.
+pub fn save_rgb_png(path: &Path, image: &RgbRaster, sixteen_bit: bool) -> Result<()> {
+    let dynamic = if sixteen_bit {
+        DynamicImage::ImageRgb16(to_rgb16(image))
+    } else {
+        DynamicImage::ImageRgb8(to_rgb8(image))
+    };
+    write_atomic(path, &encode_png(&dynamic)?)
+}
+
+/// Writes a `[0, 1]` single-channel raster as a 16-bit greyscale PNG, atomically.
+pub fn save_gray16_png(path: &Path, image: &GrayRaster) -> Result<()> {
+    let mut out = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::new(
+        image.width() as u32,
+        image.height() as u32,
+    );
+    for (dst, &src) in out.pixels_mut().zip(image.data()) {
+        dst.0 = [unit_to_u16(src)];
+    }
+    write_atomic(path, &encode_png(&DynamicImage::ImageLuma16(out))?)
+}
+
+/// Makes sure `dir` exists (creating it) and is a writable folder; the error names the folder.
+pub fn prepare_output_dir(dir: &Path) -> Result<()> {
+    if dir.exists() && !dir.is_dir() {
+        return Err(Error::file(dir, "exists and is not a folder"));
+    }
+    std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, format!("cannot create: {e}")))?;
+    let probe = dir.join(format!(".makeit4d-write-test.{}", std::process::id()));
+    std::fs::write(&probe, b"")
+        .map_err(|e| Error::file(dir, format!("folder is not writable: {e}")))?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmp() -> tempfile::TempDir {
+        tempfile::tempdir().expect("tempdir")
+    }
+
+    #[test]
+    fn round_trip_8_bit_png() {
+        let dir = tmp();
+        let p = dir.path().join("a.png");
+        let img = Raster::from_fn(3, 2, |x, y| [x as f32 / 2.0, y as f32, 0.5]);
+        save_rgb_png(&p, &img, false).unwrap();
+        let back = load_image(&p).unwrap();
+        assert_eq!(back.rgb.size(), (3, 2));
+        assert!(back.alpha.is_none());
+        for (a, b) in img.data().iter().zip(back.rgb.data()) {
+            for c in 0..3 {
+                assert!((a[c] - b[c]).abs() <= 0.5 / 255.0 + 1e-6);
+            }
+        }
+        // No temporary file left behind.
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn sixteen_bit_grey_and_alpha() {
+        let dir = tmp();
+        let p16 = dir.path().join("g16.png");
+        let g = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(4, 4, |x, _| {
+            image::Luma([x as u16 * 20000])
+        });
+        DynamicImage::ImageLuma16(g).save(&p16).unwrap();
+        let l = load_image(&p16).unwrap();
+        assert_eq!(l.bits_per_channel, 16);
+        assert!((l.rgb.at(1, 0)[1] - 20000.0 / 65535.0).abs() < 1e-5);
+
+        let pa = dir.path().join("rgba.png");
+        let rgba = image::RgbaImage::from_fn(2, 1, |x, _| image::Rgba([255, 0, 0, x as u8 * 255]));
+        DynamicImage::ImageRgba8(rgba).save(&pa).unwrap();
+        let l = load_image(&pa).unwrap();
+        let alpha = l.alpha.expect("alpha kept");
+        assert_eq!(alpha.data(), &[0.0, 1.0]);
+        assert_eq!(l.rgb.at(0, 0), [1.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn bad_files_give_one_line_errors() {
+        let dir = tmp();
+        let missing = dir.path().join("nope.png");
+        let e = load_image(&missing).unwrap_err().to_string();
+        assert!(e.contains("nope.png") && e.contains("no such file"), "{e}");
+        let e = load_image(dir.path()).unwrap_err().to_string();
+        assert!(e.contains("directory"), "{e}");
+        let empty = dir.path().join("empty.png");
+        std::fs::write(&empty, b"").unwrap();
+        assert!(load_image(&empty).unwrap_err().to_string().contains("empty"));
+        let text = dir.path().join("text.png");
+        std::fs::write(&text, b"hello, this is not an image\n").unwrap();
+        let e = load_image(&text).unwrap_err().to_string();
+        assert!(e.contains("text.png"), "{e}");
+        assert!(!e.contains('\n'));
+    }
+
+    #[test]
+    fn huge_header_is_refused_before_allocating() {
+        // A valid PNG signature + IHDR claiming 100000×100000, no pixel data.
+        let dir = tmp();
+        let p = dir.path().join("huge.png");
+        let mut bytes = vec![0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A];
+        let mut ihdr = Vec::new();
+        ihdr.extend_from_slice(b"IHDR");
+        ihdr.extend_from_slice(&100_000u32.to_be_bytes());
+        ihdr.extend_from_slice(&100_000u32.to_be_bytes());
+        ihdr.extend_from_slice(&[8, 2, 0, 0, 0]);
+        bytes.extend_from_slice(&13u32.to_be_bytes());
+        bytes.extend_from_slice(&ihdr);
+        bytes.extend_from_slice(&crc32(&ihdr).to_be_bytes());
+        std::fs::write(&p, &bytes).unwrap();
+        let e = load_image(&p).unwrap_err().to_string();
+        assert!(e.contains("huge.png") && e.contains("large"), "{e}");
+    }
+
+    /// CRC-32 (IEEE) for building PNG chunks in tests.
+    fn crc32(data: &[u8]) -> u32 {
+        let mut crc = 0xFFFF_FFFFu32;
+        for &b in data {
+            crc ^= b as u32;
+            for _ in 0..8 {
+                crc = if crc & 1 != 0 {
+                    (crc >> 1) ^ 0xEDB8_8320
+                } else {
+                    crc >> 1
+                };
+            }
+        }
+        !crc
+    }
+
+    #[test]
+    fn atomic_write_into_missing_folder_fails_cleanly() {
+        let dir = tmp();
+        let p = dir.path().join("missing").join("x.png");
+        let e = write_atomic(&p, b"abc").unwrap_err().to_string();
+        assert!(e.contains("x.png") && e.contains("cannot write"), "{e}");
+    }
+
+    #[test]
+    fn output_dir_that_is_a_file_is_refused() {
+        let dir = tmp();
+        let f = dir.path().join("file");
+        std::fs::write(&f, b"x").unwrap();
+        assert!(
+            prepare_output_dir(&f)
+                .unwrap_err()
+                .to_string()
+                .contains("not a folder")
+        );
+    }
+}
