@@ -3,11 +3,15 @@
 //! the editor are thin front ends over it.
 
 pub mod error;
+pub mod export;
 pub mod geometry;
 pub mod image_io;
+pub mod path;
 pub mod progress;
+pub mod project;
 pub mod raster;
 pub mod render;
+pub mod scene;
 pub mod stages;
 
 pub use error::{Error, Result};

@@ -1,0 +1,309 @@
+//! The project file: everything that affects the output, as versioned JSON.
+//!
+//! The command line and the editor read and write the same file, so a scene tuned in the editor
+//! renders identically from a script. The input image path is stored relative to the project
+//! file. Every section has defaults, so a minimal project is `{"version": 1, "input": "a.jpg"}`.
+
+use crate::error::{Error, Result};
+use crate::path::CameraPath;
+use crate::render::SplatSettings;
+use crate::stages::depth::horizon::HorizonParams;
+use serde::{Deserialize, Serialize};
+use std::path::{Component, Path, PathBuf};
+
+/// The project file version this build reads and writes.
+pub const PROJECT_VERSION: u32 = 1;
+
+/// Largest frame count accepted (a sanity bound, ~2 hours at 25 fps).
+pub const MAX_FRAMES: usize = 200_000;
+
+/// A whole project.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Project {
+    /// File format version; must be [`PROJECT_VERSION`].
+    pub version: u32,
+    /// The input photo. Relative paths are relative to the project file's folder (or to the
+    /// working directory for a project that has not been saved).
+    pub input: PathBuf,
+    /// Output frames.
+    #[serde(default)]
+    pub output: OutputSettings,
+    /// Camera model and path.
+    #[serde(default)]
+    pub camera: CameraSettings,
+    /// Depth stage.
+    #[serde(default)]
+    pub depth: DepthSettings,
+    /// Splatting quality.
+    #[serde(default)]
+    pub render: SplatSettings,
+}
+
+/// Output size and timing.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OutputSettings {
+    /// Output width; `None` = the input's.
+    pub width: Option<usize>,
+    /// Output height; `None` = the input's.
+    pub height: Option<usize>,
+    /// Number of frames.
+    pub frames: usize,
+    /// Frames per second (metadata for video export and timing).
+    pub fps: f32,
+}
+
+impl Default for OutputSettings {
+    fn default() -> Self {
+        Self {
+            width: None,
+            height: None,
+            frames: 100,
+            fps: 25.0,
+        }
+    }
+}
+
+/// Camera intrinsics of the input photo and the path.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CameraSettings {
+    /// Horizontal field of view of the input photo, degrees.
+    pub hfov_deg: f32,
+    /// The camera path.
+    pub path: CameraPath,
+}
+
+impl Default for CameraSettings {
+    fn default() -> Self {
+        Self {
+            hfov_deg: 60.0,
+            path: CameraPath::default(),
+        }
+    }
+}
+
+/// Which depth estimator runs, and its parameters.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DepthSettings {
+    /// Parameters of the horizon prior.
+    pub horizon: HorizonParams,
+}
+
+impl Project {
+    /// A project for `input` with every setting at its default.
+    pub fn new(input: impl Into<PathBuf>) -> Self {
+        Self {
+            version: PROJECT_VERSION,
+            input: input.into(),
+            output: OutputSettings::default(),
+            camera: CameraSettings::default(),
+            depth: DepthSettings::default(),
+            render: SplatSettings::default(),
+        }
+    }
+
+    /// Checks every value a user can type; the error names the setting.
+    pub fn validate(&self) -> Result<()> {
+        if self.version != PROJECT_VERSION {
+            return Err(Error::invalid(format!(
+                "unsupported project version {} (this makeit4d reads version {PROJECT_VERSION})",
+                self.version
+            )));
+        }
+        let o = &self.output;
+        if o.frames == 0 || o.frames > MAX_FRAMES {
+            return Err(Error::invalid(format!(
+                "frames = {} is outside 1..={MAX_FRAMES}",
+                o.frames
+            )));
+        }
+        if !(o.fps.is_finite() && o.fps > 0.0 && o.fps <= 1000.0) {
+            return Err(Error::invalid(format!("fps = {} is outside (0, 1000]", o.fps)));
+        }
+        for (name, v) in [("width", o.width), ("height", o.height)] {
+            if let Some(v) = v
+                && (v == 0 || v > crate::image_io::MAX_SIDE as usize)
+            {
+                return Err(Error::invalid(format!(
+                    "output {name} = {v} is outside 1..={}",
+                    crate::image_io::MAX_SIDE
+                )));
+            }
+        }
+        if o.width.is_some() != o.height.is_some() {
+            return Err(Error::invalid(
+                "output width and height must be given together",
+            ));
+        }
+        if !(self.camera.hfov_deg.is_finite()
+            && self.camera.hfov_deg >= 0.1
+            && self.camera.hfov_deg <= 179.0)
+        {
+            return Err(Error::invalid(format!(
+                "field of view {}° is outside [0.1°, 179°]",
+                self.camera.hfov_deg
+            )));
+        }
+        self.render.validate()
+    }
+
+    /// Reads and validates a project file. Relative input paths are resolved against the
+    /// project file's folder.
+    pub fn load(path: &Path) -> Result<Project> {
+        let text = std::fs::read_to_string(path).map_err(|e| match e.kind() {
+            std::io::ErrorKind::NotFound => Error::file(path, "no such project file"),
+            std::io::ErrorKind::InvalidData => Error::file(path, "is not UTF-8 text"),
+            _ => Error::file(path, e),
+        })?;
+        let mut project = Self::from_json(&text).map_err(|e| match e {
+            Error::InvalidInput(m) => Error::file(path, m),
+            other => other,
+        })?;
+        if project.input.is_relative() {
+            let base = path.parent().unwrap_or(Path::new(""));
+            project.input = base.join(&project.input);
+        }
+        Ok(project)
+    }
+
+    /// Parses and validates project JSON (input path left as written).
+    pub fn from_json(text: &str) -> Result<Project> {
+        let value: serde_json::Value = serde_json::from_str(text)
+            .map_err(|e| Error::invalid(format!("malformed project JSON: {e}")))?;
+        match value.get("version") {
+            Some(serde_json::Value::Number(n)) if n.as_u64() == Some(PROJECT_VERSION as u64) => {}
+            Some(v) => {
+                return Err(Error::invalid(format!(
+                    "unsupported project version {v} (this makeit4d reads version {PROJECT_VERSION})"
+                )));
+            }
+            None => return Err(Error::invalid("project JSON has no \"version\" field")),
+        }
+        let project: Project = serde_json::from_value(value)
+            .map_err(|e| Error::invalid(format!("invalid project: {e}")))?;
+        project.validate()?;
+        Ok(project)
+    }
+
+    /// Writes the project atomically to `path`, storing the input path relative to `path`'s
+    /// folder when both are on the same file system tree.
+    pub fn save(&self, path: &Path) -> Result<()> {
+        self.validate()?;
+        let mut stored = self.clone();
+        let base = absolute(path.parent().unwrap_or(Path::new("")));
+        stored.input = relative_to(&absolute(&self.input), &base);
+        let text = serde_json::to_string_pretty(&stored)
+            .map_err(|e| Error::invalid(format!("cannot serialise project: {e}")))?;
+        crate::image_io::write_atomic(path, format!("{text}\n").as_bytes())
+    }
+}
+
+/// `path` made absolute against the working directory, with `.` and `..` removed lexically.
+fn absolute(path: &Path) -> PathBuf {
+    let joined = if path.is_absolute() {
+        path.to_path_buf()
+    } else {
+        std::env::current_dir()
+            .unwrap_or_default()
+            .join(path)
+    };
+    let mut out = PathBuf::new();
+    for c in joined.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                out.pop();
+            }
+            other => out.push(other.as_os_str()),
+        }
+    }
+    out
+}
+
+/// `target` expressed relative to the folder `base` (both absolute and normalised).
+fn relative_to(target: &Path, base: &Path) -> PathBuf {
+    let t: Vec<_> = target.components().collect();
+    let b: Vec<_> = base.components().collect();
+    let common = t.iter().zip(&b).take_while(|(x, y)| x == y).count();
+    if common == 0 {
+        return target.to_path_buf();
+    }
+    let mut out = PathBuf::new();
+    for _ in common..b.len() {
+        out.push("..");
+    }
+    for c in &t[common..] {
+        out.push(c.as_os_str());
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn minimal_project_gets_defaults() {
+        let p = Project::from_json(r#"{"version": 1, "input": "a.jpg"}"#).unwrap();
+        assert_eq!(p.output.frames, 100);
+        assert_eq!(p.render, SplatSettings::default());
+    }
+
+    #[test]
+    fn bad_projects_are_refused_with_reasons() {
+        let cases = [
+            ("{", "malformed"),
+            (r#"{"input": "a.jpg"}"#, "no \"version\""),
+            (r#"{"version": 7, "input": "a.jpg"}"#, "unsupported project version 7"),
+            (r#"{"version": "1", "input": "a.jpg"}"#, "unsupported project version"),
+            (r#"{"version": 1}"#, "input"),
+            (r#"{"version": 1, "input": "a", "bogus": 3}"#, "bogus"),
+            (
+                r#"{"version": 1, "input": "a", "output": {"frames": 0}}"#,
+                "frames = 0",
+            ),
+            (
+                r#"{"version": 1, "input": "a", "render": {"k": 99}}"#,
+                "K = 99",
+            ),
+        ];
+        for (json, needle) in cases {
+            let e = Project::from_json(json).unwrap_err().to_string();
+            assert!(e.contains(needle), "{json} → {e}");
+            assert!(!e.contains('\n'), "{e}");
+        }
+    }
+
+    #[test]
+    fn save_load_round_trip_with_relative_input() {
+        let dir = tempfile::tempdir().unwrap();
+        let img = dir.path().join("images").join("photo.jpg");
+        let mut p = Project::new(&img);
+        p.output.frames = 7;
+        p.camera.hfov_deg = 42.0;
+        let file = dir.path().join("projects").join("p.json");
+        std::fs::create_dir_all(file.parent().unwrap()).unwrap();
+        p.save(&file).unwrap();
+        let text = std::fs::read_to_string(&file).unwrap();
+        assert!(text.contains("\"../images/photo.jpg\""), "{text}");
+        let back = Project::load(&file).unwrap();
+        assert_eq!(absolute(&back.input), absolute(&img));
+        assert_eq!(back.output, p.output);
+        assert_eq!(back.camera, p.camera);
+    }
+
+    #[test]
+    fn relative_paths() {
+        assert_eq!(
+            relative_to(Path::new("/a/b/c.jpg"), Path::new("/a/d")),
+            PathBuf::from("../b/c.jpg")
+        );
+        assert_eq!(
+            relative_to(Path::new("/a/b/c.jpg"), Path::new("/a/b")),
+            PathBuf::from("c.jpg")
+        );
+    }
+}
