@@ -49,7 +49,10 @@ fn check_regular_file(path: &Path) -> Result<()> {
 /// Checks a size read from a header against [`MAX_SIDE`] and [`MAX_PIXELS`].
 pub fn check_size(path: &Path, width: u32, height: u32) -> Result<()> {
     if width == 0 || height == 0 {
-        return Err(Error::file(path, format!("has no pixels ({width}×{height})")));
+        return Err(Error::file(
+            path,
+            format!("has no pixels ({width}×{height})"),
+        ));
     }
     if width > MAX_SIDE || height > MAX_SIDE || width as u64 * height as u64 > MAX_PIXELS {
         return Err(Error::file(
@@ -66,17 +69,23 @@ pub fn check_size(path: &Path, width: u32, height: u32) -> Result<()> {
 /// Decodes an image file (see the module docs for what is accepted and how).
 pub fn load_image(path: &Path) -> Result<LoadedImage> {
     check_regular_file(path)?;
-    let reader = ImageReader::open(path)
-        .map_err(|e| Error::file(path, e))?
+    let bytes = std::fs::read(path).map_err(|e| Error::file(path, e))?;
+    let mut reader = ImageReader::new(std::io::Cursor::new(&bytes[..]))
         .with_guessed_format()
         .map_err(|e| Error::file(path, e))?;
-    if reader.format().is_none() {
-        return Err(Error::file(path, "is not a recognised image format"));
+    match reader.format() {
+        None => return Err(Error::file(path, "is not a recognised image format")),
+        Some(image::ImageFormat::Jpeg) if !jpeg_is_complete(&bytes) => {
+            return Err(Error::file(
+                path,
+                "corrupt or truncated JPEG (no end-of-image marker after the last scan)",
+            ));
+        }
+        Some(_) => {}
     }
-    let mut reader = reader;
+    // Width and height are checked by `check_size` right after the header is read (so the
+    // message can name the size); the allocation limit guards the decoders themselves.
     let mut limits = Limits::default();
-    limits.max_image_width = Some(MAX_SIDE);
-    limits.max_image_height = Some(MAX_SIDE);
     limits.max_alloc = Some(MAX_PIXELS * 16);
     reader.limits(limits);
     let mut decoder = reader
@@ -91,6 +100,18 @@ pub fn load_image(path: &Path) -> Result<LoadedImage> {
         DynamicImage::from_decoder(decoder).map_err(|e| Error::file(path, decode_message(&e)))?;
     image.apply_orientation(orientation);
     Ok(from_dynamic(&image))
+}
+
+/// True when a JPEG byte stream has an end-of-image marker (`FF D9`) after its last
+/// start-of-scan (`FF DA`). Inside entropy-coded data every `FF` byte is stuffed (`FF 00`) or a
+/// restart marker, so `FF D9` there can only be the real end; the decoder itself pads a
+/// truncated scan with grey instead of failing.
+pub fn jpeg_is_complete(bytes: &[u8]) -> bool {
+    let last_sos = bytes.windows(2).rposition(|w| w == [0xFF, 0xDA]);
+    match last_sos {
+        Some(i) => bytes[i..].windows(2).any(|w| w == [0xFF, 0xD9]),
+        None => false,
+    }
 }
 
 /// Turns an `image` error into one line a user understands.
@@ -182,7 +203,10 @@ pub fn unit_to_u16(v: f32) -> u16 {
 pub fn encode_png(image: &DynamicImage) -> Result<Vec<u8>> {
     let mut bytes = Vec::new();
     image
-        .write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
+        .write_to(
+            &mut std::io::Cursor::new(&mut bytes),
+            image::ImageFormat::Png,
+        )
         .map_err(|e| Error::invalid(format!("PNG encoding failed: {e}")))?;
     Ok(bytes)
 }
@@ -311,7 +335,12 @@ mod tests {
         assert!(e.contains("directory"), "{e}");
         let empty = dir.path().join("empty.png");
         std::fs::write(&empty, b"").unwrap();
-        assert!(load_image(&empty).unwrap_err().to_string().contains("empty"));
+        assert!(
+            load_image(&empty)
+                .unwrap_err()
+                .to_string()
+                .contains("empty")
+        );
         let text = dir.path().join("text.png");
         std::fs::write(&text, b"hello, this is not an image\n").unwrap();
         let e = load_image(&text).unwrap_err().to_string();
@@ -333,6 +362,12 @@ mod tests {
         bytes.extend_from_slice(&13u32.to_be_bytes());
         bytes.extend_from_slice(&ihdr);
         bytes.extend_from_slice(&crc32(&ihdr).to_be_bytes());
+        // An empty IDAT and the IEND, so the header is all a decoder can read.
+        for chunk in [&b"IDAT"[..], &b"IEND"[..]] {
+            bytes.extend_from_slice(&0u32.to_be_bytes());
+            bytes.extend_from_slice(chunk);
+            bytes.extend_from_slice(&crc32(chunk).to_be_bytes());
+        }
         std::fs::write(&p, &bytes).unwrap();
         let e = load_image(&p).unwrap_err().to_string();
         assert!(e.contains("huge.png") && e.contains("large"), "{e}");

@@ -72,8 +72,14 @@ fn parse_size(s: &str) -> Result<(usize, usize), String> {
     let (w, h) = s
         .split_once(['x', 'X'])
         .ok_or_else(|| format!("expected WIDTHxHEIGHT, got '{s}'"))?;
-    let w: usize = w.trim().parse().map_err(|_| format!("bad width in '{s}'"))?;
-    let h: usize = h.trim().parse().map_err(|_| format!("bad height in '{s}'"))?;
+    let w: usize = w
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad width in '{s}'"))?;
+    let h: usize = h
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad height in '{s}'"))?;
     let max = makeit4d::image_io::MAX_SIDE as usize;
     if w == 0 || h == 0 || w > max || h > max {
         return Err(format!("size {w}x{h} is outside 1..={max} per side"));

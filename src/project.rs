@@ -121,7 +121,10 @@ impl Project {
             )));
         }
         if !(o.fps.is_finite() && o.fps > 0.0 && o.fps <= 1000.0) {
-            return Err(Error::invalid(format!("fps = {} is outside (0, 1000]", o.fps)));
+            return Err(Error::invalid(format!(
+                "fps = {} is outside (0, 1000]",
+                o.fps
+            )));
         }
         for (name, v) in [("width", o.width), ("height", o.height)] {
             if let Some(v) = v
@@ -206,9 +209,7 @@ fn absolute(path: &Path) -> PathBuf {
     let joined = if path.is_absolute() {
         path.to_path_buf()
     } else {
-        std::env::current_dir()
-            .unwrap_or_default()
-            .join(path)
+        std::env::current_dir().unwrap_or_default().join(path)
     };
     let mut out = PathBuf::new();
     for c in joined.components() {
@@ -257,8 +258,14 @@ mod tests {
         let cases = [
             ("{", "malformed"),
             (r#"{"input": "a.jpg"}"#, "no \"version\""),
-            (r#"{"version": 7, "input": "a.jpg"}"#, "unsupported project version 7"),
-            (r#"{"version": "1", "input": "a.jpg"}"#, "unsupported project version"),
+            (
+                r#"{"version": 7, "input": "a.jpg"}"#,
+                "unsupported project version 7",
+            ),
+            (
+                r#"{"version": "1", "input": "a.jpg"}"#,
+                "unsupported project version",
+            ),
             (r#"{"version": 1}"#, "input"),
             (r#"{"version": 1, "input": "a", "bogus": 3}"#, "bogus"),
             (

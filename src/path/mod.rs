@@ -24,6 +24,7 @@ pub enum CameraPath {
     FlyIn,
 }
 
+#[allow(clippy::derivable_impls)]
 impl Default for CameraPath {
     fn default() -> Self {
         CameraPath::FlyIn
@@ -44,7 +45,11 @@ impl CameraPath {
     pub fn views(&self, base: &Intrinsics, scene: &SceneScale, frames: usize) -> Result<Vec<View>> {
         Ok((0..frames)
             .map(|i| {
-                let t = if frames > 1 { i as f32 / (frames - 1) as f32 } else { 0.0 };
+                let t = if frames > 1 {
+                    i as f32 / (frames - 1) as f32
+                } else {
+                    0.0
+                };
                 let z = match self {
                     CameraPath::Still => 0.0,
                     CameraPath::FlyIn => 0.5 * scene.near_depth * t,

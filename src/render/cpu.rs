@@ -267,9 +267,10 @@ pub fn render_cpu(
             };
             for p in 0..tw * th {
                 let list = &entries[p * k_max..p * k_max + lens[p] as usize];
-                let (c, a, z) = composite(list.iter().map(|e| {
-                    (e.w, cloud.colours[e.index as usize], e.z)
-                }));
+                let (c, a, z) = composite(
+                    list.iter()
+                        .map(|e| (e.w, cloud.colours[e.index as usize], e.z)),
+                );
                 out.colour[p] = c;
                 out.coverage[p] = a;
                 out.depth[p] = z;
@@ -288,8 +289,7 @@ pub fn render_cpu(
         for (row, y) in (y_start..(y_start + TILE).min(height)).enumerate() {
             let src = row * tw..(row + 1) * tw;
             colour.row_mut(y)[x_start..x_start + tw].copy_from_slice(&tile.colour[src.clone()]);
-            coverage.row_mut(y)[x_start..x_start + tw]
-                .copy_from_slice(&tile.coverage[src.clone()]);
+            coverage.row_mut(y)[x_start..x_start + tw].copy_from_slice(&tile.coverage[src.clone()]);
             depth.row_mut(y)[x_start..x_start + tw].copy_from_slice(&tile.depth[src]);
         }
     }
@@ -430,9 +430,8 @@ mod tests {
     fn compositing_formula_on_hand_computed_pixel() {
         // Two points: w1 = 0.5 red at z=1, w2 = 0.8 blue at z=2.
         // C = 0.5·red + 0.8·0.5·blue; A = 0.5 + 0.4 = 0.9; colour = C/A.
-        let (c, a, z) = composite(
-            [(0.5, [1.0, 0.0, 0.0], 1.0), (0.8, [0.0, 0.0, 1.0], 2.0)].into_iter(),
-        );
+        let (c, a, z) =
+            composite([(0.5, [1.0, 0.0, 0.0], 1.0), (0.8, [0.0, 0.0, 1.0], 2.0)].into_iter());
         assert!((a - 0.9).abs() < 1e-6);
         assert!((c[0] - 0.5 / 0.9).abs() < 1e-6);
         assert!((c[2] - 0.4 / 0.9).abs() < 1e-6);
@@ -478,7 +477,10 @@ mod tests {
         let f = render_cpu(&cloud, None, &view(k), 3, 3, &SplatSettings::default()).unwrap();
         // Red (w = 0.5) in front of blue (w = 1): C = 0.5 red + 0.5 blue, A = 1.
         let c = f.colour.at(1, 1);
-        assert!((c[0] - 0.5).abs() < 1e-5 && (c[2] - 0.5).abs() < 1e-5, "{c:?}");
+        assert!(
+            (c[0] - 0.5).abs() < 1e-5 && (c[2] - 0.5).abs() < 1e-5,
+            "{c:?}"
+        );
         assert!((f.coverage.at(1, 1) - 1.0).abs() < 1e-6);
         assert!((f.depth.at(1, 1) - 3.5).abs() < 1e-5);
     }
@@ -513,9 +515,13 @@ mod tests {
             [(x * 7 % 11) as f32 / 10.0, (y * 3 % 7) as f32 / 6.0, 0.5]
         });
         // A slanted plane with a depth step.
-        let depth = Raster::from_fn(37, 23, |x, y| {
-            if x > 20 { 50.0 } else { 2.0 + 0.1 * y as f32 }
-        });
+        let depth = Raster::from_fn(
+            37,
+            23,
+            |x, y| {
+                if x > 20 { 50.0 } else { 2.0 + 0.1 * y as f32 }
+            },
+        );
         let cloud =
             PointCloud::lift(&image, &depth, &k, None, None, LiftOptions::default()).unwrap();
         let f = render_cpu(&cloud, None, &view(k), 37, 23, &SplatSettings::default()).unwrap();

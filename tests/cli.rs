@@ -1,0 +1,287 @@
+//! The `makeit4d render` command end to end: good inputs render, bad inputs fail with one line,
+//! exit code 2 and nothing written.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn exe() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_makeit4d"))
+}
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+/// Runs `makeit4d render ARGS…`.
+fn run(args: &[&std::ffi::OsStr]) -> Output {
+    exe()
+        .arg("render")
+        .args(args)
+        .output()
+        .expect("spawn makeit4d")
+}
+
+fn os<S: AsRef<std::ffi::OsStr> + ?Sized>(s: &S) -> &std::ffi::OsStr {
+    s.as_ref()
+}
+
+/// Asserts a clean failure: exit code 2, one line on stderr that contains every needle, no
+/// panic.
+fn assert_clean_failure(out: &Output, needles: &[&str]) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "stderr: {stderr}");
+    assert_eq!(
+        stderr.trim_end().lines().count(),
+        1,
+        "not one line: {stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    for n in needles {
+        assert!(stderr.contains(n), "missing '{n}' in: {stderr}");
+    }
+}
+
+fn frames_in(dir: &Path) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map(|rd| rd.filter_map(|e| e.ok().map(|e| e.path())).collect())
+        .unwrap_or_default();
+    v.sort();
+    v
+}
+
+#[test]
+fn bad_inputs_fail_cleanly_and_write_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = d.join("out");
+
+    let empty = d.join("empty.jpg");
+    std::fs::write(&empty, b"").unwrap();
+    let text_png = d.join("text.png");
+    std::fs::write(&text_png, b"just some text, not a PNG\n").unwrap();
+    let truncated = d.join("truncated.jpg");
+    let jpeg = std::fs::read(data("evening_glow_320.jpg")).unwrap();
+    std::fs::write(&truncated, &jpeg[..jpeg.len() / 3]).unwrap();
+    let huge = d.join("huge.png");
+    std::fs::write(&huge, huge_png_header()).unwrap();
+
+    let cases: Vec<(PathBuf, Vec<&str>)> = vec![
+        (d.join("missing.jpg"), vec!["missing.jpg", "no such file"]),
+        (d.to_path_buf(), vec!["directory"]),
+        (empty.clone(), vec!["empty.jpg", "empty"]),
+        (truncated.clone(), vec!["truncated.jpg"]),
+        (text_png.clone(), vec!["text.png"]),
+        (huge.clone(), vec!["huge.png", "100000"]),
+    ];
+    for (input, needles) in cases {
+        let o = run(&[os(&input), os("--out"), os(&out), os("--frames"), os("2")]);
+        assert_clean_failure(&o, &needles);
+        assert!(
+            !out.exists(),
+            "{} created the output folder",
+            input.display()
+        );
+    }
+}
+
+/// A PNG signature and an IHDR chunk claiming 100000×100000 pixels.
+fn huge_png_header() -> Vec<u8> {
+    let mut bytes = vec![0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A];
+    let mut ihdr = b"IHDR".to_vec();
+    ihdr.extend_from_slice(&100_000u32.to_be_bytes());
+    ihdr.extend_from_slice(&100_000u32.to_be_bytes());
+    ihdr.extend_from_slice(&[8, 2, 0, 0, 0]);
+    bytes.extend_from_slice(&13u32.to_be_bytes());
+    bytes.extend_from_slice(&ihdr);
+    bytes.extend_from_slice(&crc32(&ihdr).to_be_bytes());
+    // An empty IDAT and the IEND, so the header is all a decoder can read.
+    for chunk in [&b"IDAT"[..], &b"IEND"[..]] {
+        bytes.extend_from_slice(&0u32.to_be_bytes());
+        bytes.extend_from_slice(chunk);
+        bytes.extend_from_slice(&crc32(chunk).to_be_bytes());
+    }
+    bytes
+}
+
+/// CRC-32 (IEEE) for PNG chunks.
+fn crc32(data: &[u8]) -> u32 {
+    let mut crc = 0xFFFF_FFFFu32;
+    for &b in data {
+        crc ^= b as u32;
+        for _ in 0..8 {
+            crc = if crc & 1 != 0 {
+                (crc >> 1) ^ 0xEDB8_8320
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    !crc
+}
+
+#[test]
+fn bad_arguments_and_outputs_fail_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let img = data("evening_glow_320.jpg");
+    let out = d.join("out");
+
+    let o = run(&[os(&img), os("--out"), os(&out), os("--frames"), os("0")]);
+    assert_clean_failure(&o, &["frames"]);
+    let o = run(&[os(&img), os("--out"), os(&out), os("--size"), os("0x0")]);
+    assert_clean_failure(&o, &["size"]);
+    assert!(!out.exists());
+
+    // Output path that is a file.
+    let file = d.join("a_file");
+    std::fs::write(&file, b"x").unwrap();
+    let o = run(&[os(&img), os("--out"), os(&file), os("--frames"), os("1")]);
+    assert_clean_failure(&o, &["a_file", "not a folder"]);
+
+    // Unwritable output folder (a read-only folder, or /proc when running as root).
+    let ro = d.join("readonly");
+    std::fs::create_dir(&ro).unwrap();
+    let mut perms = std::fs::metadata(&ro).unwrap().permissions();
+    std::os::unix::fs::PermissionsExt::set_mode(&mut perms, 0o555);
+    std::fs::set_permissions(&ro, perms).unwrap();
+    let probe_writable = std::fs::write(ro.join("probe"), b"").is_ok();
+    let target = if probe_writable {
+        PathBuf::from("/proc/makeit4d-no-such-dir/out")
+    } else {
+        ro.join("out")
+    };
+    let o = run(&[os(&img), os("--out"), os(&target), os("--frames"), os("1")]);
+    assert_clean_failure(&o, &["out"]);
+
+    // Malformed and unknown-version projects.
+    let bad_json = d.join("bad.json");
+    std::fs::write(&bad_json, b"{ \"version\": 1, ").unwrap();
+    let o = run(&[os("--project"), os(&bad_json), os("--out"), os(&out)]);
+    assert_clean_failure(&o, &["bad.json", "malformed"]);
+    let v9 = d.join("v9.json");
+    std::fs::write(&v9, br#"{"version": 9, "input": "x.jpg"}"#).unwrap();
+    let o = run(&[os("--project"), os(&v9), os("--out"), os(&out)]);
+    assert_clean_failure(&o, &["v9.json", "version 9"]);
+    assert!(!out.exists());
+}
+
+fn render(input: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut cmd = exe();
+    cmd.arg("render").arg(input).arg("--out").arg(out);
+    cmd.args(extra);
+    cmd.output().expect("spawn")
+}
+
+#[test]
+fn unusual_formats_render() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // 16-bit greyscale, RGBA and 1×1 PNGs made here; CMYK and EXIF-rotated JPEGs committed.
+    let g16 = d.join("grey16.png");
+    image::DynamicImage::ImageLuma16(image::ImageBuffer::from_fn(24, 16, |x, y| {
+        image::Luma([(x * 2000 + y * 500) as u16])
+    }))
+    .save(&g16)
+    .unwrap();
+    let rgba = d.join("rgba.png");
+    image::DynamicImage::ImageRgba8(image::RgbaImage::from_fn(24, 16, |x, _| {
+        image::Rgba([200, 100, 50, if x < 12 { 255 } else { 0 }])
+    }))
+    .save(&rgba)
+    .unwrap();
+    let one = d.join("one.png");
+    image::DynamicImage::ImageRgb8(image::RgbImage::from_pixel(1, 1, image::Rgb([9, 8, 7])))
+        .save(&one)
+        .unwrap();
+    for (input, size) in [
+        (g16, (24, 16)),
+        (rgba, (24, 16)),
+        (one, (1, 1)),
+        (data("cmyk.jpg"), (64, 40)),
+        (data("exif_rotated.jpg"), (40, 64)),
+    ] {
+        let out = d.join(format!(
+            "out_{}",
+            input.file_stem().unwrap().to_string_lossy()
+        ));
+        let o = render(&input, &out, &["--frames", "2"]);
+        assert!(
+            o.status.success(),
+            "{}: {}",
+            input.display(),
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let frames = frames_in(&out);
+        assert_eq!(frames.len(), 2, "{frames:?}");
+        let f = image::open(&frames[0]).unwrap();
+        assert_eq!((f.width() as usize, f.height() as usize), size);
+    }
+}
+
+#[test]
+fn render_summary_frames_and_determinism() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let img = data("evening_glow_320.jpg");
+    let project = d.join("p.json");
+    let a = d.join("a");
+    let o = render(
+        &img,
+        &a,
+        &["--frames", "4", "--save-project", project.to_str().unwrap()],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("wrote 4/4 frames")
+            && stdout.contains("renderer")
+            && stdout.contains("holes"),
+        "{stdout}"
+    );
+    let frames = frames_in(&a);
+    assert_eq!(frames.len(), 4);
+    // Frame 0 is the input view; consecutive frames differ.
+    let input = image::open(&img).unwrap().to_rgb8();
+    let f0 = image::open(&frames[0]).unwrap().to_rgb8();
+    assert!(
+        psnr(&input, &f0) >= 35.0,
+        "frame 0 PSNR {}",
+        psnr(&input, &f0)
+    );
+    let f1 = image::open(&frames[1]).unwrap().to_rgb8();
+    assert_ne!(f0, f1);
+
+    // The saved project renders the same bytes.
+    let b = d.join("b");
+    let o = exe()
+        .arg("render")
+        .arg("--project")
+        .arg(&project)
+        .arg("--out")
+        .arg(&b)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for (x, y) in frames.iter().zip(frames_in(&b)) {
+        assert_eq!(std::fs::read(x).unwrap(), std::fs::read(&y).unwrap());
+    }
+    // No temporary files left in the output.
+    assert!(
+        frames_in(&a)
+            .iter()
+            .all(|p| p.extension().is_some_and(|e| e == "png"))
+    );
+}
+
+fn psnr(a: &image::RgbImage, b: &image::RgbImage) -> f64 {
+    let mse: f64 = a
+        .as_raw()
+        .iter()
+        .zip(b.as_raw())
+        .map(|(&x, &y)| (x as f64 - y as f64).powi(2))
+        .sum::<f64>()
+        / a.as_raw().len() as f64;
+    10.0 * (255.0f64 * 255.0 / mse.max(1e-12)).log10()
+}

@@ -1,0 +1,35 @@
+#!/usr/bin/env bash
+# Installs what the tests need on a fresh machine, then runs the whole test suite.
+#
+#   - Debian packages (as root, through apt-get, only when missing): mesa-vulkan-drivers
+#     (lavapipe, the CPU Vulkan adapter the GPU tests run on), xvfb (the editor's window tests).
+#   - The ONNX Runtime 1.31 shared library from PyPI's onnxruntime wheel, into
+#     ${XDG_DATA_HOME:-~/.local/share}/makeit4d/ort (where makeit4d looks for it).
+#   - Rust crates through cargo (Cargo.lock pins them).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+as_root() {
+    if [ "$(id -u)" = 0 ]; then "$@"; elif command -v sudo >/dev/null; then sudo "$@"; else
+        echo "tests/run.sh: need root to install Debian packages: $*" >&2; return 1; fi
+}
+
+missing=()
+for pkg in mesa-vulkan-drivers libvulkan1 xvfb; do
+    dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+    echo "tests/run.sh: installing ${missing[*]}"
+    as_root apt-get update -qq
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+ort_dir="${XDG_DATA_HOME:-$HOME/.local/share}/makeit4d/ort"
+ort_lib="$ort_dir/onnxruntime/capi/libonnxruntime.so.1.31.1"
+if [ ! -e "$ort_lib" ]; then
+    echo "tests/run.sh: installing ONNX Runtime 1.31.1 into $ort_dir"
+    python3 -m pip install --quiet --disable-pip-version-check --no-deps --target "$ort_dir" onnxruntime==1.31.1
+fi
+export ORT_DYLIB_PATH="$ort_lib"
+
+cargo test --locked --all-targets "$@"
