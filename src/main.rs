@@ -4,7 +4,9 @@ use anyhow::{Context, anyhow, bail};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use makeit4d::Error;
-use makeit4d::export::render_sequence;
+use makeit4d::export::{
+    ExportOptions, FramePattern, Passes, VideoFormat, VideoOptions, render_sequence,
+};
 use makeit4d::path::CameraPath;
 use makeit4d::progress::Progress;
 use makeit4d::project::Project;
@@ -41,12 +43,14 @@ enum Command {
 struct RenderArgs {
     /// The input photo (optional when --project names one).
     image: Option<PathBuf>,
-    /// Output folder for frame_0000.png, frame_0001.png, … (created if missing).
+    /// Output folder (created if missing). With several projects, each renders into
+    /// OUT/<project name>/.
     #[arg(long)]
     out: PathBuf,
-    /// A project file to render; command-line flags override its values.
+    /// A project file, or a folder of *.json project files, to render; repeat for a batch.
+    /// Command-line flags override the projects' values.
     #[arg(long)]
-    project: Option<PathBuf>,
+    project: Vec<PathBuf>,
     /// Write the effective project (after overrides) to this file before rendering.
     #[arg(long)]
     save_project: Option<PathBuf>,
@@ -65,6 +69,64 @@ struct RenderArgs {
     /// Horizontal field of view of the input photo, degrees.
     #[arg(long)]
     fov: Option<f32>,
+    /// Frame file-name pattern with one %d or %0Nd.
+    #[arg(long, default_value = "frame_%04d.png")]
+    pattern: String,
+    /// Bits per channel of the colour PNGs.
+    #[arg(long, default_value_t = 8, value_parser = parse_bit_depth)]
+    bit_depth: u8,
+    /// Skip frames already complete in the output folder (they decode and have the right size).
+    #[arg(long)]
+    resume: bool,
+    /// Extra passes: depth (16-bit + depth.json scale), coverage (16-bit alpha). Repeatable.
+    #[arg(long = "pass", value_enum)]
+    passes: Vec<PassArg>,
+    /// Only frames START..END of the path (END exclusive), e.g. 10..20.
+    #[arg(long, value_parser = parse_range)]
+    range: Option<(usize, usize)>,
+    /// Also encode a video through ffmpeg (OUT/video.mp4 or OUT/video.webm).
+    #[arg(long, value_enum)]
+    video: Option<VideoArg>,
+    /// Video quality as a constant rate factor (lower is better; default 18 for mp4, 30 for webm).
+    #[arg(long)]
+    crf: Option<u8>,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum PassArg {
+    Depth,
+    Coverage,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum VideoArg {
+    Mp4,
+    Webm,
+}
+
+/// Parses a PNG bit depth: 8 or 16.
+fn parse_bit_depth(s: &str) -> Result<u8, String> {
+    match s.trim() {
+        "8" => Ok(8),
+        "16" => Ok(16),
+        _ => Err(format!("bit depth must be 8 or 16, got '{s}'")),
+    }
+}
+
+/// Parses `START..END`.
+fn parse_range(s: &str) -> Result<(usize, usize), String> {
+    let (a, b) = s
+        .split_once("..")
+        .ok_or_else(|| format!("expected START..END, got '{s}'"))?;
+    let a: usize = a
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad start in '{s}'"))?;
+    let b: usize = b.trim().parse().map_err(|_| format!("bad end in '{s}'"))?;
+    if a >= b {
+        return Err(format!("empty range '{s}'"));
+    }
+    Ok((a, b))
 }
 
 /// Parses `WIDTHxHEIGHT`.
@@ -146,13 +208,87 @@ fn progress_bar(cancel: Arc<AtomicBool>) -> (ProgressBar, Progress) {
     (bar, progress)
 }
 
+/// Expands `--project` arguments: files as given, folders to their `*.json` files (sorted).
+fn project_files(args: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    for p in args {
+        if p.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
+                .with_context(|| format!("{}: cannot list folder", p.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|f| f.extension().is_some_and(|e| e == "json") && f.is_file())
+                .collect();
+            found.sort();
+            if found.is_empty() {
+                bail!("{}: folder holds no .json project files", p.display());
+            }
+            files.extend(found);
+        } else {
+            files.push(p.clone());
+        }
+    }
+    Ok(files)
+}
+
 fn render(args: RenderArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
-    let mut project = match (&args.project, &args.image) {
+    let projects = project_files(&args.project)?;
+    if projects.len() <= 1 {
+        return render_one(&args, projects.first(), &args.out, cancel);
+    }
+    if args.save_project.is_some() {
+        bail!("--save-project needs a single project");
+    }
+    // Batch: each project independently, one summary line each at the end.
+    let mut lines = Vec::new();
+    let mut failed = 0;
+    for p in &projects {
+        if cancel.load(std::sync::atomic::Ordering::Relaxed) {
+            lines.push(format!("{}: not started (cancelled)", p.display()));
+            failed += 1;
+            continue;
+        }
+        let name = p
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "project".into());
+        match render_one(&args, Some(p), &args.out.join(&name), cancel.clone()) {
+            Ok(()) => lines.push(format!("{}: ok", p.display())),
+            Err(e) => {
+                failed += 1;
+                lines.push(format!(
+                    "{}: failed: {}",
+                    p.display(),
+                    format!("{e:#}").replace('\n', " ")
+                ));
+            }
+        }
+    }
+    println!(
+        "batch: {} projects, {} ok, {failed} failed",
+        projects.len(),
+        projects.len() - failed
+    );
+    for l in &lines {
+        println!("  {l}");
+    }
+    if failed > 0 {
+        bail!("{failed} of {} projects failed", projects.len());
+    }
+    Ok(())
+}
+
+fn render_one(
+    args: &RenderArgs,
+    project_file: Option<&PathBuf>,
+    out: &std::path::Path,
+    cancel: Arc<AtomicBool>,
+) -> anyhow::Result<()> {
+    let mut project = match (project_file, &args.image) {
         (Some(p), _) => Project::load(p)?,
         (None, Some(image)) => Project::new(image),
         (None, None) => bail!("render needs an input image or --project"),
     };
-    if let (Some(_), Some(image)) = (&args.project, &args.image) {
+    if let (Some(_), Some(image)) = (project_file, &args.image) {
         project.input = image.clone();
     }
     if let Some(frames) = args.frames {
@@ -173,10 +309,30 @@ fn render(args: RenderArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
             CameraPath::preset(name).ok_or_else(|| anyhow!("unknown preset '{name}'"))?;
     }
     project.validate()?;
+    let options = ExportOptions {
+        pattern: FramePattern::parse(&args.pattern)?,
+        sixteen_bit: args.bit_depth == 16,
+        resume: args.resume,
+        passes: Passes {
+            depth: args.passes.contains(&PassArg::Depth),
+            coverage: args.passes.contains(&PassArg::Coverage),
+        },
+        range: args.range,
+        video: args.video.map(|v| {
+            let mut o = VideoOptions::new(match v {
+                VideoArg::Mp4 => VideoFormat::Mp4,
+                VideoArg::Webm => VideoFormat::Webm,
+            });
+            if let Some(crf) = args.crf {
+                o.crf = crf;
+            }
+            o
+        }),
+    };
     // Decode and validate everything before anything is written.
     let (bar, progress) = progress_bar(cancel);
     let scene = build_scene(&project, &progress.sub(0.0, 0.1))?;
-    makeit4d::image_io::prepare_output_dir(&args.out)?;
+    makeit4d::image_io::prepare_output_dir(out)?;
     if let Some(path) = &args.save_project {
         project
             .save(path)
@@ -187,10 +343,15 @@ fn render(args: RenderArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
         &project,
         &scene,
         &mut renderer,
-        &args.out,
+        out,
+        &options,
         &progress.sub(0.1, 1.0),
     );
     bar.finish_and_clear();
-    println!("{}", summary?);
+    let summary = summary?;
+    for w in &summary.warnings {
+        eprintln!("warning: {w}");
+    }
+    println!("{summary}");
     Ok(())
 }
