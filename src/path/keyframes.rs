@@ -738,6 +738,60 @@ mod tests {
     }
 
     #[test]
+    fn bezier_rotation_is_c1_for_general_rotations() {
+        let euler = |yaw: f64, pitch: f64, roll: f64| {
+            DQuat::from_euler(
+                glam::EulerRot::YXZ,
+                yaw.to_radians(),
+                pitch.to_radians(),
+                roll.to_radians(),
+            )
+        };
+        let rotations = [
+            euler(0.0, 0.0, 0.0),
+            euler(20.0, 10.0, -5.0),
+            euler(35.0, -15.0, 10.0),
+            euler(90.0, 5.0, 30.0),
+            euler(60.0, 40.0, 0.0),
+        ];
+        let frames = [0.0, 12.0, 15.0, 40.0, 47.0];
+        let keys: Vec<Keyframe> = frames
+            .iter()
+            .zip(rotations)
+            .map(|(&frame, rotation)| Keyframe {
+                rotation,
+                ..key(frame, [frame * 0.1, 0.0, 0.0], 0.0)
+            })
+            .collect();
+        let path = resolve(&KeyframePath::new(keys.clone()));
+        let h = 1e-4;
+        for k in &keys[1..4] {
+            let (before, at, after) = (
+                path.sample(k.frame - h),
+                path.sample(k.frame),
+                path.sample(k.frame + h),
+            );
+            assert!(rotation::angle_between(at.rotation, k.rotation) < 1e-12);
+            let w_left = rotation::relative(before.rotation, at.rotation) / h;
+            let w_right = rotation::relative(at.rotation, after.rotation) / h;
+            assert!(
+                (w_left - w_right).length() < 1e-3 * (1.0 + w_left.length()),
+                "rotation kink at frame {}: {w_left} vs {w_right}",
+                k.frame
+            );
+        }
+    }
+
+    #[test]
+    fn focal_and_fov_conversions_known_values() {
+        assert!((focal_px(90.0, 100) - 50.0).abs() < 1e-12);
+        assert!((hfov_deg(50.0, 100) - 90.0).abs() < 1e-12);
+        for fov in [1.0, 60.0, 170.0] {
+            assert!((hfov_deg(focal_px(fov, 640), 640) - fov).abs() < 1e-9);
+        }
+    }
+
+    #[test]
     fn bezier_never_overshoots_its_keys() {
         // A key that is a local maximum in x and a sharp change of speed in z.
         let keys = vec![
