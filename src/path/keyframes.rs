@@ -314,6 +314,10 @@ fn checked_key(index: usize, key: &Keyframe) -> Result<Keyframe> {
     if !key.position.is_finite() {
         return Err(what("position is not finite"));
     }
+    // Views are f32: a position beyond its range would become infinite there.
+    if key.position.abs().max_element() > 1e30 {
+        return Err(what("position is out of range (beyond 1e30)"));
+    }
     if !key.rotation.is_finite() {
         return Err(what("rotation is not finite"));
     }
@@ -908,6 +912,7 @@ mod tests {
         zero.rotation = DQuat::from_xyzw(0.0, 0.0, 0.0, 0.0);
         assert!(message(vec![zero]).contains("zero"));
         assert!(message(vec![key(f64::NAN, [0.0; 3], 0.0)]).contains("frame number"));
+        assert!(message(vec![key(0.0, [1e300, 0.0, 0.0], 0.0)]).contains("out of range"));
         for fov in [0.0, 180.0, -5.0, f64::NAN, f64::INFINITY] {
             assert!(
                 message(vec![key(0.0, [0.0; 3], 0.0).with_hfov(fov)]).contains("field of view")
