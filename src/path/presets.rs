@@ -241,7 +241,8 @@ impl Preset {
     /// The preset as editable keyframes over `frames` frames. Keys lie exactly on the preset;
     /// straight moves (fly-in, fly-out, pan, dolly-zoom) become two linear keys with an
     /// ease-in-out and reproduce the preset exactly; curved ones (orbit: a key every 5° of arc,
-    /// at least 8 segments; swing: 16 segments) become Bézier keys that follow it to within
+    /// at least 8 segments; swing: 16 segments; never more than one key per frame, keys on whole
+    /// frames) become Bézier keys that follow it to within
     /// about 1 % of the move's size (the keys sit exactly on the preset; between them the timing
     /// differs slightly, most near the eased start and end).
     pub fn to_keyframes(
@@ -262,32 +263,41 @@ impl Preset {
             return Err(Error::invalid("image width must be positive"));
         }
         let last = frames.saturating_sub(1);
-        let segments = match self.kind {
-            _ if last == 0 => 0,
+        let straight = matches!(
+            self.kind,
+            PresetKind::FlyIn | PresetKind::FlyOut | PresetKind::Pan | PresetKind::DollyZoom
+        );
+        let wanted_segments = match self.kind {
             PresetKind::Still => 0,
-            PresetKind::FlyIn | PresetKind::FlyOut | PresetKind::Pan | PresetKind::DollyZoom => 1,
+            _ if straight => 1,
             PresetKind::Orbit => {
                 let phi = TRANSLATION_FRACTION_OF_NEAR * self.amplitude * scene.near_depth as f64
                     / scene.median_depth as f64;
                 let by_angle = (phi.abs().to_degrees() / ORBIT_DEGREES_PER_SEGMENT).ceil();
                 (by_angle as usize).clamp(8, 10_000)
             }
-            PresetKind::Swing => SWING_SEGMENTS,
+            _ => SWING_SEGMENTS,
         };
-        let straight = segments == 1;
+        // Keys sit on whole frames, at most one per frame.
+        let segments = wanted_segments.min(last);
         let base_focal = base.fx as f64;
         let keys = (0..=segments)
             .map(|j| {
-                let t = if segments == 0 {
+                let frame = if segments == 0 {
+                    0
+                } else {
+                    (last as f64 * j as f64 / segments as f64).round() as usize
+                };
+                let t = if last == 0 {
                     0.0
                 } else {
-                    j as f64 / segments as f64
+                    frame as f64 / last as f64
                 };
                 let sample = self.sample(scene, t);
                 let hfov = (self.kind == PresetKind::DollyZoom)
                     .then(|| hfov_deg(sample.focal_scale * base_focal, width));
                 Keyframe {
-                    frame: last as f64 * t,
+                    frame: frame as f64,
                     position: sample.position,
                     rotation: sample.rotation,
                     hfov_deg: hfov,
@@ -529,18 +539,22 @@ mod tests {
             assert!(max_angle < angle_tolerance, "{kind}: {max_angle}");
             assert!(max_focal < 1e-5, "{kind}: {max_focal}");
             for key in &keyed.keys {
-                let f = key.frame.round() as usize;
-                if (key.frame - f as f64).abs() < 1e-9 {
-                    let d =
-                        (direct[f].world_from_camera.translation - key.position.as_vec3()).length();
-                    assert!(d < 1e-5, "{kind}: key at {f} off the preset by {d}");
-                }
+                let f = key.frame as usize;
+                assert_eq!(key.frame, f as f64, "{kind}: key off a whole frame");
+                let d = (direct[f].world_from_camera.translation - key.position.as_vec3()).length();
+                assert!(d < 1e-5, "{kind}: key at {f} off the preset by {d}");
             }
         }
         let still = Preset::new(PresetKind::Still)
             .to_keyframes(&base(), WIDTH, &scene(), 10)
             .unwrap();
         assert_eq!(still.keys.len(), 1);
+        // Short paths get at most one key per frame.
+        let short = Preset::new(PresetKind::Swing)
+            .to_keyframes(&base(), WIDTH, &scene(), 4)
+            .unwrap();
+        assert_eq!(short.keys.len(), 4);
+        assert!(short.canonical().is_ok());
         let one = Preset::new(PresetKind::Orbit)
             .to_keyframes(&base(), WIDTH, &scene(), 1)
             .unwrap();
