@@ -4,6 +4,7 @@
 
 pub mod error;
 pub mod geometry;
+pub mod ml;
 pub mod progress;
 pub mod raster;
 pub mod render;

@@ -1,5 +1,7 @@
 //! Depth estimation: the [`DepthEstimator`] trait and its implementations.
 
+pub mod onnx;
+
 use crate::error::Result;
 use crate::geometry::Intrinsics;
 use crate::progress::Progress;
