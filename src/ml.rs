@@ -166,8 +166,15 @@ fn probe(path: &Path) -> Result<(libloading::Library, String), String> {
     }
     // SAFETY: loading a library runs its initialisers. The user (or the documented install
     // location) named this file as ONNX Runtime; nothing else is loaded from there.
-    let library = unsafe { libloading::Library::new(path) }
-        .map_err(|err| format!("{where_}: cannot be loaded as a shared library ({err})"))?;
+    let library = unsafe { libloading::Library::new(path) }.map_err(|err| {
+        // libloading's own text is just "dlopen failed"; the system's reason is its source.
+        let reason = std::error::Error::source(&err)
+            .map(|source| source.to_string())
+            .unwrap_or_else(|| err.to_string());
+        let prefix = format!("{where_}: ");
+        let reason = reason.strip_prefix(&prefix).unwrap_or(&reason);
+        format!("{where_}: cannot be loaded as a shared library ({reason})")
+    })?;
     type GetApiBase = unsafe extern "system" fn() -> *const ort::sys::OrtApiBase;
     // SAFETY: `OrtGetApiBase` has this signature in every ONNX Runtime release.
     let get_api_base = unsafe { library.get::<GetApiBase>(b"OrtGetApiBase") }.map_err(|_| {
@@ -257,11 +264,7 @@ fn load_runtime(search: &OrtSearch) -> std::result::Result<Runtime, LoadFailure>
         };
         // From here on the library is `ort`'s for the life of the process: no other can be
         // tried, so a failure to create the environment is final.
-        return match builder
-            .with_name("makeit4d")
-            .with_telemetry(false)
-            .build()
-        {
+        return match builder.with_name("makeit4d").with_telemetry(false).build() {
             Ok(environment) => Ok(Runtime {
                 path,
                 version,
@@ -274,7 +277,12 @@ fn load_runtime(search: &OrtSearch) -> std::result::Result<Runtime, LoadFailure>
             ))),
         };
     }
-    Err(fail(problems.join("; ")))
+    let problems = problems.join("; ");
+    Err(fail(if search.dylib_path.is_some() {
+        format!("ORT_DYLIB_PATH: {problems}")
+    } else {
+        problems
+    }))
 }
 
 static RUNTIME: OnceLock<std::result::Result<Runtime, LoadFailure>> = OnceLock::new();
@@ -316,8 +324,11 @@ impl fmt::Display for OrtStatus {
                     error.as_deref().unwrap_or("unknown reason")
                 )?;
                 if !self.searched.is_empty() {
-                    let places: Vec<String> =
-                        self.searched.iter().map(|p| p.display().to_string()).collect();
+                    let places: Vec<String> = self
+                        .searched
+                        .iter()
+                        .map(|p| p.display().to_string())
+                        .collect();
                     write!(f, "\n  searched: {}", places.join(", "))?;
                 }
                 write!(f, "\n  install: {ORT_INSTALL_HINT}")
@@ -348,11 +359,7 @@ pub fn ort_status() -> OrtStatus {
 /// caller falls back to `fallback` and prints the returned message, so the user hears it once,
 /// not once per frame or layer. Example message:
 /// `depth: learned model unavailable (ONNX Runtime not found …); using the classical estimator`.
-pub fn fallback_notice(
-    what: &str,
-    reason: &dyn fmt::Display,
-    fallback: &str,
-) -> Option<String> {
+pub fn fallback_notice(what: &str, reason: &dyn fmt::Display, fallback: &str) -> Option<String> {
     static SEEN: OnceLock<Mutex<HashSet<String>>> = OnceLock::new();
     let mut seen = SEEN
         .get_or_init(Default::default)
@@ -859,7 +866,12 @@ impl OnnxSession {
             path: path.to_path_buf(),
             message,
         };
-        let runtime = runtime().map_err(|failure| error(failure.message.clone()))?;
+        let runtime = runtime().map_err(|failure| {
+            error(format!(
+                "ONNX Runtime is not available: {}",
+                failure.message
+            ))
+        })?;
         match std::fs::metadata(path) {
             Ok(meta) if meta.is_file() => {}
             Ok(_) => return Err(error("not a file".into())),
@@ -868,7 +880,11 @@ impl OnnxSession {
         let session = ort::session::Session::builder(&runtime.environment)
             .and_then(|mut builder| builder.commit_from_file(path))
             .map_err(|err| error(format!("ONNX Runtime cannot load it: {err}")))?;
-        let inputs = session.inputs().iter().map(TensorInfo::from_outlet).collect();
+        let inputs = session
+            .inputs()
+            .iter()
+            .map(TensorInfo::from_outlet)
+            .collect();
         let outputs = session
             .outputs()
             .iter()
@@ -947,7 +963,11 @@ impl OnnxSession {
         for name in names {
             self.input(name)?;
         }
-        if let Some(extra) = self.inputs.iter().find(|t| !names.contains(&t.name.as_str())) {
+        if let Some(extra) = self
+            .inputs
+            .iter()
+            .find(|t| !names.contains(&t.name.as_str()))
+        {
             return Err(self.error(format!(
                 "the model has an input '{}' the manifest does not name (inputs: {})",
                 extra.name,
@@ -978,9 +998,8 @@ impl OnnxSession {
                     input.shape
                 )));
             }
-            let tensor =
-                ort::value::TensorRef::from_array_view((input.shape.to_vec(), input.data))
-                    .map_err(|err| self.error(format!("cannot make input '{}': {err}", input.name)))?;
+            let tensor = ort::value::TensorRef::from_array_view((input.shape.to_vec(), input.data))
+                .map_err(|err| self.error(format!("cannot make input '{}': {err}", input.name)))?;
             values.push((
                 Cow::Borrowed(input.name),
                 ort::session::SessionInputValue::from(tensor),
@@ -1006,16 +1025,18 @@ impl OnnxSession {
                         std::thread::sleep(Duration::from_millis(20));
                     }
                 });
-            let outcome = session.run_with_options(values, &options).and_then(|outputs| {
-                let value = outputs.get(output).ok_or_else(|| {
-                    ort::Error::new(format!("the model produced no output '{output}'"))
-                })?;
-                let (shape, data) = value.try_extract_tensor::<f32>()?;
-                Ok(OutputTensor {
-                    shape: shape.iter().map(|&d| d.max(0) as usize).collect(),
-                    data: data.to_vec(),
-                })
-            });
+            let outcome = session
+                .run_with_options(values, &options)
+                .and_then(|outputs| {
+                    let value = outputs.get(output).ok_or_else(|| {
+                        ort::Error::new(format!("the model produced no output '{output}'"))
+                    })?;
+                    let (shape, data) = value.try_extract_tensor::<f32>()?;
+                    Ok(OutputTensor {
+                        shape: shape.iter().map(|&d| d.max(0) as usize).collect(),
+                        data: data.to_vec(),
+                    })
+                });
             done.store(true, Ordering::Release);
             if let Ok(handle) = watcher {
                 let _ = handle.join();
@@ -1140,7 +1161,10 @@ mod tests {
             .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
             .collect();
         if cfg!(target_os = "linux") {
-            assert_eq!(names, ["libonnxruntime.so.1.31.1", "libonnxruntime.so.1.30.0"]);
+            assert_eq!(
+                names,
+                ["libonnxruntime.so.1.31.1", "libonnxruntime.so.1.30.0"]
+            );
         }
         // ORT_DYLIB_PATH wins alone.
         let forced = OrtSearch {
@@ -1156,7 +1180,10 @@ mod tests {
         let text = dir.path().join("libonnxruntime.so");
         std::fs::write(&text, "this is not a shared library").unwrap();
         let err = probe_library(&text).unwrap_err();
-        assert!(err.contains("cannot be loaded as a shared library"), "{err}");
+        assert!(
+            err.contains("cannot be loaded as a shared library"),
+            "{err}"
+        );
         assert!(err.contains("libonnxruntime.so"), "{err}");
         let missing = dir.path().join("nothing.so");
         assert!(probe_library(&missing).is_err());
@@ -1167,7 +1194,11 @@ mod tests {
         })
         .err()
         .unwrap();
-        assert!(failure.message.contains("cannot be loaded"), "{}", failure.message);
+        assert!(
+            failure.message.contains("cannot be loaded"),
+            "{}",
+            failure.message
+        );
         let empty = load_runtime(&OrtSearch {
             dylib_path: None,
             exe_dir: None,
@@ -1175,7 +1206,11 @@ mod tests {
         })
         .err()
         .unwrap();
-        assert!(empty.message.contains("ONNX Runtime not found"), "{}", empty.message);
+        assert!(
+            empty.message.contains("ONNX Runtime not found"),
+            "{}",
+            empty.message
+        );
     }
 
     #[test]
@@ -1204,7 +1239,10 @@ mod tests {
             error: None,
             searched: vec![],
         };
-        assert_eq!(ok.to_string(), "ONNX Runtime 1.31.1: /lib/libonnxruntime.so");
+        assert_eq!(
+            ok.to_string(),
+            "ONNX Runtime 1.31.1: /lib/libonnxruntime.so"
+        );
     }
 
     #[test]

@@ -52,10 +52,9 @@ impl OnnxDepth {
     /// Like [`OnnxDepth::from_manifest`] for an already parsed manifest.
     pub fn new(manifest: ModelManifest) -> Result<Self> {
         let ModelSpec::Depth(spec) = manifest.spec.clone() else {
-            return Err(manifest.error(format!(
-                "is a {} model, not a depth model",
-                manifest.kind()
-            )));
+            return Err(
+                manifest.error(format!("is a {} model, not a depth model", manifest.kind()))
+            );
         };
         let session = OnnxSession::load(&manifest.model_path)?;
         let manifest_name = manifest
@@ -63,7 +62,8 @@ impl OnnxDepth {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default();
-        let mismatch = |message: String| session.error(format!("{message} (manifest {manifest_name})"));
+        let mismatch =
+            |message: String| session.error(format!("{message} (manifest {manifest_name})"));
 
         session.expect_inputs(&[spec.input.as_str()])?;
         let input = session.input(&spec.input)?;
@@ -189,9 +189,9 @@ impl DisparityMap {
         let disparity_of = |v: f32| -> Option<f32> {
             match meaning {
                 DepthOutput::RelativeDisparity => v.is_finite().then_some(v),
-                DepthOutput::Depth | DepthOutput::MetricDepth => {
-                    (v.is_finite() && v > 0.0).then(|| 1.0 / v).filter(|d| d.is_finite())
-                }
+                DepthOutput::Depth | DepthOutput::MetricDepth => (v.is_finite() && v > 0.0)
+                    .then(|| 1.0 / v)
+                    .filter(|d| d.is_finite()),
             }
         };
         let converted: Vec<Option<f32>> = raw.data().iter().map(|&v| disparity_of(v)).collect();
@@ -216,7 +216,8 @@ impl DisparityMap {
             return Err("the output has no usable values".to_string());
         };
         let scale = lo.abs().max(hi.abs());
-        if !(hi - lo > 1e-6 * scale) {
+        // Both are finite (quantiles of finite values).
+        if hi - lo <= 1e-6 * scale {
             return Err(format!(
                 "the output is constant ({median}); the model saw no depth structure"
             ));
@@ -230,7 +231,10 @@ impl DisparityMap {
             .iter()
             .map(|d| if d.is_some() { 1.0 } else { 0.0 })
             .collect();
-        match (GrayRaster::from_vec(w, h, normalized), GrayRaster::from_vec(w, h, valid)) {
+        match (
+            GrayRaster::from_vec(w, h, normalized),
+            GrayRaster::from_vec(w, h, valid),
+        ) {
             (Some(normalized), Some(valid)) => Ok(Self { normalized, valid }),
             _ => Err("internal: output size mismatch".to_string()),
         }
@@ -317,6 +321,9 @@ mod tests {
         assert!(err.contains("constant"), "{err}");
         let nan = GrayRaster::new(5, 5, f32::NAN);
         let err = DisparityMap::from_output(&nan, DepthOutput::RelativeDisparity).unwrap_err();
-        assert!(err.contains("100% of the output values are NaN/Inf"), "{err}");
+        assert!(
+            err.contains("100% of the output values are NaN/Inf"),
+            "{err}"
+        );
     }
 }

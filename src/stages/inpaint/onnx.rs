@@ -222,7 +222,8 @@ impl OnnxInpainter {
             .iter()
             .flat_map(|&y0| xs.iter().map(move |&x0| (x0, y0)))
             .filter(|&(x0, y0)| {
-                (y0..(y0 + tile_h).min(h)).any(|y| (x0..(x0 + tile_w).min(w)).any(|x| hole.at(x, y)))
+                (y0..(y0 + tile_h).min(h))
+                    .any(|y| (x0..(x0 + tile_w).min(w)).any(|x| hole.at(x, y)))
             })
             .collect();
         let mut sum = Raster::new(w, h, [0.0f32; 3]);
@@ -237,9 +238,15 @@ impl OnnxInpainter {
                     let (cx, cy) = clamp(x, y);
                     let inside = x0 + x < w && y0 + y < h;
                     // Padding beyond the image repeats the edge and counts as known.
-                    (image.at_clamped(cx, cy), inside && blocked.at(x0 + x, y0 + y))
+                    (
+                        image.at_clamped(cx, cy),
+                        inside && blocked.at(x0 + x, y0 + y),
+                    )
                 },
-                &progress.sub(k as f32 / tiles.len() as f32, (k + 1) as f32 / tiles.len() as f32),
+                &progress.sub(
+                    k as f32 / tiles.len() as f32,
+                    (k + 1) as f32 / tiles.len() as f32,
+                ),
             )?;
             for y in 0..tile_h.min(h - y0) {
                 let wy = feather(y, tile_h, overlap);
@@ -299,7 +306,12 @@ impl Inpainter for OnnxInpainter {
             }
         };
         let mut out = image.clone();
-        for ((o, &f), &h) in out.data_mut().iter_mut().zip(filled.data()).zip(hole.data()) {
+        for ((o, &f), &h) in out
+            .data_mut()
+            .iter_mut()
+            .zip(filled.data())
+            .zip(hole.data())
+        {
             if h {
                 *o = f;
             }
@@ -322,7 +334,11 @@ fn check_sizes(request: &InpaintRequest<'_>) -> Result<()> {
         ))
     };
     if !image.same_size(request.hole) {
-        return Err(mismatch("hole mask", request.hole.width(), request.hole.height()));
+        return Err(mismatch(
+            "hole mask",
+            request.hole.width(),
+            request.hole.height(),
+        ));
     }
     if let Some(allowed) = request.allowed_source
         && !image.same_size(allowed)
@@ -394,16 +410,14 @@ pub fn complete_guide(
 ) -> GrayRaster {
     let (w, h) = guide.size();
     let is_source = |i: usize| {
-        !hole.data()[i]
-            && allowed_source.is_none_or(|a| a.data()[i])
-            && guide.data()[i].is_finite()
+        !hole.data()[i] && allowed_source.is_none_or(|a| a.data()[i]) && guide.data()[i].is_finite()
     };
     let mut out = guide.clone();
     let mut reached = vec![false; w * h];
     let mut queue = VecDeque::new();
-    for i in 0..w * h {
+    for (i, reached) in reached.iter_mut().enumerate() {
         if is_source(i) {
-            reached[i] = true;
+            *reached = true;
             queue.push_back(i);
         }
     }
@@ -504,7 +518,11 @@ mod tests {
             assert_eq!(filled.at(0, y), 1.0);
             assert_eq!(filled.at(5, y), 5.0);
             // Harmonic between 1 (x = 1) and 5 (x = 4): 7/3 and 11/3.
-            assert!((filled.at(2, y) - 7.0 / 3.0).abs() < 1e-3, "{}", filled.at(2, y));
+            assert!(
+                (filled.at(2, y) - 7.0 / 3.0).abs() < 1e-3,
+                "{}",
+                filled.at(2, y)
+            );
             assert!((filled.at(3, y) - 11.0 / 3.0).abs() < 1e-3);
         }
         // Only the right side is an allowed source: the hole takes 5.
@@ -514,6 +532,11 @@ mod tests {
         assert_eq!(filled.at(1, 1), 1.0);
         // A full hole has no source: the median of nothing → 0.
         let all = MaskRaster::new(6, 3, true);
-        assert!(complete_guide(&guide, &all, None).data().iter().all(|&v| v == 0.0));
+        assert!(
+            complete_guide(&guide, &all, None)
+                .data()
+                .iter()
+                .all(|&v| v == 0.0)
+        );
     }
 }
