@@ -238,9 +238,9 @@ fn load_runtime(search: &OrtSearch) -> std::result::Result<Runtime, LoadFailure>
     if candidates.is_empty() {
         let places: Vec<String> = searched.iter().map(|p| p.display().to_string()).collect();
         return Err(fail(format!(
-            "ONNX Runtime not found (looked in {}); install it with: {ORT_INSTALL_HINT}",
+            "no ONNX Runtime library in {}",
             if places.is_empty() {
-                "no folder".to_string()
+                "any folder searched".to_string()
             } else {
                 places.join(", ")
             }
@@ -317,20 +317,9 @@ impl fmt::Display for OrtStatus {
                 write!(f, "ONNX Runtime {version}: {}", path.display())
             }
             (None, error) => {
-                write!(
-                    f,
-                    "ONNX Runtime: not available ({}); learned models are off, classical \
-                     methods are used",
-                    error.as_deref().unwrap_or("unknown reason")
-                )?;
-                if !self.searched.is_empty() {
-                    let places: Vec<String> = self
-                        .searched
-                        .iter()
-                        .map(|p| p.display().to_string())
-                        .collect();
-                    write!(f, "\n  searched: {}", places.join(", "))?;
-                }
+                let error = error.as_deref().unwrap_or("unknown reason");
+                write!(f, "ONNX Runtime: not available: {error}")?;
+                write!(f, "\n  learned models are off; classical methods are used")?;
                 write!(f, "\n  install: {ORT_INSTALL_HINT}")
             }
         }
@@ -798,11 +787,16 @@ impl TensorInfo {
             ));
         }
         if self.shape.len() != dims.len() {
+            let wanted: Vec<String> = dims
+                .iter()
+                .map(|d| d.map_or("?".to_string(), |d| d.to_string()))
+                .collect();
             return Err(format!(
-                "{role} has rank {} (shape {}) but must have rank {}",
+                "{role} has rank {} (shape {}) but must have rank {} ([{}])",
                 self.shape.len(),
                 self.shape_text(),
-                dims.len()
+                dims.len(),
+                wanted.join(", ")
             ));
         }
         for (axis, (&have, want)) in self.shape.iter().zip(dims).enumerate() {
@@ -868,7 +862,7 @@ impl OnnxSession {
         };
         let runtime = runtime().map_err(|failure| {
             error(format!(
-                "ONNX Runtime is not available: {}",
+                "ONNX Runtime is not available: {}; install: {ORT_INSTALL_HINT}",
                 failure.message
             ))
         })?;
@@ -1207,7 +1201,7 @@ mod tests {
         .err()
         .unwrap();
         assert!(
-            empty.message.contains("ONNX Runtime not found"),
+            empty.message.contains("no ONNX Runtime library in"),
             "{}",
             empty.message
         );
@@ -1231,8 +1225,8 @@ mod tests {
             searched: vec![PathBuf::from("/a")],
         };
         let text = status.to_string();
-        assert!(text.contains("not available (ONNX Runtime not found)"));
-        assert!(text.contains("searched: /a"));
+        assert!(text.starts_with("ONNX Runtime: not available: ONNX Runtime not found\n"));
+        assert!(text.contains("classical methods are used"));
         assert!(text.contains("pip install"));
         let ok = OrtStatus {
             found: Some((PathBuf::from("/lib/libonnxruntime.so"), "1.31.1".into())),

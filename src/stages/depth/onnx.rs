@@ -52,9 +52,10 @@ impl OnnxDepth {
     /// Like [`OnnxDepth::from_manifest`] for an already parsed manifest.
     pub fn new(manifest: ModelManifest) -> Result<Self> {
         let ModelSpec::Depth(spec) = manifest.spec.clone() else {
-            return Err(
-                manifest.error(format!("is a {} model, not a depth model", manifest.kind()))
-            );
+            return Err(manifest.error(format!(
+                "its kind is \"{}\", but a depth model is needed",
+                manifest.kind()
+            )));
         };
         let session = OnnxSession::load(&manifest.model_path)?;
         let manifest_name = manifest

@@ -52,7 +52,7 @@ impl OnnxInpainter {
     pub fn new(manifest: ModelManifest) -> Result<Self> {
         let ModelSpec::Inpaint(spec) = manifest.spec.clone() else {
             return Err(manifest.error(format!(
-                "is a {} model, not an inpainting model",
+                "its kind is \"{}\", but an inpainting model is needed",
                 manifest.kind()
             )));
         };
