@@ -1016,7 +1016,8 @@ impl OnnxSession {
                             let _ = options.terminate();
                             return;
                         }
-                        std::thread::sleep(Duration::from_millis(20));
+                        // Woken early by `unpark` when the run ends.
+                        std::thread::park_timeout(Duration::from_millis(20));
                     }
                 });
             let outcome = session
@@ -1033,6 +1034,7 @@ impl OnnxSession {
                 });
             done.store(true, Ordering::Release);
             if let Ok(handle) = watcher {
+                handle.thread().unpark();
                 let _ = handle.join();
             }
             outcome

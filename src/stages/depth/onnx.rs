@@ -257,7 +257,9 @@ impl DisparityMap {
 /// `clamp((d − p1) / (p99 − p1), 0, 1)`.
 #[inline]
 pub fn normalize_disparity(d: f32, p1: f32, p99: f32) -> f32 {
-    ((d - p1) / (p99 - p1)).clamp(0.0, 1.0)
+    // In f64, so that outputs near f32::MAX cannot overflow the differences.
+    let t = (f64::from(d) - f64::from(p1)) / (f64::from(p99) - f64::from(p1));
+    t.clamp(0.0, 1.0) as f32
 }
 
 /// Depth from normalised disparity: `Z = 1 / max(disp, ε)`, `ε` = [`DISPARITY_EPSILON`], so
@@ -313,6 +315,17 @@ mod tests {
         assert_eq!(map.valid.at(1, 1), 0.0);
         assert_eq!(map.valid.at(2, 2), 0.0);
         assert_eq!(map.valid.at(0, 0), 1.0);
+    }
+
+    #[test]
+    fn huge_output_values_stay_finite() {
+        let raw = GrayRaster::from_fn(8, 8, |x, y| if (x + y) % 2 == 0 { -3e38 } else { 3e38 });
+        let map = DisparityMap::from_output(&raw, DepthOutput::RelativeDisparity).unwrap();
+        let est = map.to_estimate(5, 5);
+        for raster in [&est.depth, &est.sky, &est.confidence] {
+            assert!(raster.data().iter().all(|v| v.is_finite()));
+        }
+        assert!(est.depth.data().iter().all(|&z| (1.0..=100.0).contains(&z)));
     }
 
     #[test]
