@@ -431,11 +431,7 @@ mod tests {
             let (u0, v0, _) = k.project(p - dir * h).unwrap();
             let du = (u1 - u0) / (2.0 * h);
             let dv = (v1 - v0) / (2.0 * h);
-            assert!(
-                approx(du, j[0][axis], 0.05 * (1.0 + du.abs())),
-                "{du} {}",
-                j[0][axis]
-            );
+            assert!(approx(du, j[0][axis], 0.05 * (1.0 + du.abs())), "{du} {}", j[0][axis]);
             assert!(approx(dv, j[1][axis], 0.05 * (1.0 + dv.abs())));
         }
     }
