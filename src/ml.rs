@@ -157,6 +157,12 @@ fn library_files_in(dir: &Path) -> Vec<PathBuf> {
 
 /// Opens `path` as a shared library and checks that it is ONNX Runtime of a usable version;
 /// returns the library (kept loaded) and its version string. Never hands the file to `ort`.
+///
+/// This module's only `unsafe`: opening a shared library and calling its C entry point is unsafe
+/// by nature (`ort` does the same internally). Doing it here first is what turns a wrong file
+/// into a one-line error with the system's reason and gives `doctor` the runtime's version,
+/// which `ort` does not expose.
+#[allow(unsafe_code)]
 fn probe(path: &Path) -> Result<(libloading::Library, String), String> {
     let where_ = path.display();
     match std::fs::metadata(path) {
