@@ -256,7 +256,7 @@ pub fn output_views(project: &Project, scene: &Scene) -> Result<Vec<View>> {
     let views = project
         .camera
         .path
-        .views(&out_intrinsics, &scene.scale, frames)?;
+        .views(&out_intrinsics, width, &scene.scale, frames)?;
     if views.len() != frames {
         return Err(Error::invalid(format!(
             "camera path produced {} views for {frames} frames",

@@ -1,13 +1,13 @@
 //! The `makeit4d` command line.
 
-use anyhow::{Context, anyhow, bail};
+use anyhow::{Context, bail};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use makeit4d::Error;
 use makeit4d::export::{
     ExportOptions, FramePattern, Passes, VideoFormat, VideoOptions, render_sequence,
 };
-use makeit4d::path::CameraPath;
+use makeit4d::path::{CameraPath, Preset, PresetKind};
 use makeit4d::progress::Progress;
 use makeit4d::project::Project;
 use makeit4d::render::cpu::CpuRenderer;
@@ -305,8 +305,8 @@ fn render_one(
         project.camera.hfov_deg = fov;
     }
     if let Some(name) = &args.preset {
-        project.camera.path =
-            CameraPath::preset(name).ok_or_else(|| anyhow!("unknown preset '{name}'"))?;
+        let kind: PresetKind = name.parse()?;
+        project.camera.path = CameraPath::Preset(Preset::new(kind));
     }
     project.validate()?;
     let options = ExportOptions {

@@ -1,6 +1,7 @@
 //! Depth estimation: the [`DepthEstimator`] trait and its implementations.
 
 pub mod horizon;
+pub mod onnx;
 
 use crate::error::Result;
 use crate::geometry::Intrinsics;

@@ -1,5 +1,7 @@
 //! Image completion: the [`Inpainter`] trait and its implementations.
 
+pub mod onnx;
+
 use crate::error::Result;
 use crate::progress::Progress;
 use crate::raster::{GrayRaster, MaskRaster, RgbRaster};
