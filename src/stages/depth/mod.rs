@@ -1,5 +1,8 @@
 //! Depth estimation: the [`DepthEstimator`] trait and its implementations.
 
+pub mod classical;
+pub mod filter;
+
 use crate::error::Result;
 use crate::geometry::Intrinsics;
 use crate::progress::Progress;
