@@ -1,7 +1,11 @@
 //! Depth estimation: the [`DepthEstimator`] trait and its implementations.
 
 pub mod classical;
+pub mod eval;
 pub mod filter;
+pub mod io;
+pub mod paint;
+pub mod preview;
 
 use crate::error::Result;
 use crate::geometry::Intrinsics;
