@@ -58,16 +58,33 @@ fn main() -> Result<()> {
                 )?;
                 io::export_depth_png(&e.depth, &out.join(format!("{stem}_depth16.png")))?;
                 let grey = |g: &makeit4d::raster::GrayRaster| g.map(|v| [v, v, v]);
-                io::save_rgb_png(&grey(&a.position_work), &out.join(format!("{stem}_cue_position.png")))?;
-                io::save_rgb_png(&grey(&a.object_work), &out.join(format!("{stem}_cue_object.png")))?;
-                io::save_rgb_png(&grey(&a.haze_work), &out.join(format!("{stem}_cue_haze.png")))?;
+                io::save_rgb_png(
+                    &grey(&a.position_work),
+                    &out.join(format!("{stem}_cue_position.png")),
+                )?;
+                io::save_rgb_png(
+                    &grey(&a.object_work),
+                    &out.join(format!("{stem}_cue_object.png")),
+                )?;
+                io::save_rgb_png(
+                    &grey(&a.haze_work),
+                    &out.join(format!("{stem}_cue_haze.png")),
+                )?;
                 io::save_rgb_png(&grey(&a.sky_work), &out.join(format!("{stem}_cue_sky.png")))?;
-                io::save_rgb_png(&grey(&e.confidence), &out.join(format!("{stem}_confidence.png")))?;
+                io::save_rgb_png(
+                    &grey(&e.confidence),
+                    &out.join(format!("{stem}_confidence.png")),
+                )?;
                 println!(
-                    "{stem}: horizon {:.3} ({}), haziness {:.2}, depth {:.2}–{:.2}",
+                    "{stem}: horizon {:.3} ({}), haziness {:.2}, border coherence {:.3}, depth {:.2}–{:.2}",
                     a.horizon,
-                    if a.horizon_detected { "from sky" } else { "default/override" },
+                    if a.horizon_detected {
+                        "from sky"
+                    } else {
+                        "default/override"
+                    },
                     a.haziness,
+                    a.border_coherence,
                     e.depth.data().iter().copied().fold(f32::INFINITY, f32::min),
                     e.depth.data().iter().copied().fold(0.0f32, f32::max),
                 );
@@ -79,7 +96,9 @@ fn main() -> Result<()> {
             let b = eval::bench_classical_depth(&image, runs)?;
             print!("{}", b.to_markdown());
         }
-        _ => bail!("usage: depth_tools eval <image> <gt> [invalid] [--json] | preview <out-dir> <image>... | bench <image> [runs]"),
+        _ => bail!(
+            "usage: depth_tools eval <image> <gt> [invalid] [--json] | preview <out-dir> <image>... | bench <image> [runs]"
+        ),
     }
     let _ = ClassicalDepth::default().name();
     Ok(())

@@ -48,8 +48,14 @@ pub struct ClassicalDepthParams {
     /// Sky candidates have a luma at least this (sRGB-encoded, `[0, 1]`). Default 0.18.
     pub sky_min_luma: f32,
     /// Sky candidates have a local texture (blurred luma gradient magnitude per working pixel)
-    /// at most this. Default 0.025.
+    /// at most this. Default 0.03.
     pub sky_max_texture: f32,
+    /// Pixels brighter than this × the median luma are sky candidates whatever their texture.
+    /// Default 2.0.
+    pub sky_bright_factor: f32,
+    /// Sky is cut off this far below the detected horizon, fraction of the height (water and
+    /// fog below the horizon are not sky). Default 0.05.
+    pub sky_below_horizon: f32,
     /// Weight of the position (ground plane + pop-up) cue in the fusion. Default 0.5.
     pub ground_weight: f32,
     /// Share of a plain top-to-bottom disparity ramp mixed into the ground prior, so that
@@ -61,17 +67,23 @@ pub struct ClassicalDepthParams {
     /// How far a vertical structure carries its ground-contact nearness upward before it
     /// fades, fraction of the image height. Default 1.0.
     pub popup_carry: f32,
-    /// Weight of the object (figure-ground against the border) cue. Default 1.0.
+    /// Weight of the object (figure-ground against the border) cue, scaled down by the
+    /// border's incoherence and by haziness. Default 1.0.
     pub object_weight: f32,
     /// Colour difference (RGB Euclidean, `[0, 1]` units) of one standard deviation in the
     /// object cue's similarity kernel. Default 0.4.
     pub object_colour_scale: f32,
     /// Texture difference of one standard deviation in the object cue's kernel. Default 0.01.
     pub object_texture_scale: f32,
+    /// Border coherence (mean similarity of two border samples) below which the object cue
+    /// is off: a border of many different things is not one background. Default 0.2.
+    pub object_coherence_onset: f32,
+    /// Border coherence at which the object cue has its full weight. Default 0.4.
+    pub object_coherence_full: f32,
     /// Width of the border band sampled as "background", fraction of the shorter side.
     /// Default 0.05.
     pub border_band: f32,
-    /// Weight of the haze cue when the image is fully hazy. Default 1.0.
+    /// Weight of the haze cue when the image is fully hazy. Default 0.5.
     pub haze_weight: f32,
     /// Median normalised dark channel at which the haze cue starts to count. Default 0.5.
     pub haze_onset: f32,
@@ -97,7 +109,9 @@ impl Default for ClassicalDepthParams {
             camera_height_m: 1.6,
             work_size_px: 384,
             sky_min_luma: 0.18,
-            sky_max_texture: 0.025,
+            sky_max_texture: 0.03,
+            sky_bright_factor: 2.0,
+            sky_below_horizon: 0.05,
             ground_weight: 0.5,
             background_ramp: 0.3,
             popup_edge: 0.1,
@@ -105,8 +119,10 @@ impl Default for ClassicalDepthParams {
             object_weight: 1.0,
             object_colour_scale: 0.4,
             object_texture_scale: 0.01,
+            object_coherence_onset: 0.2,
+            object_coherence_full: 0.4,
             border_band: 0.05,
-            haze_weight: 1.0,
+            haze_weight: 0.5,
             haze_onset: 0.5,
             haze_full: 0.75,
             max_depth_ratio: 100.0,
@@ -149,6 +165,8 @@ impl ClassicalDepthParams {
             ("refine_radius", self.refine_radius),
             ("sky_min_luma", self.sky_min_luma),
             ("sky_max_texture", self.sky_max_texture),
+            ("sky_bright_factor", self.sky_bright_factor),
+            ("sky_below_horizon", self.sky_below_horizon),
             ("haze_onset", self.haze_onset),
         ];
         for (name, v) in non_negative {
@@ -158,6 +176,14 @@ impl ClassicalDepthParams {
         }
         if !(self.default_horizon.is_finite()) {
             return Err(Error::invalid("default_horizon must be finite"));
+        }
+        if !(self.object_coherence_full.is_finite()
+            && self.object_coherence_onset.is_finite()
+            && self.object_coherence_full > self.object_coherence_onset)
+        {
+            return Err(Error::invalid(
+                "object_coherence_full must be greater than object_coherence_onset",
+            ));
         }
         if !(self.haze_full.is_finite() && self.haze_full > self.haze_onset) {
             return Err(Error::invalid("haze_full must be greater than haze_onset"));
@@ -197,6 +223,8 @@ pub struct ClassicalAnalysis {
     pub horizon_detected: bool,
     /// How hazy the image is, `[0, 1]` (the haze cue's weight factor).
     pub haziness: f32,
+    /// Mean similarity of two border samples in the object cue's kernel, `[0, 1]`.
+    pub border_coherence: f32,
     /// Hard sky mask at working resolution, as 0/1.
     pub sky_work: GrayRaster,
     /// Position cue (ground plane + pop-up), nearness `[0, 1]`.
@@ -247,7 +275,7 @@ impl ClassicalDepth {
         let texture = texture_energy(&work_luma);
 
         // Sky and horizon.
-        let sky_work = sky_mask(&work, &work_luma, &texture, p);
+        let mut sky_work = sky_mask(&work, &work_luma, &texture, p);
         let (horizon, horizon_detected) = match p.horizon {
             Some(h) => (h, false),
             None => match horizon_from_sky(&sky_work) {
@@ -255,6 +283,14 @@ impl ClassicalDepth {
                 None => (p.default_horizon, false),
             },
         };
+        if horizon_detected || p.horizon.is_some() {
+            let cut = (horizon + p.sky_below_horizon) * (wh as f32 - 1.0);
+            for y in 0..wh {
+                if y as f32 > cut {
+                    sky_work.row_mut(y).fill(0.0);
+                }
+            }
+        }
         progress.report(0.2, "depth: cues");
         progress.check()?;
 
@@ -266,7 +302,19 @@ impl ClassicalDepth {
         progress.check()?;
 
         // Object cue.
-        let object_work = object_cue(&work, &texture, p);
+        let (mut object_work, border_coherence) = object_cue(&work, &texture, p);
+        // Much brighter than the image (sky through branches, bright clouds): not an object.
+        let median_luma = quantile(work_luma.data(), 0.5).unwrap_or(0.0);
+        if median_luma > 0.0 {
+            let f = p.sky_bright_factor;
+            for (o, l) in object_work.data_mut().iter_mut().zip(work_luma.data()) {
+                let sky_like = ((l / median_luma - 0.75 * f) / (0.5 * f)).clamp(0.0, 1.0);
+                *o *= 1.0 - sky_like;
+            }
+        }
+        let object_share = ((border_coherence - p.object_coherence_onset)
+            / (p.object_coherence_full - p.object_coherence_onset))
+            .clamp(0.0, 1.0);
         progress.report(0.6, "depth: cues");
         progress.check()?;
 
@@ -275,7 +323,9 @@ impl ClassicalDepth {
 
         // Fusion in nearness.
         let wg = p.ground_weight;
-        let wo = p.object_weight;
+        // In haze the haze cue already separates figure from ground; counting the object cue
+        // too would flatten the ground-plane gradient of everything in front of the fog.
+        let wo = p.object_weight * object_share * (1.0 - haziness);
         let wz = p.haze_weight * haziness;
         let total = (wg + wo + wz).max(1e-6);
         let mut fused = Raster::from_fn(ww, wh, |x, y| {
@@ -310,7 +360,13 @@ impl ClassicalDepth {
             p.refine_epsilon,
             subsample,
         )
-        .map(|v| if v.is_finite() { v.clamp(0.0, 1.0) } else { 0.0 });
+        .map(|v| {
+            if v.is_finite() {
+                v.clamp(0.0, 1.0)
+            } else {
+                0.0
+            }
+        });
         progress.report(0.9, "depth: refine");
         progress.check()?;
 
@@ -341,6 +397,7 @@ impl ClassicalDepth {
             horizon,
             horizon_detected,
             haziness,
+            border_coherence,
             sky_work,
             position_work,
             object_work,
@@ -366,7 +423,13 @@ impl DepthEstimator for ClassicalDepth {
 
 /// The image with every channel finite and in `[0, 1]` (NaN → 0).
 fn sanitised(image: &RgbRaster) -> RgbRaster {
-    let clean = |v: f32| if v.is_finite() { v.clamp(0.0, 1.0) } else { 0.0 };
+    let clean = |v: f32| {
+        if v.is_finite() {
+            v.clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    };
     image.map(|c| [clean(c[0]), clean(c[1]), clean(c[2])])
 }
 
@@ -383,8 +446,10 @@ pub fn texture_energy(luma: &GrayRaster) -> GrayRaster {
     gaussian_blur(&grad, 1.5)
 }
 
-/// Hard sky mask (1 = sky): pixels with luma ≥ `sky_min_luma` and texture ≤ `sky_max_texture`
-/// that are 4-connected to a candidate in the top row.
+/// Hard sky mask (1 = sky): candidates 4-connected to a candidate in the top row. A candidate
+/// is not vegetation-green and is either light and smooth (luma ≥ `sky_min_luma`, texture ≤
+/// `sky_max_texture`) or much brighter than the image (luma ≥ `sky_bright_factor` × median
+/// luma: sky seen through branches, bright clouds).
 fn sky_mask(
     work: &RgbRaster,
     work_luma: &GrayRaster,
@@ -392,8 +457,14 @@ fn sky_mask(
     p: &ClassicalDepthParams,
 ) -> GrayRaster {
     let (w, h) = work.size();
+    let median_luma = quantile(work_luma.data(), 0.5).unwrap_or(0.0);
+    let bright = (p.sky_bright_factor * median_luma).max(p.sky_min_luma);
     let candidate = Raster::from_fn(w, h, |x, y| {
-        work_luma.at(x, y) >= p.sky_min_luma && texture.at(x, y) <= p.sky_max_texture
+        let c = work.at(x, y);
+        let l = work_luma.at(x, y);
+        let vegetation = c[1] > c[0] + 0.03 && c[1] > c[2] + 0.03;
+        let smooth_and_light = l >= p.sky_min_luma && texture.at(x, y) <= p.sky_max_texture;
+        !vegetation && (smooth_and_light || l >= bright)
     });
     let mut sky = Raster::new(w, h, 0.0f32);
     let mut queue = VecDeque::new();
@@ -457,8 +528,8 @@ fn flood(
     }
 }
 
-/// Horizon from a sky mask: the median over columns of the lowest sky row connected to the
-/// top, as a fraction of the height; `None` when fewer than half of the columns start with sky
+/// Horizon from a sky mask: the median over columns of the lower edge of each column's lowest
+/// sky pixel, as a fraction of the height; `None` when fewer than half of the columns have sky
 /// or the sky covers (almost) everything.
 pub fn horizon_from_sky(sky: &GrayRaster) -> Option<f32> {
     let (w, h) = sky.size();
@@ -467,12 +538,8 @@ pub fn horizon_from_sky(sky: &GrayRaster) -> Option<f32> {
     }
     let mut bottoms = Vec::new();
     for x in 0..w {
-        let mut y = 0;
-        while y < h && sky.at(x, y) > 0.5 {
-            y += 1;
-        }
-        if y > 0 {
-            bottoms.push(y as f32 - 0.5);
+        if let Some(y) = (0..h).rev().find(|&y| sky.at(x, y) > 0.5) {
+            bottoms.push(y as f32 + 0.5);
         }
     }
     if bottoms.len() * 2 < w {
@@ -548,8 +615,14 @@ pub fn popup(work: &RgbRaster, prior: &GrayRaster, edge: f32, carry: f32) -> Gra
 
 /// Object (figure-ground) cue: `1 − L/max L`, where `L(x)` is the mean Gaussian similarity of
 /// pixel `x`'s features (blurred colour / `object_colour_scale`, texture /
-/// `object_texture_scale`) to samples from the top, left and right border bands.
-fn object_cue(work: &RgbRaster, texture: &GrayRaster, p: &ClassicalDepthParams) -> GrayRaster {
+/// `object_texture_scale`) to samples from the top, left and right border bands. Also returns
+/// the border's coherence, the mean similarity between two border samples (1 = a uniform
+/// border): the cue is only meaningful when the border is one background.
+fn object_cue(
+    work: &RgbRaster,
+    texture: &GrayRaster,
+    p: &ClassicalDepthParams,
+) -> (GrayRaster, f32) {
     let (w, h) = work.size();
     let blurred: Vec<GrayRaster> = (0..3)
         .map(|c| gaussian_blur(&work.map(|v| v[c]), 1.5))
@@ -576,9 +649,25 @@ fn object_cue(work: &RgbRaster, texture: &GrayRaster, p: &ClassicalDepthParams) 
     let max_samples = 320;
     let stride = samples.len().div_ceil(max_samples).max(1);
     let samples: Vec<[f32; 4]> = samples.into_iter().step_by(stride).collect();
-    if samples.is_empty() || p.object_weight == 0.0 {
-        return Raster::new(w, h, 0.0);
+    if samples.len() < 2 || p.object_weight == 0.0 {
+        return (Raster::new(w, h, 0.0), 0.0);
     }
+    let kernel = |f: &[f32; 4], b: &[f32; 4]| {
+        let d2 = (f[0] - b[0]).powi(2)
+            + (f[1] - b[1]).powi(2)
+            + (f[2] - b[2]).powi(2)
+            + (f[3] - b[3]).powi(2);
+        (-0.5 * d2).exp()
+    };
+    // Border coherence: the mean similarity between two different border samples.
+    let mut coherence = 0.0f32;
+    for (i, a) in samples.iter().enumerate() {
+        for b in &samples[i + 1..] {
+            coherence += kernel(a, b);
+        }
+    }
+    let pairs = samples.len() * (samples.len() - 1) / 2;
+    coherence /= pairs as f32;
     let inv_n = 1.0 / samples.len() as f32;
     let mut likelihood = vec![0.0f32; w * h];
     likelihood
@@ -589,11 +678,7 @@ fn object_cue(work: &RgbRaster, texture: &GrayRaster, p: &ClassicalDepthParams) 
                 let f = feature(x, y);
                 let mut s = 0.0;
                 for b in &samples {
-                    let d2 = (f[0] - b[0]).powi(2)
-                        + (f[1] - b[1]).powi(2)
-                        + (f[2] - b[2]).powi(2)
-                        + (f[3] - b[3]).powi(2);
-                    s += (-0.5 * d2).exp();
+                    s += kernel(&f, b);
                 }
                 *l = s * inv_n;
             }
@@ -603,7 +688,8 @@ fn object_cue(work: &RgbRaster, texture: &GrayRaster, p: &ClassicalDepthParams) 
         .iter()
         .map(|l| if max > 0.0 { 1.0 - l / max } else { 0.0 })
         .collect();
-    Raster::from_vec(w, h, data).unwrap_or_else(|| Raster::new(w, h, 0.0))
+    let cue = Raster::from_vec(w, h, data).unwrap_or_else(|| Raster::new(w, h, 0.0));
+    (cue, coherence)
 }
 
 /// Atmospheric light `A` of the dark channel prior: the mean colour of the brightest 0.1 %
@@ -886,7 +972,9 @@ mod tests {
         let e = estimator();
         // All sky.
         let sky = Raster::new(50, 30, [0.5, 0.7, 0.95]);
-        let out = e.estimate(&sky, &intrinsics(50, 30), &Progress::none()).unwrap();
+        let out = e
+            .estimate(&sky, &intrinsics(50, 30), &Progress::none())
+            .unwrap();
         check_sane(&out, 50, 30);
         assert!(out.sky.data().iter().all(|s| *s > 0.9));
         // All black.
@@ -898,7 +986,9 @@ mod tests {
         // 1×1, 1×N, N×1.
         for (w, h) in [(1, 1), (1, 7), (9, 1)] {
             let img = Raster::new(w, h, [0.3, 0.4, 0.5]);
-            let out = e.estimate(&img, &intrinsics(w, h), &Progress::none()).unwrap();
+            let out = e
+                .estimate(&img, &intrinsics(w, h), &Progress::none())
+                .unwrap();
             check_sane(&out, w, h);
         }
         // NaN and Inf pixels, and invalid intrinsics.
@@ -914,7 +1004,73 @@ mod tests {
         check_sane(&out, 20, 20);
         // Empty image is an error, not a panic.
         let empty: RgbRaster = Raster::new(0, 0, [0.0; 3]);
-        assert!(e.estimate(&empty, &intrinsics(1, 1), &Progress::none()).is_err());
+        assert!(
+            e.estimate(&empty, &intrinsics(1, 1), &Progress::none())
+                .is_err()
+        );
+    }
+
+    fn load_test_photo(name: &str) -> RgbRaster {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data")
+            .join(name);
+        let img = image::open(&path).unwrap().to_rgb32f();
+        let (w, h) = (img.width() as usize, img.height() as usize);
+        Raster::from_vec(w, h, img.pixels().map(|p| p.0).collect()).unwrap()
+    }
+
+    /// Median depth over a box given in fractions of the image `[x0, y0, x1, y1]`.
+    fn median_depth(d: &GrayRaster, b: [f32; 4]) -> f32 {
+        let (w, h) = d.size();
+        let mut v = Vec::new();
+        for y in (b[1] * h as f32) as usize..(b[3] * h as f32) as usize {
+            for x in (b[0] * w as f32) as usize..(b[2] * w as f32) as usize {
+                v.push(d.at(x, y));
+            }
+        }
+        quantile(&v, 0.5).unwrap()
+    }
+
+    #[test]
+    fn landscape_photos_have_far_sky_and_near_foreground() {
+        for (name, sky_box, far_box, near_box) in [
+            // Sky, far shore, pebbles in front of the boats.
+            (
+                "evening_glow_320.jpg",
+                [0.3, 0.02, 0.7, 0.15],
+                [0.3, 0.38, 0.7, 0.45],
+                [0.3, 0.85, 0.7, 0.98],
+            ),
+            // Fog, end of the pier, first boards.
+            (
+                "cold_ripple_320.jpg",
+                [0.3, 0.02, 0.7, 0.2],
+                [0.3, 0.52, 0.7, 0.56],
+                [0.3, 0.9, 0.7, 0.98],
+            ),
+        ] {
+            let img = load_test_photo(name);
+            let (w, h) = img.size();
+            let e = estimator()
+                .estimate(&img, &intrinsics(w, h), &Progress::none())
+                .unwrap();
+            check_sane(&e, w, h);
+            let sky = median_depth(&e.depth, sky_box);
+            let far = median_depth(&e.depth, far_box);
+            let near = median_depth(&e.depth, near_box);
+            assert!(sky > far && far > near, "{name}: {sky} {far} {near}");
+            assert!(median_depth(&e.sky, sky_box) > 0.9, "{name}");
+        }
+        // The forest has no open sky; its floor is nearer at the bottom than at mid-height.
+        let img = load_test_photo("forest_path_320.jpg");
+        let (w, h) = img.size();
+        let e = estimator()
+            .estimate(&img, &intrinsics(w, h), &Progress::none())
+            .unwrap();
+        check_sane(&e, w, h);
+        let mid = median_depth(&e.depth, [0.2, 0.5, 0.8, 0.6]);
+        let near = median_depth(&e.depth, [0.2, 0.9, 0.8, 1.0]);
+        assert!(near < mid, "{near} {mid}");
     }
 
     #[test]

@@ -243,7 +243,8 @@ pub fn eval_depth(
         return Err(Error::invalid("depth eval: the image has no pixels"));
     }
     let classical = ClassicalDepth::default();
-    let mut estimators: Vec<&dyn DepthEstimator> = vec![&classical, &ConstantDepth, &VerticalRampDepth];
+    let mut estimators: Vec<&dyn DepthEstimator> =
+        vec![&classical, &ConstantDepth, &VerticalRampDepth];
     estimators.extend_from_slice(extra);
     let mut rows = Vec::new();
     let count = estimators.len() as f32;
@@ -406,7 +407,9 @@ mod tests {
     }
 
     fn load_rgb(name: &str) -> RgbRaster {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(name);
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data")
+            .join(name);
         let img = image::open(&path).unwrap().to_rgb32f();
         let (w, h) = (img.width() as usize, img.height() as usize);
         let data = img.pixels().map(|p| p.0).collect();

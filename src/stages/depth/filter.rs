@@ -160,7 +160,7 @@ pub fn fast_guided_filter(
 /// clamped). `sigma_px ≤ 0` returns a copy.
 pub fn gaussian_blur(src: &GrayRaster, sigma_px: f32) -> GrayRaster {
     let (w, h) = src.size();
-    if !(sigma_px > 0.0) || src.is_empty() {
+    if sigma_px.is_nan() || sigma_px <= 0.0 || src.is_empty() {
         return src.clone();
     }
     let r = (3.0 * sigma_px).ceil() as isize;
@@ -204,7 +204,10 @@ pub fn min_filter(src: &GrayRaster, radius_px: usize) -> GrayRaster {
             for (x, o) in row.iter_mut().enumerate() {
                 let lo = x.saturating_sub(radius_px);
                 let hi = (x + radius_px + 1).min(w);
-                *o = src_row[lo..hi].iter().copied().fold(f32::INFINITY, f32::min);
+                *o = src_row[lo..hi]
+                    .iter()
+                    .copied()
+                    .fold(f32::INFINITY, f32::min);
             }
         });
         out

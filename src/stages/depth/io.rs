@@ -182,7 +182,10 @@ pub fn parse_npy(bytes: &[u8]) -> std::result::Result<GrayRaster, String> {
         .split(',')
         .map(str::trim)
         .filter(|s| !s.is_empty())
-        .map(|s| s.parse::<usize>().map_err(|_| format!("bad .npy shape {shape_text}")))
+        .map(|s| {
+            s.parse::<usize>()
+                .map_err(|_| format!("bad .npy shape {shape_text}"))
+        })
         .collect::<std::result::Result<_, _>>()?;
     let kept: Vec<usize> = dims.iter().copied().filter(|&d| d != 1).collect();
     let (h, w) = match (kept.len(), dims.len()) {
@@ -199,7 +202,9 @@ pub fn parse_npy(bytes: &[u8]) -> std::result::Result<GrayRaster, String> {
         _ => return Err(format!("expected a 2-D array, got shape {shape_text}")),
     };
     let count = w.checked_mul(h).ok_or("the .npy shape is too large")?;
-    let needed = count.checked_mul(elem).ok_or("the .npy shape is too large")?;
+    let needed = count
+        .checked_mul(elem)
+        .ok_or("the .npy shape is too large")?;
     let payload = &bytes[data_start..];
     if payload.len() < needed {
         return Err(format!(
@@ -330,7 +335,9 @@ pub fn import_depth(
     height: usize,
 ) -> Result<ImportedDepth> {
     if width == 0 || height == 0 {
-        return Err(Error::invalid("depth import: the target size has no pixels"));
+        return Err(Error::invalid(
+            "depth import: the target size has no pixels",
+        ));
     }
     let values = read_depth_values(path)?;
     if values.is_empty() {
@@ -356,10 +363,7 @@ pub fn import_depth(
                 "decoded through the sidecar {}",
                 sidecar_path(path).display()
             ));
-            let raw = values.map(|v| {
-                s.depth_of(v.clamp(0.0, 65535.0) as u16)
-                    .unwrap_or(f32::NAN)
-            });
+            let raw = values.map(|v| s.depth_of(v.clamp(0.0, 65535.0) as u16).unwrap_or(f32::NAN));
             values_to_depth(&raw, DepthFileKind::Depth)?
         }
         None => values_to_depth(&values, kind)?,
@@ -399,7 +403,10 @@ fn read_sidecar(png_path: &Path) -> Result<Option<DepthPngSidecar>> {
         return Ok(None);
     }
     if !(sidecar.offset.is_finite() && sidecar.scale.is_finite()) {
-        return Err(Error::file(&path, "the sidecar's offset or scale is not finite"));
+        return Err(Error::file(
+            &path,
+            "the sidecar's offset or scale is not finite",
+        ));
     }
     Ok(Some(sidecar))
 }
@@ -509,7 +516,10 @@ mod tests {
     fn npy_roundtrip_and_layouts() {
         let r = Raster::from_fn(3, 2, |x, y| (10 * y + x) as f32 + 0.5);
         let bytes = npy_bytes(&r);
-        assert_eq!((10 + u16::from_le_bytes([bytes[8], bytes[9]]) as usize) % 64, 0);
+        assert_eq!(
+            (10 + u16::from_le_bytes([bytes[8], bytes[9]]) as usize) % 64,
+            0
+        );
         assert_eq!(parse_npy(&bytes).unwrap(), r);
 
         // Hand-made float64 Fortran-order (2, 3) array [[0, 1, 2], [10, 11, 12]].
@@ -569,7 +579,12 @@ mod tests {
         assert_eq!(z.data(), &[2.0, 4.0, 4.0, 4.0]);
         assert!(warn.is_some());
         let clean = Raster::new(2, 2, 3.0f32);
-        assert!(values_to_depth(&clean, DepthFileKind::Depth).unwrap().1.is_none());
+        assert!(
+            values_to_depth(&clean, DepthFileKind::Depth)
+                .unwrap()
+                .1
+                .is_none()
+        );
         let all_bad = Raster::from_vec(2, 1, vec![f32::INFINITY, f32::NAN]).unwrap();
         assert!(values_to_depth(&all_bad, DepthFileKind::Depth).is_err());
     }

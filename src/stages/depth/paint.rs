@@ -54,8 +54,10 @@ impl DepthStroke {
                 self.strength
             )));
         }
-        if matches!(self.kind, DepthStrokeKind::Smooth | DepthStrokeKind::Flatten)
-            && self.strength > 1.0
+        if matches!(
+            self.kind,
+            DepthStrokeKind::Smooth | DepthStrokeKind::Flatten
+        ) && self.strength > 1.0
         {
             return Err(Error::invalid(format!(
                 "depth stroke: {:?} strength {} must be in [0, 1]",
@@ -75,7 +77,7 @@ impl DepthStroke {
 
 /// Brush weight `(1 − (d/r)²)²` for distance `d` and radius `r`; 0 for `d ≥ r`.
 pub fn brush_weight(distance_px: f32, radius_px: f32) -> f32 {
-    if !(distance_px < radius_px) || radius_px <= 0.0 {
+    if distance_px.is_nan() || distance_px >= radius_px || radius_px <= 0.0 {
         return 0.0;
     }
     let q = distance_px / radius_px;
@@ -113,8 +115,7 @@ fn stroke_weights(stroke: &DepthStroke, width: usize, height: usize) -> GrayRast
     }
     let clamp_x = |v: f32| v.clamp(0.0, width as f32 - 1.0) as usize;
     let clamp_y = |v: f32| v.clamp(0.0, height as f32 - 1.0) as usize;
-    if x1 + r < 0.0 || y1 + r < 0.0 || x0 - r > width as f32 - 1.0 || y0 - r > height as f32 - 1.0
-    {
+    if x1 + r < 0.0 || y1 + r < 0.0 || x0 - r > width as f32 - 1.0 || y0 - r > height as f32 - 1.0 {
         return weights;
     }
     let (bx0, bx1) = (clamp_x((x0 - r).floor()), clamp_x((x1 + r).ceil()));
@@ -165,7 +166,11 @@ pub fn apply_strokes(depth: &GrayRaster, strokes: &[DepthStroke]) -> Result<Gray
             DepthStrokeKind::Smooth => {
                 let radius = ((0.5 * stroke.radius_px).round() as usize).max(1);
                 let mean = super::filter::box_mean(&log_z, radius);
-                for ((l, wt), m) in log_z.data_mut().iter_mut().zip(weights.data()).zip(mean.data())
+                for ((l, wt), m) in log_z
+                    .data_mut()
+                    .iter_mut()
+                    .zip(weights.data())
+                    .zip(mean.data())
                 {
                     *l += s * wt * (m - *l);
                 }
@@ -242,7 +247,12 @@ mod tests {
     #[test]
     fn polyline_covers_its_segment() {
         let depth = Raster::new(20, 5, 1.0f32);
-        let push = stroke(DepthStrokeKind::Push, vec![[2.0, 2.0], [17.0, 2.0]], 2.0, 1.0);
+        let push = stroke(
+            DepthStrokeKind::Push,
+            vec![[2.0, 2.0], [17.0, 2.0]],
+            2.0,
+            1.0,
+        );
         let out = apply_strokes(&depth, &[push]).unwrap();
         for x in 2..=17 {
             assert!((out.at(x, 2) - 1f32.exp()).abs() < 1e-4);
@@ -295,7 +305,7 @@ mod tests {
         assert_eq!(apply_strokes(&depth, &[empty, off]).unwrap(), depth);
         // 1×1 depth, and a NaN pixel is left alone.
         let one = Raster::new(1, 1, 4.0f32);
-        let out = apply_strokes(&one, &[a.clone()]).unwrap();
+        let out = apply_strokes(&one, std::slice::from_ref(&a)).unwrap();
         assert!(out.at(0, 0).is_finite());
         let mut nan = depth.clone();
         nan.set(2, 2, f32::NAN);
@@ -306,7 +316,12 @@ mod tests {
 
     #[test]
     fn strokes_roundtrip_through_json() {
-        let s = stroke(DepthStrokeKind::Flatten, vec![[1.0, 2.0], [3.0, 4.0]], 5.0, 0.5);
+        let s = stroke(
+            DepthStrokeKind::Flatten,
+            vec![[1.0, 2.0], [3.0, 4.0]],
+            5.0,
+            0.5,
+        );
         let json = serde_json::to_string(&s).unwrap();
         assert!(json.contains("\"flatten\""));
         let back: DepthStroke = serde_json::from_str(&json).unwrap();

@@ -6,14 +6,23 @@ use crate::raster::{GrayRaster, Raster, Rgb, RgbRaster, quantile};
 /// Turbo colormap (Mikhailov 2019, Google), its published polynomial approximation; `t` is
 /// clamped to `[0, 1]` (NaN → 0), channels clamped to `[0, 1]`.
 pub fn turbo(t: f32) -> Rgb {
-    let x = if t.is_finite() { t.clamp(0.0, 1.0) } else { 0.0 };
+    let x = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     let v4 = [1.0, x, x * x, x * x * x];
     let v2 = [v4[2] * v4[2], v4[3] * v4[2]];
     let dot = |k4: [f32; 4], k2: [f32; 2]| -> f32 {
-        k4[0] * v4[0] + k4[1] * v4[1] + k4[2] * v4[2] + k4[3] * v4[3] + k2[0] * v2[0] + k2[1] * v2[1]
+        k4[0] * v4[0]
+            + k4[1] * v4[1]
+            + k4[2] * v4[2]
+            + k4[3] * v4[3]
+            + k2[0] * v2[0]
+            + k2[1] * v2[1]
     };
     let r = dot(
-        [0.135_721_38, 4.615_392_6, -42.660_322, 132.131_08],
+        [0.135_721_38, 4.615_392_6, -42.660_32, 132.131_08],
         [-152.942_39, 59.286_38],
     );
     let g = dot(
