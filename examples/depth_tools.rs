@@ -90,6 +90,15 @@ fn main() -> Result<()> {
                 );
             }
         }
+        Some("profile") if args.len() >= 2 => {
+            let image = load(Path::new(&args[1]))?;
+            let k = Intrinsics::from_hfov(image.width(), image.height(), 60.0);
+            let start = std::time::Instant::now();
+            let progress = Progress::new(move |f, stage| {
+                println!("{:7.3} s  {f:.2} {stage}", start.elapsed().as_secs_f64());
+            });
+            ClassicalDepth::default().estimate(&image, &k, &progress)?;
+        }
         Some("bench") if args.len() >= 2 => {
             let image = load(Path::new(&args[1]))?;
             let runs = args.get(2).map(|r| r.parse()).transpose()?.unwrap_or(5);

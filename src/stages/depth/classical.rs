@@ -18,7 +18,7 @@
 //!
 //! Sky is clamped to a finite far plane (`far_plane_factor` × median scene depth).
 
-use super::filter::{box_mean, fast_guided_filter, gaussian_blur, min_filter};
+use super::filter::{box_mean, gaussian_blur, guided_upsample, min_filter};
 use super::{DepthEstimate, DepthEstimator};
 use crate::error::{Error, Result};
 use crate::geometry::Intrinsics;
@@ -341,26 +341,25 @@ impl ClassicalDepth {
         progress.report(0.7, "depth: refine");
         progress.check()?;
 
-        // Full-resolution edge-aware refinement.
+        // Full-resolution edge-aware refinement: guided upsampling of the working-size maps.
         let full_luma = image.map(luma);
-        let radius_px = ((p.refine_radius * long as f32).round() as usize).max(1);
-        let subsample = ((1.0 / scale).round() as usize).max(1);
-        let nearness = fast_guided_filter(
+        let radius_work = ((p.refine_radius * ww.max(wh) as f32).round() as usize).max(1);
+        let refined = guided_upsample(
             &full_luma,
-            &fused.resized(width, height),
-            radius_px,
+            &[&fused, &sky_work],
+            radius_work,
             p.refine_epsilon,
-            subsample,
-        )
-        .map(|v| v.clamp(0.0, 1.0));
-        let sky = fast_guided_filter(
-            &full_luma,
-            &sky_work.resized(width, height),
-            radius_px,
-            p.refine_epsilon,
-            subsample,
-        )
-        .map(|v| {
+        );
+        let [nearness, sky] = <[GrayRaster; 2]>::try_from(refined)
+            .map_err(|_| Error::invalid("depth: refinement lost a map"))?;
+        let nearness = nearness.map(|v| {
+            if v.is_finite() {
+                v.clamp(0.0, 1.0)
+            } else {
+                0.0
+            }
+        });
+        let sky = sky.map(|v| {
             if v.is_finite() {
                 v.clamp(0.0, 1.0)
             } else {
@@ -378,10 +377,13 @@ impl ClassicalDepth {
         // Confidence: cue agreement, lowered at depth edges; sky by its certainty.
         let agreement = Raster::from_fn(ww, wh, |x, y| {
             1.0 - (position_work.at(x, y) - object_work.at(x, y)).abs()
-        })
-        .resized(width, height);
+        });
+        let (sx, sy) = (ww as f32 / width as f32, wh as f32 / height as f32);
+        let agreement = par_from_fn(width, height, |x, y| {
+            agreement.sample_bilinear((x as f32 + 0.5) * sx - 0.5, (y as f32 + 0.5) * sy - 0.5)
+        });
         let edges = depth_edge_strength(&nearness);
-        let confidence = Raster::from_fn(width, height, |x, y| {
+        let confidence = par_from_fn(width, height, |x, y| {
             let s = sky.at(x, y);
             let sky_certainty = (2.0 * s - 1.0).abs();
             let ground = agreement.at(x, y) * (1.0 - edges.at(x, y));
@@ -419,6 +421,19 @@ impl DepthEstimator for ClassicalDepth {
     ) -> Result<DepthEstimate> {
         Ok(self.analyse(image, intrinsics, progress)?.estimate)
     }
+}
+
+/// [`Raster::from_fn`] with the rows computed in parallel.
+fn par_from_fn(width: usize, height: usize, f: impl Fn(usize, usize) -> f32 + Sync) -> GrayRaster {
+    let mut data = vec![0.0f32; width * height];
+    if width > 0 {
+        data.par_chunks_mut(width).enumerate().for_each(|(y, row)| {
+            for (x, v) in row.iter_mut().enumerate() {
+                *v = f(x, y);
+            }
+        });
+    }
+    Raster::from_vec(width, height, data).unwrap_or_else(|| Raster::new(width, height, 0.0))
 }
 
 /// The image with every channel finite and in `[0, 1]` (NaN → 0).
@@ -669,13 +684,16 @@ fn object_cue(
     let pairs = samples.len() * (samples.len() - 1) / 2;
     coherence /= pairs as f32;
     let inv_n = 1.0 / samples.len() as f32;
-    let mut likelihood = vec![0.0f32; w * h];
+    // The features are blurred: evaluating on every second pixel and interpolating loses
+    // little and saves three quarters of the work.
+    let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
+    let mut likelihood = vec![0.0f32; cw * ch];
     likelihood
-        .par_chunks_mut(w)
+        .par_chunks_mut(cw)
         .enumerate()
-        .for_each(|(y, row)| {
-            for (x, l) in row.iter_mut().enumerate() {
-                let f = feature(x, y);
+        .for_each(|(cy, row)| {
+            for (cx, l) in row.iter_mut().enumerate() {
+                let f = feature((2 * cx).min(w - 1), (2 * cy).min(h - 1));
                 let mut s = 0.0;
                 for b in &samples {
                     s += kernel(&f, b);
@@ -688,7 +706,11 @@ fn object_cue(
         .iter()
         .map(|l| if max > 0.0 { 1.0 - l / max } else { 0.0 })
         .collect();
-    let cue = Raster::from_vec(w, h, data).unwrap_or_else(|| Raster::new(w, h, 0.0));
+    let coarse = Raster::from_vec(cw, ch, data).unwrap_or_else(|| Raster::new(cw, ch, 0.0));
+    // Coarse pixel c sits on fine pixel 2c.
+    let cue = Raster::from_fn(w, h, |x, y| {
+        coarse.sample_bilinear(x as f32 / 2.0, y as f32 / 2.0)
+    });
     (cue, coherence)
 }
 
@@ -773,7 +795,7 @@ fn normalise_robust(values: &mut GrayRaster, exclude: Option<&GrayRaster>) {
 /// the nearness range per pixel counts as a full edge), clamped.
 fn depth_edge_strength(nearness: &GrayRaster) -> GrayRaster {
     let (w, h) = nearness.size();
-    Raster::from_fn(w, h, |x, y| {
+    par_from_fn(w, h, |x, y| {
         let (xi, yi) = (x as isize, y as isize);
         let gx = nearness.at_clamped(xi + 1, yi) - nearness.at_clamped(xi - 1, yi);
         let gy = nearness.at_clamped(xi, yi + 1) - nearness.at_clamped(xi, yi - 1);

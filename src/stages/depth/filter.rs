@@ -156,6 +156,59 @@ pub fn fast_guided_filter(
     Raster::from_vec(w, h, out).unwrap_or(input_clean)
 }
 
+/// Guided upsampling: filters low-resolution `inputs` (all of one size) with the guided filter
+/// whose guide is `guide` reduced to that size, then applies the upsampled coefficients to the
+/// full-resolution guide, `q = A↑·I + B↑` (the fast guided filter of He & Sun 2015 for an input
+/// that is already small). `radius_px` is in low-resolution pixels. The outputs have the
+/// guide's size; an input of another size than the first is returned resized.
+pub fn guided_upsample(
+    guide: &GrayRaster,
+    inputs: &[&GrayRaster],
+    radius_px: usize,
+    epsilon: f32,
+) -> Vec<GrayRaster> {
+    let (w, h) = guide.size();
+    let Some(first) = inputs.first() else {
+        return Vec::new();
+    };
+    let (lw, lh) = first.size();
+    if guide.is_empty() || first.is_empty() {
+        return inputs.iter().map(|i| (*i).clone()).collect();
+    }
+    let guide_clean = guide.map(|v| if v.is_finite() { v } else { 0.0 });
+    let guide_small = guide_clean.resized(lw, lh);
+    let coefficients: Vec<Option<(GrayRaster, GrayRaster)>> = inputs
+        .iter()
+        .map(|input| {
+            input.same_size(first).then(|| {
+                let clean = input.map(|v| if v.is_finite() { v } else { 0.0 });
+                guided_coefficients(&guide_small, &clean, radius_px.max(1), epsilon)
+            })
+        })
+        .collect();
+    let sx = lw as f32 / w as f32;
+    let sy = lh as f32 / h as f32;
+    coefficients
+        .iter()
+        .zip(inputs)
+        .map(|(c, input)| {
+            let Some((a, b)) = c else {
+                return input.resized(w, h);
+            };
+            let mut out = vec![0.0f32; w * h];
+            out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+                let ys = (y as f32 + 0.5) * sy - 0.5;
+                for (x, o) in row.iter_mut().enumerate() {
+                    let xs = (x as f32 + 0.5) * sx - 0.5;
+                    let g = guide_clean.at(x, y);
+                    *o = a.sample_bilinear(xs, ys) * g + b.sample_bilinear(xs, ys);
+                }
+            });
+            Raster::from_vec(w, h, out).unwrap_or_else(|| input.resized(w, h))
+        })
+        .collect()
+}
+
 /// Separable Gaussian blur with standard deviation `sigma_px` (kernel truncated at 3σ, border
 /// clamped). `sigma_px ≤ 0` returns a copy.
 pub fn gaussian_blur(src: &GrayRaster, sigma_px: f32) -> GrayRaster {
@@ -301,6 +354,24 @@ mod tests {
         // One pixel.
         let one = Raster::new(1, 1, 2.0f32);
         assert_eq!(fast_guided_filter(&one, &one, 4, 1e-2, 4).at(0, 0), 2.0);
+    }
+
+    #[test]
+    fn guided_upsample_keeps_constants_and_full_resolution_edges() {
+        // Guide: a step at x = 20 of 40; low-resolution input 10×5: the same step, blurred.
+        let guide = Raster::from_fn(40, 20, |x, _| if x < 20 { 0.0 } else { 1.0 });
+        let low = Raster::from_fn(10, 5, |x, _| if x < 5 { 0.0 } else { 1.0 });
+        let constant = Raster::new(10, 5, 0.7f32);
+        let out = guided_upsample(&guide, &[&low, &constant], 1, 1e-4);
+        assert_eq!(out[0].size(), (40, 20));
+        // The edge sits on the guide's edge at full resolution.
+        assert!(out[0].at(18, 10) < 0.1, "{}", out[0].at(18, 10));
+        assert!(out[0].at(21, 10) > 0.9, "{}", out[0].at(21, 10));
+        assert!(out[1].data().iter().all(|v| (v - 0.7).abs() < 1e-5));
+        // 1×1 guide and input.
+        let one = Raster::new(1, 1, 0.3f32);
+        assert!((guided_upsample(&one, &[&one], 2, 1e-2)[0].at(0, 0) - 0.3).abs() < 1e-6);
+        assert!(guided_upsample(&one, &[], 2, 1e-2).is_empty());
     }
 
     #[test]
