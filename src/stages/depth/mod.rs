@@ -1,7 +1,13 @@
 //! Depth estimation: the [`DepthEstimator`] trait and its implementations.
 
+pub mod classical;
+pub mod eval;
+pub mod filter;
 pub mod horizon;
+pub mod io;
 pub mod onnx;
+pub mod paint;
+pub mod preview;
 
 use crate::error::Result;
 use crate::geometry::Intrinsics;
