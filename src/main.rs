@@ -37,6 +37,86 @@ struct Cli {
 enum Command {
     /// Render a photo (or a project) to a folder of PNG frames.
     Render(RenderArgs),
+    /// Estimate the depth of a photo on its own (16-bit disparity PNG + JSON sidecar).
+    Depth(DepthArgs),
+    /// Score stages against ground truth.
+    #[command(subcommand)]
+    Eval(EvalCommand),
+    /// Measure speed (and quality) of the stages; prints markdown tables.
+    #[command(subcommand)]
+    Bench(BenchCommand),
+    /// Print what this machine offers: GPU adapter, ONNX Runtime, models, ffmpeg.
+    Doctor(DoctorArgs),
+}
+
+#[derive(Args, Debug)]
+struct DepthArgs {
+    /// The input photo.
+    image: PathBuf,
+    /// The 16-bit disparity PNG to write (normalised to the full range; the scale goes to
+    /// the .json beside it).
+    #[arg(long)]
+    out: PathBuf,
+    /// An ONNX depth model manifest (JSON); without it the classical estimator runs.
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Also write a colourised preview (near = red, far = dark blue).
+    #[arg(long)]
+    colour: Option<PathBuf>,
+    /// Horizontal field of view of the photo, degrees.
+    #[arg(long, default_value_t = 60.0)]
+    fov: f32,
+    /// Horizon row as a fraction of the height (0 = top); default: detected.
+    #[arg(long)]
+    horizon: Option<f32>,
+}
+
+#[derive(Subcommand, Debug)]
+enum EvalCommand {
+    /// Depth accuracy against ground-truth disparity (scale-and-shift aligned, MiDaS protocol).
+    Depth(EvalDepthArgs),
+}
+
+#[derive(Args, Debug)]
+struct EvalDepthArgs {
+    /// The (left) image.
+    #[arg(long)]
+    image: PathBuf,
+    /// Ground-truth disparity of that image (8/16-bit PNG or .npy).
+    #[arg(long)]
+    gt_disparity: PathBuf,
+    /// Disparity value that marks unknown pixels.
+    #[arg(long, default_value_t = 0.0)]
+    invalid: f32,
+    /// Also score this ONNX depth model manifest.
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Print JSON instead of a markdown table.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Subcommand, Debug)]
+enum BenchCommand {
+    /// The classical depth estimator: median seconds over several runs.
+    Depth(BenchDepthArgs),
+}
+
+#[derive(Args, Debug)]
+struct BenchDepthArgs {
+    /// Photo to estimate (default: assets/evening_glow.jpg, 1280×800).
+    #[arg(long, default_value = "assets/evening_glow.jpg")]
+    image: PathBuf,
+    /// Number of runs.
+    #[arg(long, default_value_t = 5)]
+    runs: usize,
+}
+
+#[derive(Args, Debug)]
+struct DoctorArgs {
+    /// Also list the models this project configures.
+    #[arg(long)]
+    project: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -177,6 +257,10 @@ fn main() -> ExitCode {
     }
     let result = match cli.command {
         Command::Render(args) => render(args, cancel),
+        Command::Depth(args) => depth(args, cancel),
+        Command::Eval(EvalCommand::Depth(args)) => eval_depth(args, cancel),
+        Command::Bench(BenchCommand::Depth(args)) => bench_depth(args),
+        Command::Doctor(args) => doctor(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -332,6 +416,9 @@ fn render_one(
     // Decode and validate everything before anything is written.
     let (bar, progress) = progress_bar(cancel);
     let scene = build_scene(&project, &progress.sub(0.0, 0.1))?;
+    for w in &scene.warnings {
+        bar.suspend(|| eprintln!("warning: {w}"));
+    }
     makeit4d::image_io::prepare_output_dir(out)?;
     if let Some(path) = &args.save_project {
         project
@@ -353,5 +440,110 @@ fn render_one(
         eprintln!("warning: {w}");
     }
     println!("{summary}");
+    Ok(())
+}
+
+fn depth(args: DepthArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::stages::depth::{DepthMethod, DepthSettings, io, preview, run_depth_stage};
+    let input = makeit4d::image_io::load_image(&args.image)?;
+    let (w, h) = input.rgb.size();
+    let intrinsics = makeit4d::geometry::Intrinsics::from_hfov(w, h, args.fov);
+    let mut settings = DepthSettings::default();
+    settings.classical.horizon = args.horizon;
+    if let Some(model) = &args.model {
+        settings.method = DepthMethod::Onnx;
+        settings.model = Some(model.clone());
+    }
+    let (bar, progress) = progress_bar(cancel);
+    let stage = run_depth_stage(&settings, &input.rgb, &intrinsics, &progress);
+    bar.finish_and_clear();
+    let stage = stage?;
+    for w in &stage.warnings {
+        eprintln!("warning: {w}");
+    }
+    io::export_depth_png(&stage.estimate.depth, &args.out)?;
+    if let Some(path) = &args.colour {
+        let rgb = preview::depth_preview(&stage.estimate.depth, Some(&stage.estimate.sky));
+        makeit4d::image_io::save_rgb_png(path, &rgb, false)?;
+    }
+    println!(
+        "wrote {} ({}×{}, {} estimator; scale in {})",
+        args.out.display(),
+        w,
+        h,
+        stage.estimator,
+        io::sidecar_path(&args.out).display()
+    );
+    Ok(())
+}
+
+fn eval_depth(args: EvalDepthArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::stages::depth::{DepthEstimator, eval, onnx::OnnxDepth};
+    let image = makeit4d::image_io::load_image(&args.image)?;
+    let gt = eval::read_gt_disparity(&args.gt_disparity)?;
+    let (w, h) = image.rgb.size();
+    let intrinsics = makeit4d::geometry::Intrinsics::from_hfov(w, h, 60.0);
+    let model = match &args.model {
+        Some(m) => Some(OnnxDepth::from_manifest(m)?),
+        None => None,
+    };
+    let extra: Vec<&dyn DepthEstimator> = model.iter().map(|m| m as &dyn DepthEstimator).collect();
+    let (bar, progress) = progress_bar(cancel);
+    let table = eval::eval_depth(
+        &image.rgb,
+        &gt,
+        args.invalid,
+        &intrinsics,
+        &extra,
+        &progress,
+    );
+    bar.finish_and_clear();
+    let table = table?;
+    if args.json {
+        println!("{}", table.to_json()?);
+    } else {
+        print!("{}", table.to_markdown());
+    }
+    Ok(())
+}
+
+fn bench_depth(args: BenchDepthArgs) -> anyhow::Result<()> {
+    let image = makeit4d::image_io::load_image(&args.image)?;
+    let bench = makeit4d::stages::depth::eval::bench_classical_depth(&image.rgb, args.runs.max(1))?;
+    print!("{}", bench.to_markdown());
+    Ok(())
+}
+
+fn doctor(args: DoctorArgs) -> anyhow::Result<()> {
+    println!("makeit4d {}", env!("CARGO_PKG_VERSION"));
+    println!("{}", makeit4d::ml::ort_status());
+    match &args.project {
+        Some(p) => {
+            let project = Project::load(p)?;
+            match (&project.depth.method, &project.depth.model) {
+                (makeit4d::stages::depth::DepthMethod::Onnx, Some(m)) => {
+                    match makeit4d::ml::ModelManifest::load(m) {
+                        Ok(manifest) => {
+                            println!("depth model: {} ({})", manifest.display_name(), m.display())
+                        }
+                        Err(e) => println!("depth model: {} — {e:#}", m.display()),
+                    }
+                }
+                (method, _) => println!("depth: {method:?} (no learned model)"),
+            }
+        }
+        None => println!("models: none configured (pass --project to list a project's models)"),
+    }
+    let ffmpeg = VideoOptions::new(VideoFormat::Mp4).ffmpeg;
+    match std::process::Command::new(&ffmpeg).arg("-version").output() {
+        Ok(out) if out.status.success() => {
+            let text = String::from_utf8_lossy(&out.stdout);
+            println!("ffmpeg: {}", text.lines().next().unwrap_or("found"));
+        }
+        _ => println!(
+            "ffmpeg: not found ({}): video export is off; PNG sequences still work",
+            ffmpeg.display()
+        ),
+    }
     Ok(())
 }

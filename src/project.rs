@@ -7,7 +7,7 @@
 use crate::error::{Error, Result};
 use crate::path::CameraPath;
 use crate::render::SplatSettings;
-use crate::stages::depth::horizon::HorizonParams;
+use crate::stages::depth::DepthSettings;
 use serde::{Deserialize, Serialize};
 use std::path::{Component, Path, PathBuf};
 
@@ -84,14 +84,6 @@ impl Default for CameraSettings {
     }
 }
 
-/// Which depth estimator runs, and its parameters.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct DepthSettings {
-    /// Parameters of the horizon prior.
-    pub horizon: HorizonParams,
-}
-
 impl Project {
     /// A project for `input` with every setting at its default.
     pub fn new(input: impl Into<PathBuf>) -> Self {
@@ -153,6 +145,17 @@ impl Project {
         self.render.validate()
     }
 
+    /// Applies `f` to every file path the project refers to (input, models, imports).
+    pub fn map_paths(&mut self, f: impl Fn(&Path) -> PathBuf) {
+        self.input = f(&self.input);
+        if let Some(m) = &self.depth.model {
+            self.depth.model = Some(f(m));
+        }
+        if let Some(import) = &mut self.depth.import {
+            import.path = f(&import.path);
+        }
+    }
+
     /// Reads and validates a project file. Relative input paths are resolved against the
     /// project file's folder.
     pub fn load(path: &Path) -> Result<Project> {
@@ -165,10 +168,14 @@ impl Project {
             Error::InvalidInput(m) => Error::file(path, m),
             other => other,
         })?;
-        if project.input.is_relative() {
-            let base = path.parent().unwrap_or(Path::new(""));
-            project.input = base.join(&project.input);
-        }
+        let base = path.parent().unwrap_or(Path::new("")).to_path_buf();
+        project.map_paths(|p| {
+            if p.is_relative() {
+                base.join(p)
+            } else {
+                p.to_path_buf()
+            }
+        });
         Ok(project)
     }
 
@@ -197,7 +204,7 @@ impl Project {
         self.validate()?;
         let mut stored = self.clone();
         let base = absolute(path.parent().unwrap_or(Path::new("")));
-        stored.input = relative_to(&absolute(&self.input), &base);
+        stored.map_paths(|p| relative_to(&absolute(p), &base));
         let text = serde_json::to_string_pretty(&stored)
             .map_err(|e| Error::invalid(format!("cannot serialise project: {e}")))?;
         crate::image_io::write_atomic(path, format!("{text}\n").as_bytes())

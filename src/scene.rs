@@ -7,8 +7,7 @@ use crate::path::SceneScale;
 use crate::progress::Progress;
 use crate::project::Project;
 use crate::raster::{GrayRaster, quantile};
-use crate::stages::depth::horizon::HorizonPrior;
-use crate::stages::depth::{DepthEstimate, DepthEstimator};
+use crate::stages::depth::{DepthEstimate, run_depth_stage};
 use crate::stages::points::{LiftOptions, PointCloud};
 use std::sync::Arc;
 
@@ -25,6 +24,10 @@ pub struct Scene {
     pub scale: SceneScale,
     /// The point cloud.
     pub cloud: Arc<PointCloud>,
+    /// Which depth estimator ran.
+    pub depth_estimator: String,
+    /// One line per fallback or adjustment the user should hear about.
+    pub warnings: Vec<String>,
 }
 
 /// Depth statistics of the non-sky pixels (all pixels when everything is sky).
@@ -60,10 +63,13 @@ pub fn build_scene(project: &Project, progress: &Progress) -> Result<Scene> {
     progress.check()?;
     let (w, h) = input.rgb.size();
     let intrinsics = Intrinsics::from_hfov(w, h, project.camera.hfov_deg);
-    let estimator = HorizonPrior {
-        params: project.depth.horizon,
-    };
-    let depth = estimator.estimate(&input.rgb, &intrinsics, &progress.sub(0.1, 0.8))?;
+    let stage = run_depth_stage(
+        &project.depth,
+        &input.rgb,
+        &intrinsics,
+        &progress.sub(0.1, 0.8),
+    )?;
+    let depth = stage.estimate;
     progress.check()?;
     let scale = scene_scale(&depth.depth, &depth.sky)?;
     progress.report(0.8, "points");
@@ -82,5 +88,7 @@ pub fn build_scene(project: &Project, progress: &Progress) -> Result<Scene> {
         depth,
         scale,
         cloud: Arc::new(cloud),
+        depth_estimator: stage.estimator,
+        warnings: stage.warnings,
     })
 }
