@@ -169,9 +169,7 @@ impl PointCloud {
                 let tv = along(0, 1, Vec3::new(0.0, z / intrinsics.fy, 0.0));
                 cloud.positions.push(p);
                 cloud.colours.push(image.at(x, y));
-                cloud
-                    .alphas
-                    .push(alpha.map_or(1.0, |a| a.at(x, y).clamp(0.0, 1.0)));
+                cloud.alphas.push(alpha.map_or(1.0, |a| a.at(x, y).clamp(0.0, 1.0)));
                 cloud.tangent_u.push(tu);
                 cloud.tangent_v.push(tv);
                 cloud.source_depth.push(z);
@@ -193,8 +191,8 @@ mod tests {
         let k = Intrinsics::from_hfov(4, 3, 60.0);
         let image = Raster::new(4, 3, [0.5, 0.25, 1.0]);
         let depth = Raster::from_fn(4, 3, |x, _| 2.0 + x as f32 * 0.01);
-        let cloud =
-            PointCloud::lift(&image, &depth, &k, None, None, LiftOptions::default()).expect("lift");
+        let cloud = PointCloud::lift(&image, &depth, &k, None, None, LiftOptions::default())
+            .expect("lift");
         assert_eq!(cloud.len(), 12);
         for i in 0..cloud.len() {
             let [x, y] = cloud.source_pixel[i];
@@ -232,15 +230,9 @@ mod tests {
             PointCloud::lift(&image, &depth, &k, None, None, LiftOptions::default()).unwrap();
         assert_eq!(cloud.len(), 1);
         let alpha = Raster::from_vec(3, 1, vec![1.0, 1.0, 0.0]).unwrap();
-        let cloud = PointCloud::lift(
-            &image,
-            &depth,
-            &k,
-            Some(&alpha),
-            None,
-            LiftOptions::default(),
-        )
-        .unwrap();
+        let cloud =
+            PointCloud::lift(&image, &depth, &k, Some(&alpha), None, LiftOptions::default())
+                .unwrap();
         assert!(cloud.is_empty());
         let wrong = Raster::new(2, 1, 1.0f32);
         assert!(PointCloud::lift(&image, &wrong, &k, None, None, LiftOptions::default()).is_err());
