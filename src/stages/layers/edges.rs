@@ -98,10 +98,28 @@ pub fn refine_depth_edges(
     if window <= 1 || w == 0 || h == 0 {
         return (depth.clone(), labels.clone());
     }
-    let lmin = sliding_extreme(labels, window, window, u16::MAX, u16::min);
-    let lmax = sliding_extreme(labels, window, window, 0, u16::max);
-    let zmin = sliding_extreme(depth, window, window, f32::INFINITY, f32::min);
-    let zmax = sliding_extreme(depth, window, window, f32::NEG_INFINITY, f32::max);
+    // Smallest and largest label of every window, in one separable pass.
+    let range = sliding_extreme(
+        &labels.map(|l| (l, l)),
+        window,
+        window,
+        (u16::MAX, 0),
+        |a, b| (a.0.min(b.0), a.1.max(b.1)),
+    );
+    // Smallest and largest depth of every window, the same way.
+    let zrange = sliding_extreme(
+        &depth.map(|z| (z, z)),
+        window,
+        window,
+        (f32::INFINITY, f32::NEG_INFINITY),
+        // Plain comparisons (the depth holds no NaN here) vectorise better than f32::min.
+        |a, b| {
+            (
+                if b.0 < a.0 { b.0 } else { a.0 },
+                if b.1 > a.1 { b.1 } else { a.1 },
+            )
+        },
+    );
     let (before, after) = window_reach(window);
     let mut out_depth = depth.clone();
     let mut out_labels = labels.clone();
@@ -112,29 +130,37 @@ pub fn refine_depth_edges(
         .enumerate()
         .for_each(|(y, (zrow, lrow))| {
             let mut samples: Vec<(u16, f32)> = Vec::with_capacity(window * window);
+            let mut depths: Vec<f32> = Vec::with_capacity(window * window);
             let mut medians: Vec<(u16, f32)> = Vec::new();
+            let rows = y.saturating_sub(before)..(y + after + 1).min(h);
             for x in 0..w {
-                let i = y * w + x;
-                let on_edge =
-                    lmin.data()[i] != lmax.data()[i] && zmax.data()[i] > min_ratio * zmin.data()[i];
-                if !on_edge {
+                let (lo, hi) = range.data()[y * w + x];
+                let (zmin, zmax) = zrange.data()[y * w + x];
+                if lo == hi || zmax <= min_ratio * zmin {
                     continue;
                 }
                 samples.clear();
-                for yy in y.saturating_sub(before)..(y + after + 1).min(h) {
-                    for xx in x.saturating_sub(before)..(x + after + 1).min(w) {
-                        samples.push((labels.at(xx, yy), depth.at(xx, yy)));
-                    }
+                for yy in rows.clone() {
+                    let start = yy * w;
+                    let span = start + x.saturating_sub(before)..start + (x + after + 1).min(w);
+                    samples.extend(
+                        labels.data()[span.clone()]
+                            .iter()
+                            .copied()
+                            .zip(depth.data()[span].iter().copied()),
+                    );
                 }
-                samples.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
+                // Masked (lower) median of every layer present: an actual depth of that layer.
                 medians.clear();
-                let mut start = 0;
-                while start < samples.len() {
-                    let l = samples[start].0;
-                    let end = start + samples[start..].iter().take_while(|s| s.0 == l).count();
-                    // Lower median: an actual depth of layer l.
-                    medians.push((l, samples[start + (end - start - 1) / 2].1));
-                    start = end;
+                for l in lo..=hi {
+                    depths.clear();
+                    depths.extend(samples.iter().filter(|s| s.0 == l).map(|s| s.1));
+                    if depths.is_empty() {
+                        continue;
+                    }
+                    let k = (depths.len() - 1) / 2;
+                    let (_, m, _) = depths.select_nth_unstable_by(k, f32::total_cmp);
+                    medians.push((l, *m));
                 }
                 let disparity = 1.0 / f64::from(zrow[x]);
                 let mut chosen = medians[medians.len() - 1];

@@ -18,7 +18,15 @@ pub fn window_reach(size: usize) -> (usize, usize) {
 
 /// Sliding extreme along one line: `dst[i] = pick over src[i − before ..= i + after]`, where
 /// `pick` is associative and commutative and `pad` is its identity (used outside the line).
-fn sliding_line<T: Copy>(src: &[T], dst: &mut [T], size: usize, pad: T, pick: &impl Fn(T, T) -> T) {
+/// `prefix` and `suffix` are scratch buffers.
+fn sliding_line<T: Copy>(
+    src: &[T],
+    dst: &mut [T],
+    size: usize,
+    pad: T,
+    pick: &impl Fn(T, T) -> T,
+    (prefix, suffix): (&mut Vec<T>, &mut Vec<T>),
+) {
     let n = src.len();
     let (before, after) = window_reach(size);
     let k = before + after + 1;
@@ -26,43 +34,37 @@ fn sliding_line<T: Copy>(src: &[T], dst: &mut [T], size: usize, pad: T, pick: &i
         dst.copy_from_slice(src);
         return;
     }
-    // Padded line: `padded[j] = src[j − before]`; output `i` reads `padded[i .. i + k]`.
+    // The padded line is `padded[j] = src[j − before]` (pad outside); output `i` reads
+    // `padded[i .. i + k]`. `prefix[j]`: extreme from the start of j's block of k to j;
+    // `suffix[j]`: from j to its block's end.
     let len = n + k - 1;
-    let padded: Vec<T> = (0..len)
-        .map(|j| {
-            j.checked_sub(before)
-                .and_then(|s| src.get(s).copied())
-                .unwrap_or(pad)
-        })
-        .collect();
-    // `prefix[j]`: extreme from the start of j's block to j; `suffix[j]`: from j to its block's end.
-    let mut prefix = padded.clone();
-    let mut suffix = padded.clone();
-    for j in 1..len {
-        if j % k != 0 {
-            prefix[j] = pick(prefix[j - 1], padded[j]);
-        }
+    let padded = |j: usize| match j.checked_sub(before) {
+        Some(s) if s < n => src[s],
+        _ => pad,
+    };
+    prefix.clear();
+    suffix.clear();
+    prefix.reserve(len);
+    suffix.resize(len, pad);
+    for j in 0..len {
+        let v = padded(j);
+        prefix.push(if j % k == 0 {
+            v
+        } else {
+            pick(prefix[j - 1], v)
+        });
     }
-    for j in (0..len.saturating_sub(1)).rev() {
-        if (j + 1) % k != 0 {
-            suffix[j] = pick(suffix[j + 1], padded[j]);
-        }
+    for j in (0..len).rev() {
+        let v = padded(j);
+        suffix[j] = if j + 1 == len || (j + 1) % k == 0 {
+            v
+        } else {
+            pick(suffix[j + 1], v)
+        };
     }
     for (i, out) in dst.iter_mut().enumerate() {
         *out = pick(suffix[i], prefix[i + k - 1]);
     }
-}
-
-/// Transposed copy of a raster.
-fn transposed<T: Copy + Send + Sync>(r: &Raster<T>) -> Raster<T> {
-    let (w, h) = r.size();
-    let mut data = Vec::with_capacity(w * h);
-    for x in 0..w {
-        for y in 0..h {
-            data.push(r.at(x, y));
-        }
-    }
-    Raster::from_vec(h, w, data).unwrap_or_else(|| unreachable!("transpose keeps the pixel count"))
 }
 
 /// Applies `sliding_line` to every row.
@@ -80,7 +82,74 @@ fn rows_pass<T: Copy + Send + Sync>(
     out.data_mut()
         .par_chunks_mut(w)
         .zip(r.data().par_chunks(w))
-        .for_each(|(dst, src)| sliding_line(src, dst, size, pad, pick));
+        .for_each_init(
+            || (Vec::new(), Vec::new()),
+            |(prefix, suffix), (dst, src)| {
+                sliding_line(src, dst, size, pad, pick, (prefix, suffix))
+            },
+        );
+    out
+}
+
+/// The same block prefix/suffix scheme down the columns, a whole row at a time (contiguous,
+/// vectorisable, no transpose).
+fn columns_pass<T: Copy + Send + Sync>(
+    r: &Raster<T>,
+    size: usize,
+    pad: T,
+    pick: &(impl Fn(T, T) -> T + Sync),
+) -> Raster<T> {
+    let (w, h) = r.size();
+    let (before, after) = window_reach(size);
+    let k = before + after + 1;
+    if k == 1 || w == 0 || h == 0 {
+        return r.clone();
+    }
+    let len = h + k - 1;
+    let pad_row = vec![pad; w];
+    let source = |j: usize| -> &[T] {
+        match j.checked_sub(before) {
+            Some(y) if y < h => r.row(y),
+            _ => &pad_row,
+        }
+    };
+    let mut prefix = vec![pad; len * w];
+    let mut suffix = vec![pad; len * w];
+    for j in 0..len {
+        let src = source(j);
+        if j % k == 0 {
+            prefix[j * w..(j + 1) * w].copy_from_slice(src);
+        } else {
+            let (done, rest) = prefix.split_at_mut(j * w);
+            let prev = &done[(j - 1) * w..];
+            for ((d, &p), &s) in rest[..w].iter_mut().zip(prev).zip(src) {
+                *d = pick(p, s);
+            }
+        }
+    }
+    for j in (0..len).rev() {
+        let src = source(j);
+        if j + 1 == len || (j + 1) % k == 0 {
+            suffix[j * w..(j + 1) * w].copy_from_slice(src);
+        } else {
+            let (head, done) = suffix.split_at_mut((j + 1) * w);
+            let next = &done[..w];
+            for ((d, &n), &s) in head[j * w..].iter_mut().zip(next).zip(src) {
+                *d = pick(n, s);
+            }
+        }
+    }
+    let mut out = r.clone();
+    out.data_mut()
+        .par_chunks_mut(w)
+        .enumerate()
+        .for_each(|(i, row)| {
+            let a = &suffix[i * w..(i + 1) * w];
+            let b = &prefix[(i + k - 1) * w..(i + k) * w];
+            for ((o, &x), &y) in row.iter_mut().zip(a).zip(b) {
+                *o = pick(x, y);
+            }
+        });
     out
 }
 
@@ -94,11 +163,7 @@ pub fn sliding_extreme<T: Copy + Send + Sync>(
     pick: impl Fn(T, T) -> T + Sync,
 ) -> Raster<T> {
     let rows = rows_pass(r, width, pad, &pick);
-    if height <= 1 {
-        return rows;
-    }
-    let cols = rows_pass(&transposed(&rows), height, pad, &pick);
-    transposed(&cols)
+    columns_pass(&rows, height, pad, &pick)
 }
 
 /// Erosion by a `size × size` square: a pixel stays set when every pixel of its window inside

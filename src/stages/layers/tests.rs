@@ -243,6 +243,15 @@ fn sixteen_layers() {
     };
     let plan = plan_layers(&depth, &params, &Progress::none()).expect("plan");
     assert_eq!(plan.thresholds.len(), 17);
+    // Well separated clusters: greedy Ward finds the optimum too.
+    let ward = LayerParams {
+        method: ClusterMethod::Ward,
+        ..params.clone()
+    };
+    assert_eq!(
+        layer_thresholds(&depth, &ward).expect("ward"),
+        plan.thresholds
+    );
     assert_eq!(plan.regions.len(), 16);
     let stats = plan.stats();
     for (k, s) in stats.iter().enumerate() {
