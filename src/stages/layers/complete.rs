@@ -160,8 +160,9 @@ pub fn remap_to_interval(d: f32, [min_d, max_d]: [f32; 2], [near, far]: [f32; 2]
 /// layers' pixels outside layer `i`'s hole keep the canvas colour), robustly normalised with the
 /// quantiles of `params` over the layer's pixels (`mask ∪ inpainted`), and remapped into the
 /// layer's interval with [`remap_to_interval`]. The result replaces the layer's depth on those
-/// pixels; every value lies in `[d_i, d_{i+1}]`, so inpainted pixels stay behind the pixels that
-/// hid them. A layer whose estimate is flat keeps its depth.
+/// pixels; every value lies in `[d_i, d_{i+1})` (closed for the last layer), so inpainted
+/// pixels stay strictly behind the pixels that hid them. A layer whose estimate is flat keeps
+/// its depth.
 ///
 /// Not calling this function is the "off" switch: the layers then keep the depth from
 /// [`inpaint_layers`] (the refined canvas depth plus the completion's guide).
@@ -206,18 +207,24 @@ pub fn layer_based_depth(
                 canvas.height()
             )));
         }
+        // Half-open except for the last layer, so that no point of this layer ties with the
+        // nearest possible point of the next one (`d_{i+1}`).
+        let [near, far] = layer.interval;
+        let interval = if k + 1 < count {
+            [near, far.next_down().max(near)]
+        } else {
+            [near, far]
+        };
         let covered: Vec<usize> = (0..canvas.len())
             .filter(|&i| layer.mask.data()[i] || layer.inpainted.data()[i])
             .collect();
         let values: Vec<f32> = covered.iter().map(|&i| estimate.depth.data()[i]).collect();
         let range = quantile(&values, low_quantile).zip(quantile(&values, high_quantile));
         if let Some((lo, hi)) = range
-            && remap_to_interval(lo, [lo, hi], layer.interval).is_some()
+            && remap_to_interval(lo, [lo, hi], interval).is_some()
         {
             for &i in &covered {
-                if let Some(z) =
-                    remap_to_interval(estimate.depth.data()[i], [lo, hi], layer.interval)
-                {
+                if let Some(z) = remap_to_interval(estimate.depth.data()[i], [lo, hi], interval) {
                     layer.depth.data_mut()[i] = z;
                 }
             }

@@ -24,6 +24,8 @@ pub struct MeanInpainter {
     pub requests: Mutex<Vec<Recorded>>,
     /// When set, the completed guide is this value everywhere in the hole (to test clamping).
     pub forced_guide: Option<f32>,
+    /// When set, the completed colour is this everywhere in the hole.
+    pub forced_colour: Option<[f32; 3]>,
 }
 
 impl Inpainter for MeanInpainter {
@@ -62,7 +64,7 @@ impl Inpainter for MeanInpainter {
         let mut image = request.image.clone();
         let mut guide = request.guide.cloned();
         for i in (0..n).filter(|&i| request.hole.data()[i]) {
-            image.data_mut()[i] = mean;
+            image.data_mut()[i] = self.forced_colour.unwrap_or(mean);
             if let Some(g) = &mut guide {
                 g.data_mut()[i] = self.forced_guide.unwrap_or(guide_mean);
             }

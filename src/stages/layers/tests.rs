@@ -49,6 +49,16 @@ fn check_scene(scene: &LayeredScene, canvas: &RgbRaster, plan_depth: &GrayRaster
             assert_eq!(owners.len(), 1, "pixel ({x}, {y}) owned by {owners:?}");
             let owner = owners[0];
             assert_eq!(scene.layers[owner].image.at(x, y), canvas.at(x, y));
+            // The input view is reproduced: the owner's point is strictly the nearest.
+            let front = scene.layers[owner].depth.at(x, y);
+            for (k, layer) in scene.layers.iter().enumerate() {
+                if k != owner && layer.covers(x, y) {
+                    assert!(
+                        layer.depth.at(x, y) > front,
+                        "({x}, {y}): layer {k} in front"
+                    );
+                }
+            }
             for (k, layer) in scene.layers.iter().enumerate() {
                 if !layer.covers(x, y) {
                     continue;
@@ -537,6 +547,24 @@ fn layer_based_depth_known_answer_and_switch() {
             .zip(layered.layers[0].depth.data())
             .all(|(&m, &z)| !m || z == FG)
     );
+    // Ties: the square's brightest pixel maps to the top of its interval, the wall's black
+    // completion behind it to the bottom of the wall's: the same d_2. The square must stay
+    // strictly in front.
+    let mut graded = canvas.clone();
+    for y in 15..35 {
+        for x in 20..40 {
+            graded.set(x, y, [(x - 20) as f32 / 19.0; 3]);
+        }
+    }
+    let black = MeanInpainter {
+        forced_colour: Some([0.0; 3]),
+        ..MeanInpainter::default()
+    };
+    let tied = inpaint_layers(&graded, &plan, &black, 3, &Progress::none()).expect("ok");
+    let tied = layer_based_depth(&tied, &graded, &LumaDepth, &k, &params, &Progress::none())
+        .expect("layer depth");
+    assert_eq!(tied.layers[1].depth.at(30, 25), tied.layers[1].interval[0]);
+    check_scene(&tied, &graded, &plan.depth);
     // Off: the scene from inpaint_layers keeps the wall at 20.
     assert_eq!(scene.layers[1].depth.at(10, 0), BG);
     // Bad quantiles are rejected.
