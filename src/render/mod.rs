@@ -1,5 +1,7 @@
 //! Rendering the point cloud into frames (algorithms.md §7).
 
+pub mod blend;
+
 use crate::raster::{GrayRaster, RgbRaster};
 
 /// One rendered view. All rasters have the output size.

@@ -3,4 +3,5 @@
 
 pub mod depth;
 pub mod inpaint;
+pub mod motion;
 pub mod points;
