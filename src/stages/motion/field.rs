@@ -11,8 +11,9 @@
 //! - Neumann (zero normal derivative) at the border of the support, so a region with one arrow
 //!   moves as a whole and the brush's soft edge, not the solver, makes the falloff.
 //!
-//! A connected part of the support that touches no constraint does not move (`u = 0`). The
-//! field is then
+//! A connected part of the support that touches no constraint (sky seen through a gap in the
+//! trees, a second pond) moves with the mean velocity of the region's arrows: a region is one
+//! material with one motion. The field is then
 //!
 //! `M = s·(1 − f)·Σ_r m_r·u_r / max(1, Σ_r m_r)`
 //!
@@ -185,7 +186,22 @@ pub fn flow_from_spec(
                 None
             }
         });
-        let u = masked_harmonic(&support, &fixed, &sub)?;
+        // Unconstrained parts of the region move with the mean of its arrows.
+        let used: Vec<[f32; 2]> = region
+            .arrows
+            .iter()
+            .enumerate()
+            .filter(|(ai, _)| !field.ignored_arrows.contains(&(ri, *ai)))
+            .filter_map(|(_, a)| a.velocity())
+            .collect();
+        let fallback = if used.is_empty() {
+            [0.0, 0.0]
+        } else {
+            let n = used.len() as f32;
+            let s = used.iter().fold([0.0f32; 2], |s, v| [s[0] + v[0], s[1] + v[1]]);
+            [s[0] / n, s[1] / n]
+        };
+        let u = masked_harmonic(&support, &fixed, fallback, &sub)?;
         for y in 0..bh {
             for x in 0..bw {
                 let m = mask.at(bx0 + x, by0 + y);
@@ -324,8 +340,16 @@ impl Level {
     }
 
     /// Solves this level from `guess` (this level's size); returns the solution with the
-    /// constraints in place and zeros outside the support and in unconstrained components.
-    fn solve(&self, guess: Vec<[f32; 2]>, max_iterations: usize, scale: f64, progress: &Progress) -> Result<Vec<[f32; 2]>> {
+    /// constraints in place, zeros outside the support and `fallback` in unconstrained
+    /// components.
+    fn solve(
+        &self,
+        guess: Vec<[f32; 2]>,
+        fallback: [f32; 2],
+        max_iterations: usize,
+        scale: f64,
+        progress: &Progress,
+    ) -> Result<Vec<[f32; 2]>> {
         let (w, h) = (self.width, self.height);
         let n = w * h;
         let mut value = guess;
@@ -372,7 +396,7 @@ impl Level {
             match (self.support[i], self.fixed[i]) {
                 (false, _) => value[i] = [0.0; 2],
                 (true, Some(v)) => value[i] = v,
-                (true, None) if !constrained[component[i] as usize] => value[i] = [0.0; 2],
+                (true, None) if !constrained[component[i] as usize] => value[i] = fallback,
                 (true, None) => {
                     unknown_of[i] = pixel_of.len() as u32;
                     pixel_of.push(i);
@@ -517,12 +541,13 @@ fn conjugate_gradients(
 /// The harmonic interpolant `u` on `support` (4-neighbour graph Laplacian, Neumann at the
 /// border of the support) that equals `fixed` where it is `Some`.
 ///
-/// Returns `u` with the constraints in place, zero outside the support and zero in connected
-/// parts of the support that contain no constraint. `fixed` is ignored outside the support.
-/// Errors when the sizes differ or a constraint is not finite.
+/// Returns `u` with the constraints in place, zero outside the support and `fallback` in
+/// connected parts of the support that contain no constraint. `fixed` is ignored outside the
+/// support. Errors when the sizes differ or a constraint or `fallback` is not finite.
 pub fn masked_harmonic(
     support: &MaskRaster,
     fixed: &Raster<Option<[f32; 2]>>,
+    fallback: [f32; 2],
     progress: &Progress,
 ) -> Result<Raster<[f32; 2]>> {
     if !support.same_size(fixed) {
@@ -535,7 +560,10 @@ pub fn masked_harmonic(
         )));
     }
     let (w, h) = support.size();
-    let mut scale = 0.0f64;
+    if !(fallback[0].is_finite() && fallback[1].is_finite()) {
+        return Err(Error::invalid("motion: the fallback flow is not finite"));
+    }
+    let mut scale = fallback[0].abs().max(fallback[1].abs()) as f64;
     for v in fixed.data().iter().flatten() {
         if !(v[0].is_finite() && v[1].is_finite()) {
             return Err(Error::invalid("motion: a flow constraint is not finite"));
@@ -577,7 +605,7 @@ pub fn masked_harmonic(
                 8 * ((level.width + level.height) as f64).sqrt() as usize + 50,
             ),
         };
-        solution = Some(level.solve(guess, max_iterations, scale, progress)?);
+        solution = Some(level.solve(guess, fallback, max_iterations, scale, progress)?);
         progress.report((count - li) as f32 / count as f32, "motion field");
     }
     let data = solution.unwrap_or_else(|| vec![[0.0; 2]; w * h]);
@@ -656,7 +684,7 @@ mod tests {
             x if x == w - 1 => Some([3.0, -1.0]),
             _ => None,
         });
-        let u = masked_harmonic(&support, &fixed, &Progress::none()).unwrap();
+        let u = masked_harmonic(&support, &fixed, [0.0, 0.0], &Progress::none()).unwrap();
         for y in 0..h {
             for x in 0..w {
                 let t = x as f32 / (w - 1) as f32;
@@ -682,7 +710,7 @@ mod tests {
             (10, 20) => Some([0.0, 0.0]),
             _ => None,
         });
-        let u = masked_harmonic(&support, &fixed, &Progress::none()).unwrap();
+        let u = masked_harmonic(&support, &fixed, [0.0, 0.0], &Progress::none()).unwrap();
         let reference = reference_harmonic(&support, &fixed);
         for (a, b) in u.data().iter().zip(reference.data()) {
             assert!((a[0] - b[0]).abs() < 5e-3 && (a[1] - b[1]).abs() < 5e-3, "{a:?} {b:?}");
@@ -690,20 +718,22 @@ mod tests {
     }
 
     #[test]
-    fn unconstrained_components_and_outside_are_zero() {
+    fn unconstrained_components_take_the_fallback_and_outside_is_zero() {
         let (w, h) = (30, 10);
-        // Two separate blocks; only the left one has a constraint.
+        // Three blocks; only the left one has a constraint, the middle one is outside.
         let support = Raster::from_fn(w, h, |x, _| x < 10 || x >= 20);
         let fixed = Raster::from_fn(w, h, |x, y| (x == 2 && y == 2).then_some([1.0, 2.0]));
-        let u = masked_harmonic(&support, &fixed, &Progress::none()).unwrap();
+        let u = masked_harmonic(&support, &fixed, [-0.5, 0.25], &Progress::none()).unwrap();
         for y in 0..h {
             for x in 0..w {
                 let v = u.at(x, y);
                 if x < 10 {
                     // One constraint, Neumann elsewhere: the constant.
                     assert!((v[0] - 1.0).abs() < 1e-3 && (v[1] - 2.0).abs() < 1e-3);
-                } else {
+                } else if x < 20 {
                     assert_eq!(v, [0.0, 0.0]);
+                } else {
+                    assert_eq!(v, [-0.5, 0.25]);
                 }
             }
         }
@@ -713,10 +743,18 @@ mod tests {
     fn harmonic_rejects_bad_input() {
         let support = MaskRaster::new(3, 3, true);
         let nan = Raster::new(3, 3, Some([f32::NAN, 0.0]));
-        assert!(masked_harmonic(&support, &nan, &Progress::none()).is_err());
+        assert!(masked_harmonic(&support, &nan, [0.0, 0.0], &Progress::none()).is_err());
+        let none = Raster::new(3, 3, None);
+        assert!(masked_harmonic(&support, &none, [f32::INFINITY, 0.0], &Progress::none()).is_err());
         let small = Raster::new(2, 3, None);
-        assert!(masked_harmonic(&support, &small, &Progress::none()).is_err());
-        let empty = masked_harmonic(&MaskRaster::new(0, 0, true), &Raster::new(0, 0, None), &Progress::none()).unwrap();
+        assert!(masked_harmonic(&support, &small, [0.0, 0.0], &Progress::none()).is_err());
+        let empty = masked_harmonic(
+            &MaskRaster::new(0, 0, true),
+            &Raster::new(0, 0, None),
+            [1.0, 0.0],
+            &Progress::none(),
+        )
+        .unwrap();
         assert!(empty.is_empty());
     }
 

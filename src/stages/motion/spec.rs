@@ -17,8 +17,8 @@ pub const MIN_BRUSH_RADIUS_PX: f32 = 0.5;
 
 /// A brush stroke: a polyline in canvas pixels painted (or erased) with a round soft brush.
 ///
-/// The brush value at distance `d` from the polyline is `b(d) = 1` for `d ≤ h·r` and falls
-/// smoothly (`1 − smoothstep`) to `0` at `d = r` (`r` = radius, `h` = hardness).
+/// The brush value at distance `d` from the polyline is `b(d) = 1` for `d ≤ h·r` (and `d < r`)
+/// and falls smoothly (`1 − smoothstep`) to `0` at `d = r` (`r` = radius, `h` = hardness).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct Stroke {
@@ -171,10 +171,10 @@ pub fn brush_value(d: f32, radius: f32, hardness: f32) -> f32 {
         1.0
     };
     let inner = h * r;
-    if d <= inner {
-        1.0
-    } else if d >= r {
+    if d >= r {
         0.0
+    } else if d <= inner {
+        1.0
     } else {
         falloff((d - inner) / (r - inner))
     }

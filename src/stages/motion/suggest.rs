@@ -6,11 +6,15 @@
 //! - Sky: the given soft sky mask (e.g. from the depth estimator), or a *skyline* estimate:
 //!   in each column the sky runs from the top down to the first long run of textured
 //!   (non-smooth) pixels; the skyline is median-filtered across columns.
-//! - Horizon: the given row, or the median over columns of the sky's height.
-//! - Water: pixels below the horizon that are smooth (local luma gradient below the image
-//!   median) and sky-coloured (their colour, or a brightened copy of it as reflections are
+//!   A sky darker on average than the rest of the image is rejected (a canopy, not a sky).
+//! - Horizon: the given row, or the [`HORIZON_QUANTILE`] over columns of the sky's height.
+//! - Water: pixels below the horizon and below every sky pixel of their column that are
+//!   smooth (local luma gradient below the [`WATER_SMOOTHNESS_QUANTILE`] of the image) and
+//!   sky-coloured (their colour, or a brightened copy of it as reflections are
 //!   darker, falls into a populated bin of the sky's 16³ colour histogram), cleaned by a box
-//!   vote and kept when a connected part covers at least [`MIN_WATER_AREA`] of the image.
+//!   vote and kept when a connected part covers at least [`MIN_WATER_AREA`] of the image and
+//!   spans [`MIN_WATER_WIDTH`] of its width; what rises above the median top edge of the
+//!   water (a hill beside a lake) is dropped, as a level water surface has a flat top edge.
 //! - Masks become horizontal brush strokes, one per band of [`stroke_radius`] rows and run of
 //!   mask pixels, so the project stays small and the user can erase or extend them.
 //! - Arrows: two in the sky pointing right at [`SKY_DRIFT_PER_WIDTH`]·W px/frame; two per
@@ -29,7 +33,17 @@ pub const SKY_DRIFT_PER_WIDTH: f32 = 4e-4;
 pub const WATER_FLOW_PER_HEIGHT: f32 = 6e-4;
 
 /// A connected water part must cover at least this fraction of the image to be suggested.
-pub const MIN_WATER_AREA: f32 = 0.01;
+pub const MIN_WATER_AREA: f32 = 0.02;
+
+/// … and span at least this fraction of the image width (lakes and seas are wide).
+pub const MIN_WATER_WIDTH: f32 = 0.25;
+
+/// Water is at most as textured as this quantile of the image's texture.
+pub const WATER_SMOOTHNESS_QUANTILE: f32 = 0.4;
+
+/// The estimated horizon is this quantile of the columns' sky heights (low mountain gaps do
+/// not pull it up).
+pub const HORIZON_QUANTILE: f32 = 0.75;
 
 /// Brush radius used to vectorise a mask: 1/40 of the shorter side, in `[2, 32]` pixels.
 pub fn stroke_radius(width: usize, height: usize) -> f32 {
@@ -64,7 +78,7 @@ pub fn suggest_motion(
     let texture = texture(image);
     let sky_mask: MaskRaster = match sky {
         Some(s) => s.map(|v| v >= 0.5),
-        None => estimate_sky(&texture),
+        None => estimate_sky(image, &texture),
     };
     let sky_pixels = sky_mask.data().iter().filter(|&&s| s).count();
     let horizon = horizon_row.unwrap_or_else(|| {
@@ -74,7 +88,7 @@ pub fn suggest_motion(
         if sky_pixels == 0 {
             0.5 * h as f32
         } else {
-            quantile(&heights, 0.5).unwrap_or(0.5 * h as f32)
+            quantile(&heights, HORIZON_QUANTILE).unwrap_or(0.5 * h as f32)
         }
     });
     let water = if sky_pixels > 0 {
@@ -162,7 +176,7 @@ fn box_mean(v: &GrayRaster, r: usize) -> GrayRaster {
 }
 
 /// Skyline sky estimate (see the module documentation).
-fn estimate_sky(texture: &GrayRaster) -> MaskRaster {
+fn estimate_sky(image: &RgbRaster, texture: &GrayRaster) -> MaskRaster {
     let (w, h) = texture.size();
     let threshold = quantile(texture.data(), 0.35).unwrap_or(0.0).max(0.01);
     let solid_run = (h / 25).max(2);
@@ -195,7 +209,23 @@ fn estimate_sky(texture: &GrayRaster) -> MaskRaster {
     if mean < 0.03 * h as f32 {
         return MaskRaster::new(w, h, false);
     }
-    Raster::from_fn(w, h, |x, y| y < smoothed[x])
+    let sky = Raster::from_fn(w, h, |x, y| y < smoothed[x]);
+    // Sky is brighter than the rest of a landscape; a dark "sky" is a canopy or a wall.
+    let lumas = image.map(luma);
+    let (mut inside, mut n_in, mut outside, mut n_out) = (0.0f64, 0usize, 0.0f64, 0usize);
+    for (&l, &s) in lumas.data().iter().zip(sky.data()) {
+        if s {
+            inside += l as f64;
+            n_in += 1;
+        } else {
+            outside += l as f64;
+            n_out += 1;
+        }
+    }
+    if n_out > 0 && inside / (n_in as f64) < outside / (n_out as f64) {
+        return MaskRaster::new(w, h, false);
+    }
+    sky
 }
 
 /// 16 levels per channel.
@@ -244,22 +274,42 @@ fn estimate_water(image: &RgbRaster, texture: &GrayRaster, sky: &MaskRaster, hor
             near_sky[(r * BINS + g) * BINS + b]
         })
     };
-    let smooth_threshold = quantile(texture.data(), 0.5).unwrap_or(0.0).max(0.01);
+    let smooth_threshold = quantile(texture.data(), WATER_SMOOTHNESS_QUANTILE)
+        .unwrap_or(0.0)
+        .max(0.01);
     let first_row = (horizon.max(-1.0).floor() + 1.0).max(0.0) as usize;
+    // Water lies below every sky pixel of its column.
+    let sky_bottom: Vec<usize> = (0..w)
+        .map(|x| (0..h).rev().find(|&y| sky.at(x, y)).map_or(0, |y| y + 1))
+        .collect();
     let candidate = Raster::from_fn(w, h, |x, y| {
         y >= first_row
-            && !sky.at(x, y)
+            && y >= sky_bottom[x]
             && texture.at(x, y) <= smooth_threshold
             && sky_coloured(image.at(x, y))
     });
     // Box vote, then keep large connected parts.
     let vote = box_mean(&candidate.map(|c| if c { 1.0 } else { 0.0 }), (w.min(h) / 100).max(1));
-    let voted = Raster::from_fn(w, h, |x, y| y >= first_row && vote.at(x, y) > 0.5);
-    keep_large_components(&voted, (MIN_WATER_AREA * (w * h) as f32).ceil() as usize)
+    let voted = Raster::from_fn(w, h, |x, y| candidate.at(x, y) || (y >= first_row && y >= sky_bottom[x] && vote.at(x, y) > 0.5));
+    let min_area = (MIN_WATER_AREA * (w * h) as f32).ceil() as usize;
+    let min_width = (MIN_WATER_WIDTH * w as f32).ceil() as usize;
+    let water = keep_large_components(&voted, min_area, min_width);
+    // A water surface seen from a level camera has a flat top edge: drop what rises above the
+    // median top of the columns (green hills and clouds next to the lake).
+    let tops: Vec<f32> = (0..w)
+        .filter_map(|x| (0..h).find(|&y| water.at(x, y)).map(|y| y as f32))
+        .collect();
+    let Some(water_line) = quantile(&tops, 0.5) else {
+        return water;
+    };
+    let margin = 0.02 * h as f32;
+    let flat = Raster::from_fn(w, h, |x, y| water.at(x, y) && y as f32 >= water_line - margin);
+    keep_large_components(&flat, min_area, min_width)
 }
 
-/// The 4-connected parts of `mask` with at least `min_area` pixels.
-fn keep_large_components(mask: &MaskRaster, min_area: usize) -> MaskRaster {
+/// The 4-connected parts of `mask` with at least `min_area` pixels and a bounding box at
+/// least `min_width` pixels wide.
+fn keep_large_components(mask: &MaskRaster, min_area: usize, min_width: usize) -> MaskRaster {
     let (w, h) = mask.size();
     let mut out = MaskRaster::new(w, h, false);
     let mut seen = vec![false; w * h];
@@ -288,7 +338,10 @@ fn keep_large_components(mask: &MaskRaster, min_area: usize) -> MaskRaster {
                 }
             }
         }
-        if part.len() >= min_area {
+        let (lo, hi) = part
+            .iter()
+            .fold((usize::MAX, 0), |(lo, hi), &i| (lo.min(i % w), hi.max(i % w)));
+        if part.len() >= min_area && hi + 1 - lo.min(hi) >= min_width {
             for &i in &part {
                 out.data_mut()[i] = true;
             }
