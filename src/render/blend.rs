@@ -69,54 +69,46 @@ pub fn symmetric_blend(forward: &Frame, backward: &Frame, t: f32, a: f32) -> Res
     let coverage = |c: f32| if c.is_finite() { c.clamp(0.0, 1.0) } else { 0.0 };
     let (fc, fa, fz) = (forward.colour.data(), forward.coverage.data(), forward.depth.data());
     let (bc, ba, bz) = (backward.colour.data(), backward.coverage.data(), backward.depth.data());
-    let pixels: Vec<([f32; 3], f32, f32)> = (0..fc.len())
-        .into_par_iter()
-        .map(|i| {
-            let f = (fc[i], fa[i], fz[i]);
-            let b = (bc[i], ba[i], bz[i]);
-            if f.0.map(f32::to_bits) == b.0.map(f32::to_bits)
-                && f.1.to_bits() == b.1.to_bits()
-                && f.2.to_bits() == b.2.to_bits()
-            {
-                return f;
-            }
-            // Log-domain weights, so that a large sharpness cannot overflow.
-            let log_weight = |time: f32, z: f32, c: f32| {
-                let c = coverage(c);
-                (time > 0.0 && c > 0.0).then(|| time.ln() + a * disparity(z) + c.ln())
-            };
-            match (log_weight(1.0 - t, f.2, f.1), log_weight(t, b.2, b.1)) {
-                (Some(_), None) => f,
-                (None, Some(_)) => b,
-                (None, None) => {
-                    if t < 0.5 {
-                        f
-                    } else {
-                        b
-                    }
-                }
-                (Some(lf), Some(lb)) => {
-                    // w_f/(w_f + w_b) = 1/(1 + e^(lb − lf)).
-                    let pf = 1.0 / (1.0 + (lb - lf).exp());
-                    let pb = 1.0 / (1.0 + (lf - lb).exp());
-                    (
-                        [0, 1, 2].map(|c| pf * f.0[c] + pb * b.0[c]),
-                        pf * f.1 + pb * b.1,
-                        pf * f.2 + pb * b.2,
-                    )
-                }
-            }
-        })
-        .collect();
+    let n = fc.len();
     let (w, h) = size;
-    let mut colour = Vec::with_capacity(pixels.len());
-    let mut cover = Vec::with_capacity(pixels.len());
-    let mut depth = Vec::with_capacity(pixels.len());
-    for (c, a, z) in pixels {
-        colour.push(c);
-        cover.push(a);
-        depth.push(z);
-    }
+    let mut colour = vec![[0.0f32; 3]; n];
+    let mut cover = vec![0.0f32; n];
+    let mut depth = vec![0.0f32; n];
+    // w_b/w_f = e^(ln(t/(1 − t)) + a·(disp_b − disp_f))·A_b/A_f: one exponential per pixel,
+    // and no overflow into NaN for a large sharpness (an infinite ratio gives p_f = 0).
+    let log_time_ratio = (t / (1.0 - t)).ln();
+    colour
+        .par_iter_mut()
+        .zip(cover.par_iter_mut())
+        .zip(depth.par_iter_mut())
+        .enumerate()
+        .for_each(|(i, ((out_c, out_a), out_z))| {
+            let same = fc[i].map(f32::to_bits) == bc[i].map(f32::to_bits)
+                && fa[i].to_bits() == ba[i].to_bits()
+                && fz[i].to_bits() == bz[i].to_bits();
+            let (cf, cb) = (coverage(fa[i]), coverage(ba[i]));
+            let has_f = t < 1.0 && cf > 0.0;
+            let has_b = t > 0.0 && cb > 0.0;
+            let take_forward = match (same, has_f, has_b) {
+                (true, _, _) | (false, true, false) => Some(true),
+                (false, false, true) => Some(false),
+                (false, false, false) => Some(t < 0.5),
+                (false, true, true) => None,
+            };
+            match take_forward {
+                Some(true) => (*out_c, *out_a, *out_z) = (fc[i], fa[i], fz[i]),
+                Some(false) => (*out_c, *out_a, *out_z) = (bc[i], ba[i], bz[i]),
+                None => {
+                    let log_ratio = log_time_ratio + a * (disparity(bz[i]) - disparity(fz[i]));
+                    let ratio = log_ratio.exp() * (cb / cf);
+                    let pf = 1.0 / (1.0 + ratio);
+                    let pb = 1.0 - pf;
+                    *out_c = [0, 1, 2].map(|c| pf * fc[i][c] + pb * bc[i][c]);
+                    *out_a = pf * cf + pb * cb;
+                    *out_z = pf * fz[i] + pb * bz[i];
+                }
+            }
+        });
     let wrap = || Error::invalid("blend: internal size mismatch");
     Ok(Frame {
         colour: Raster::from_vec(w, h, colour).ok_or_else(wrap)?,

@@ -14,18 +14,20 @@
 //! be resumed bit-exactly. [`EulerSequence`] instead keeps
 //!
 //! - only the *active* pixels, those with `M(p) ≠ 0` (a pixel where `M` is zero samples exactly
-//!   `M(p) = 0` at its integer position, so `x_n = p` for ever: still pixels cost nothing), and
+//!   `M(p) = 0` at its integer position, so `x_n = p` for ever: still pixels cost nothing)
+//!   that are also *sources* (pixels where the layer has points; a layer's flow is defined on
+//!   the whole canvas, but only its own points need trajectories), and
 //! - their exact `f32` positions `x_n` every `C = ⌈√(N + 1)⌉` frames (11 checkpoints for
 //!   `N = 100`).
 //!
 //! Frame `n` is then restored from checkpoint `⌊n/C⌋` in at most `C − 1` steps, bit-identical
 //! to integrating from `x_0` (the same operations in the same order). Memory is
-//! `(⌊N/C⌋ + 1)·active·8` bytes, about 88 MB per direction for a fully moving 1280×800 canvas
+//! `(⌊N/C⌋ + 1)·active·8` bytes, about 82 MB per direction for a fully moving 1280×800 canvas
 //! and `N = 100`; sequential playback can use [`EulerSequence::iter`], one step per frame.
 
 use crate::error::{Error, Result};
 use crate::progress::Progress;
-use crate::raster::Raster;
+use crate::raster::{MaskRaster, Raster};
 use rayon::prelude::*;
 
 /// A displacement or flow field: `[dx, dy]` in pixels per canvas pixel.
@@ -87,17 +89,24 @@ pub struct EulerSequence {
 }
 
 impl EulerSequence {
-    /// Integrates `flow` (`M`, pixels per frame) for `frames` (`N`) frames, keeping a
-    /// checkpoint every `⌈√(N + 1)⌉` frames.
-    pub fn new(flow: &VectorRaster, frames: usize, progress: &Progress) -> Result<Self> {
-        let interval = ((frames + 1) as f64).sqrt().ceil().max(1.0) as usize;
-        Self::with_interval(flow, frames, interval, progress)
+    /// The default checkpoint interval `C = ⌈√(N + 1)⌉` for `N` frames.
+    pub fn default_interval(frames: usize) -> usize {
+        ((frames + 1) as f64).sqrt().ceil().max(1.0) as usize
     }
 
-    /// As [`EulerSequence::new`] with an explicit checkpoint interval `C ≥ 1` (memory
-    /// `(⌊N/C⌋ + 1)·active·8` bytes, at most `C − 1` steps per [`EulerSequence::displacement`]).
+    /// Integrates `flow` (`M`, pixels per frame) for `frames` (`N`) frames from every pixel,
+    /// keeping a checkpoint every [`EulerSequence::default_interval`] frames.
+    pub fn new(flow: &VectorRaster, frames: usize, progress: &Progress) -> Result<Self> {
+        Self::with_interval(flow, None, frames, Self::default_interval(frames), progress)
+    }
+
+    /// As [`EulerSequence::new`], integrating only from the pixels set in `sources` (e.g. where
+    /// a layer has points; `None` = all; the flow is still sampled everywhere) with checkpoint
+    /// interval `C ≥ 1` (memory `(⌊N/C⌋ + 1)·active·8` bytes, at most `C − 1` steps per
+    /// [`EulerSequence::displacement`]). `F_n` is zero at pixels outside `sources`.
     pub fn with_interval(
         flow: &VectorRaster,
+        sources: Option<&MaskRaster>,
         frames: usize,
         interval: usize,
         progress: &Progress,
@@ -108,13 +117,16 @@ impl EulerSequence {
         if flow.len() > u32::MAX as usize {
             return Err(Error::invalid("motion: canvas too large"));
         }
+        if sources.is_some_and(|s| !s.same_size(flow)) {
+            return Err(Error::invalid("motion: the source mask and the flow differ in size"));
+        }
         let flow = sanitised_flow(flow);
         let w = flow.width();
         let active: Vec<u32> = flow
             .data()
             .iter()
             .enumerate()
-            .filter(|(_, v)| **v != [0.0, 0.0])
+            .filter(|(i, v)| **v != [0.0, 0.0] && sources.is_none_or(|s| s.data()[*i]))
             .map(|(i, _)| i as u32)
             .collect();
         let mut positions: Vec<[f32; 2]> = active
@@ -240,7 +252,7 @@ mod tests {
             let (dx, dy) = (x as f32 - 20.0, y as f32 - 15.0);
             [-dy * 0.05 + 0.1, dx * 0.05]
         });
-        let seq = EulerSequence::with_interval(&flow, 23, 5, &Progress::none()).unwrap();
+        let seq = EulerSequence::with_interval(&flow, None, 23, 5, &Progress::none()).unwrap();
         let mut iter = seq.iter();
         for n in 0..=30 {
             let reference = integrate(&flow, n);
@@ -248,6 +260,19 @@ mod tests {
             assert_eq!(iter.next().unwrap(), reference, "iter n = {n}");
         }
         assert_eq!(seq.frames(), 23);
+    }
+
+    #[test]
+    fn only_source_pixels_are_integrated() {
+        let flow = constant(16, 8, [0.5, 0.0]);
+        let sources = Raster::from_fn(16, 8, |x, _| x < 4);
+        let seq = EulerSequence::with_interval(&flow, Some(&sources), 6, 2, &Progress::none())
+            .unwrap();
+        let f = seq.displacement(6);
+        assert_eq!(f.at(2, 3), [3.0, 0.0]);
+        assert_eq!(f.at(8, 3), [0.0, 0.0]);
+        // Checkpoints at 0, 2, 4, 6 for the 32 source pixels.
+        assert_eq!(seq.memory_bytes(), 4 * 32 * 8 + 32 * 4);
     }
 
     #[test]
@@ -293,7 +318,9 @@ mod tests {
         assert!(integrate(&Raster::new(0, 0, [1.0, 1.0]), 3).is_empty());
         let one = EulerSequence::new(&constant(1, 1, [0.5, 0.5]), 4, &Progress::none()).unwrap();
         assert_eq!(one.displacement(4).at(0, 0), [0.0, 0.0]);
-        assert!(EulerSequence::with_interval(&fast, 3, 0, &Progress::none()).is_err());
+        assert!(EulerSequence::with_interval(&fast, None, 3, 0, &Progress::none()).is_err());
+        let wrong = MaskRaster::new(2, 2, true);
+        assert!(EulerSequence::with_interval(&fast, Some(&wrong), 3, 2, &Progress::none()).is_err());
     }
 
     #[test]

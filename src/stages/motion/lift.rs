@@ -29,6 +29,15 @@ pub const SEED_EROSION_PX: usize = 2;
 /// Radius of the two mask-normalised box passes that smooth the diffused flow.
 pub const SMOOTHING_RADIUS_PX: usize = 3;
 
+/// The flow of one moving layer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LayerFlow {
+    /// `M_l` on the whole canvas (trajectories may pass behind nearer layers).
+    pub flow: VectorRaster,
+    /// Pixels where the layer has points: where its trajectories start.
+    pub points: MaskRaster,
+}
+
 /// Per-layer displacement fields `F_n` for one frame; `None` (or a missing entry) means the
 /// layer does not move.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -232,12 +241,18 @@ pub fn layer_flows(
     flow: &VectorRaster,
     cloud: &PointCloud,
     progress: &Progress,
-) -> Result<Vec<Option<VectorRaster>>> {
+) -> Result<Vec<Option<LayerFlow>>> {
     let (w, h) = flow.size();
     let front = front_layers(cloud, w, h);
     let layer_count = cloud.layer.iter().map(|&l| l as usize + 1).max().unwrap_or(0);
+    let mut points = vec![MaskRaster::new(w, h, false); layer_count];
+    for (pixel, &layer) in cloud.source_pixel.iter().zip(&cloud.layer) {
+        if let Some((x, y)) = pixel_of(*pixel, w, h) {
+            points[layer as usize].set(x, y, true);
+        }
+    }
     let mut flows = Vec::with_capacity(layer_count);
-    for l in 0..layer_count {
+    for (l, points) in points.into_iter().enumerate() {
         progress.check()?;
         let visible = front.map(|f| f as usize == l);
         let moves = visible
@@ -259,7 +274,10 @@ pub fn layer_flows(
                 *out = *m;
             }
         }
-        flows.push(Some(layer_flow));
+        flows.push(Some(LayerFlow {
+            flow: layer_flow,
+            points,
+        }));
         progress.report((l + 1) as f32 / layer_count as f32, "motion layers");
     }
     Ok(flows)
@@ -430,7 +448,8 @@ mod tests {
         let flows = layer_flows(&flow, &cloud, &Progress::none()).unwrap();
         assert_eq!(flows.len(), 2);
         assert!(flows[0].is_none(), "the tree does not move");
-        let sky = flows[1].as_ref().expect("the sky moves");
+        let sky = &flows[1].as_ref().expect("the sky moves").flow;
+        assert!(flows[1].as_ref().unwrap().points.data().iter().all(|&p| p));
         for y in 0..h {
             for x in 0..w {
                 let v = sky.at(x, y);

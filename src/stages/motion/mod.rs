@@ -23,7 +23,7 @@ pub mod suggest;
 
 pub use euler::{EulerSequence, VectorRaster, integrate};
 pub use field::{FlowField, flow_from_spec, masked_harmonic};
-pub use lift::{LayeredDisplacement, displaced_positions, layer_flows, masked_diffusion};
+pub use lift::{LayerFlow, LayeredDisplacement, displaced_positions, layer_flows, masked_diffusion};
 pub use spec::{Anchor, Arrow, MotionRegion, MotionSpec, Stroke, rasterise_strokes};
 pub use suggest::suggest_motion;
 
@@ -77,9 +77,9 @@ impl MotionLoop {
     }
 
     /// Precomputes the forward and backward sequences of every moving layer (`None` = still)
-    /// for a loop of `loop_frames` (`N ≥ 1`) frames.
+    /// for a loop of `loop_frames` (`N ≥ 1`) frames, from the layer's point pixels only.
     pub fn new(
-        layer_flows: &[Option<VectorRaster>],
+        layer_flows: &[Option<LayerFlow>],
         loop_frames: usize,
         progress: &Progress,
     ) -> Result<Self> {
@@ -96,10 +96,23 @@ impl MotionLoop {
                     forward.push(None);
                     backward.push(None);
                 }
-                Some(flow) => {
+                Some(LayerFlow { flow, points }) => {
                     let negated = flow.map(|v| [-v[0], -v[1]]);
-                    let f = EulerSequence::new(flow, loop_frames, &sub.sub(0.0, 0.5))?;
-                    let b = EulerSequence::new(&negated, loop_frames, &sub.sub(0.5, 1.0))?;
+                    let interval = EulerSequence::default_interval(loop_frames);
+                    let sequence = |flow: &VectorRaster, progress: &Progress| {
+                        EulerSequence::with_interval(
+                            flow,
+                            Some(points),
+                            loop_frames,
+                            interval,
+                            progress,
+                        )
+                    };
+                    let (f, b) = rayon::join(
+                        || sequence(flow, &sub.sub(0.0, 0.5)),
+                        || sequence(&negated, &sub.sub(0.5, 1.0)),
+                    );
+                    let (f, b) = (f?, b?);
                     let still = f.is_still();
                     forward.push((!still).then_some(f));
                     backward.push((!still).then_some(b));
@@ -326,8 +339,11 @@ mod tests {
     use crate::raster::Raster;
 
     fn constant_loop(v: [f32; 2], n: usize) -> MotionLoop {
-        let flow = Raster::new(32, 24, v);
-        MotionLoop::new(&[None, Some(flow)], n, &Progress::none()).unwrap()
+        let layer = LayerFlow {
+            flow: Raster::new(32, 24, v),
+            points: Raster::new(32, 24, true),
+        };
+        MotionLoop::new(&[None, Some(layer)], n, &Progress::none()).unwrap()
     }
 
     #[test]

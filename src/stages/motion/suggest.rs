@@ -5,7 +5,8 @@
 //!
 //! - Sky: the given soft sky mask (e.g. from the depth estimator), or a *skyline* estimate:
 //!   in each column the sky runs from the top down to the first long run of textured
-//!   (non-smooth) pixels; the skyline is median-filtered across columns.
+//!   (non-smooth) or dark (below [`DARK_FRACTION`] of the top rows' bright luma) pixels; the
+//!   skyline is median-filtered across columns.
 //!   A sky darker on average than the rest of the image is rejected (a canopy, not a sky).
 //! - Horizon: the given row, or the [`HORIZON_QUANTILE`] over columns of the sky's height.
 //! - Water: pixels below the horizon and below every sky pixel of their column that are
@@ -44,6 +45,10 @@ pub const WATER_SMOOTHNESS_QUANTILE: f32 = 0.4;
 /// The estimated horizon is this quantile of the columns' sky heights (low mountain gaps do
 /// not pull it up).
 pub const HORIZON_QUANTILE: f32 = 0.75;
+
+/// A pixel darker than this fraction of the bright top rows' luma (90th percentile) ends the
+/// sky in its column.
+pub const DARK_FRACTION: f32 = 0.35;
 
 /// Brush radius used to vectorise a mask: 1/40 of the shorter side, in `[2, 32]` pixels.
 pub fn stroke_radius(width: usize, height: usize) -> f32 {
@@ -179,12 +184,16 @@ fn box_mean(v: &GrayRaster, r: usize) -> GrayRaster {
 fn estimate_sky(image: &RgbRaster, texture: &GrayRaster) -> MaskRaster {
     let (w, h) = texture.size();
     let threshold = quantile(texture.data(), 0.35).unwrap_or(0.0).max(0.01);
+    let lumas = image.map(luma);
+    // Much darker than the bright part of the top rows: ground or mountains, not sky.
+    let top = &lumas.data()[..w * (h / 10).max(1)];
+    let dark = DARK_FRACTION * quantile(top, 0.9).unwrap_or(0.0);
     let solid_run = (h / 25).max(2);
     let skyline: Vec<usize> = (0..w)
         .map(|x| {
             let mut run = 0;
             for y in 0..h {
-                if texture.at(x, y) > threshold {
+                if texture.at(x, y) > threshold || lumas.at(x, y) < dark {
                     run += 1;
                     if run >= solid_run {
                         return y + 1 - run;
@@ -211,7 +220,6 @@ fn estimate_sky(image: &RgbRaster, texture: &GrayRaster) -> MaskRaster {
     }
     let sky = Raster::from_fn(w, h, |x, y| y < smoothed[x]);
     // Sky is brighter than the rest of a landscape; a dark "sky" is a canopy or a wall.
-    let lumas = image.map(luma);
     let (mut inside, mut n_in, mut outside, mut n_out) = (0.0f64, 0usize, 0.0f64, 0usize);
     for (&l, &s) in lumas.data().iter().zip(sky.data()) {
         if s {
