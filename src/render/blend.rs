@@ -45,7 +45,9 @@ pub fn symmetric_blend(forward: &Frame, backward: &Frame, t: f32, a: f32) -> Res
         ));
     }
     if !(t.is_finite() && a.is_finite()) {
-        return Err(Error::invalid(format!("blend: t = {t} and a = {a} must be finite")));
+        return Err(Error::invalid(format!(
+            "blend: t = {t} and a = {a} must be finite"
+        )));
     }
     let t = t.clamp(0.0, 1.0);
     let covered_depth = |frame: &Frame| {
@@ -66,9 +68,23 @@ pub fn symmetric_blend(forward: &Frame, backward: &Frame, t: f32, a: f32) -> Res
             0.0
         }
     };
-    let coverage = |c: f32| if c.is_finite() { c.clamp(0.0, 1.0) } else { 0.0 };
-    let (fc, fa, fz) = (forward.colour.data(), forward.coverage.data(), forward.depth.data());
-    let (bc, ba, bz) = (backward.colour.data(), backward.coverage.data(), backward.depth.data());
+    let coverage = |c: f32| {
+        if c.is_finite() {
+            c.clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    };
+    let (fc, fa, fz) = (
+        forward.colour.data(),
+        forward.coverage.data(),
+        forward.depth.data(),
+    );
+    let (bc, ba, bz) = (
+        backward.colour.data(),
+        backward.coverage.data(),
+        backward.depth.data(),
+    );
     let n = fc.len();
     let (w, h) = size;
     let mut colour = vec![[0.0f32; 3]; n];
@@ -122,16 +138,29 @@ pub fn symmetric_blend(forward: &Frame, backward: &Frame, t: f32, a: f32) -> Res
 pub fn bench_blend(width: usize, height: usize, iterations: usize) -> Result<f64> {
     let frame = |phase: f32| Frame {
         colour: Raster::from_fn(width, height, |x, y| {
-            [(x as f32 * 0.01 + phase).fract(), (y as f32 * 0.01).fract(), 0.5]
+            [
+                (x as f32 * 0.01 + phase).fract(),
+                (y as f32 * 0.01).fract(),
+                0.5,
+            ]
         }),
-        coverage: Raster::from_fn(width, height, |x, y| if (x + y) % 17 == 0 { 0.0 } else { 1.0 }),
+        coverage: Raster::from_fn(
+            width,
+            height,
+            |x, y| if (x + y) % 17 == 0 { 0.0 } else { 1.0 },
+        ),
         depth: Raster::from_fn(width, height, |x, y| 1.0 + (x + y) as f32 * 0.01 + phase),
     };
     let (forward, backward) = (frame(0.0), frame(0.3));
     let runs = iterations.max(1);
     let start = std::time::Instant::now();
     for i in 0..runs {
-        let out = symmetric_blend(&forward, &backward, (i as f32 + 0.5) / runs as f32, DEFAULT_SHARPNESS)?;
+        let out = symmetric_blend(
+            &forward,
+            &backward,
+            (i as f32 + 0.5) / runs as f32,
+            DEFAULT_SHARPNESS,
+        )?;
         std::hint::black_box(&out);
     }
     Ok(start.elapsed().as_secs_f64() / runs as f64)
@@ -217,6 +246,72 @@ mod tests {
         assert_eq!(out.colour.at(1, 0), [0.0, 0.5, 0.0]);
     }
 
+    /// A minimal nearest-pixel z-buffer splatter (stands in for the real renderer).
+    fn splat(
+        positions: &[glam::Vec3],
+        colours: &[[f32; 3]],
+        k: &crate::geometry::Intrinsics,
+        w: usize,
+        h: usize,
+    ) -> Frame {
+        let mut frame = flat(w, h, [0.0; 3], 0.0, 0.0);
+        for (p, c) in positions.iter().zip(colours) {
+            let Some((u, v, z)) = k.project(*p) else {
+                continue;
+            };
+            let (x, y) = (u.round(), v.round());
+            if x < 0.0 || y < 0.0 || x >= w as f32 || y >= h as f32 {
+                continue;
+            }
+            let (x, y) = (x as usize, y as usize);
+            if frame.coverage.at(x, y) == 0.0 || z < frame.depth.at(x, y) {
+                frame.colour.set(x, y, *c);
+                frame.coverage.set(x, y, 1.0);
+                frame.depth.set(x, y, z);
+            }
+        }
+        frame
+    }
+
+    #[test]
+    fn the_loop_closes_and_starts_from_the_still_render() {
+        use crate::geometry::Intrinsics;
+        use crate::progress::Progress;
+        use crate::stages::motion::{LayerFlow, MotionLoop, displaced_positions};
+        use crate::stages::points::{LiftOptions, PointCloud};
+        let (w, h, n) = (24, 16, 8);
+        let k = Intrinsics::from_hfov(w, h, 60.0);
+        let image = Raster::from_fn(w, h, |x, y| [x as f32 / w as f32, y as f32 / h as f32, 0.5]);
+        let depth = Raster::from_fn(w, h, |x, _| 3.0 + 0.1 * x as f32);
+        let cloud =
+            PointCloud::lift(&image, &depth, &k, None, None, LiftOptions::default()).expect("lift");
+        let layer = LayerFlow {
+            flow: Raster::from_fn(w, h, |_, y| if y < 8 { [0.5, 0.0] } else { [0.0, 0.0] }),
+            points: Raster::new(w, h, true),
+        };
+        let motion = MotionLoop::new(&[Some(layer)], n, &Progress::none()).unwrap();
+        let render_phase = |phase: usize| {
+            let f = motion.frame_at_phase(phase).unwrap();
+            let fwd = displaced_positions(&cloud, &f.forward, &k).unwrap();
+            let bwd = displaced_positions(&cloud, &f.backward, &k).unwrap();
+            let fwd = splat(&fwd, &cloud.colours, &k, w, h);
+            let bwd = splat(&bwd, &cloud.colours, &k, w, h);
+            symmetric_blend(&fwd, &bwd, f.t, DEFAULT_SHARPNESS).unwrap()
+        };
+        let still = splat(&cloud.positions, &cloud.colours, &k, w, h);
+        // Frame 0 and frame N are the still render, bit for bit: the video loops.
+        assert_eq!(render_phase(0), still);
+        assert_eq!(render_phase(n), still);
+        // In between, the upper half moves and the lower half does not.
+        let mid = render_phase(n / 2);
+        assert_ne!(mid, still);
+        for y in 9..h {
+            for x in 0..w {
+                assert_eq!(mid.colour.at(x, y), still.colour.at(x, y));
+            }
+        }
+    }
+
     #[test]
     fn extremes() {
         let f = varied(4, 4, 1);
@@ -241,6 +336,11 @@ mod tests {
         assert!(out.colour.data().iter().flatten().all(|v| v.is_finite()));
         // Empty frames.
         let empty = flat(0, 0, [0.0; 3], 0.0, 0.0);
-        assert!(symmetric_blend(&empty, &empty, 0.5, 4.0).unwrap().colour.is_empty());
+        assert!(
+            symmetric_blend(&empty, &empty, 0.5, 4.0)
+                .unwrap()
+                .colour
+                .is_empty()
+        );
     }
 }

@@ -37,16 +37,40 @@ pub type VectorRaster = Raster<[f32; 2]>;
 /// size (a larger step leaves the canvas whatever its size).
 pub fn sanitised_flow(flow: &VectorRaster) -> VectorRaster {
     let limit = flow.width().max(flow.height()) as f32;
-    flow.map(|v| v.map(|c| if c.is_finite() { c.clamp(-limit, limit) } else { 0.0 }))
+    flow.map(|v| {
+        v.map(|c| {
+            if c.is_finite() {
+                c.clamp(-limit, limit)
+            } else {
+                0.0
+            }
+        })
+    })
 }
 
 /// One Euler step `x ← x + M(x)` for every position, refused where it would leave the canvas.
+/// Positions are always on the canvas, so the bilinear lookup needs no clamping.
 fn step(flow: &VectorRaster, positions: &mut [[f32; 2]]) {
-    let (max_x, max_y) = ((flow.width() - 1) as f32, (flow.height() - 1) as f32);
-    positions.par_chunks_mut(1024).for_each(|chunk| {
+    let (w, h) = flow.size();
+    let (max_x, max_y) = ((w - 1) as f32, (h - 1) as f32);
+    let data = flow.data();
+    positions.par_chunks_mut(4096).for_each(|chunk| {
         for x in chunk {
-            let m = flow.sample_bilinear(x[0], x[1]);
-            let next = [x[0] + m[0], x[1] + m[1]];
+            let (px, py) = (x[0], x[1]);
+            // In range by construction: `as usize` is the floor.
+            let (x0, y0) = (px as usize, py as usize);
+            let x1 = if x0 + 1 < w { x0 + 1 } else { x0 };
+            let y1 = if y0 + 1 < h { y0 + 1 } else { y0 };
+            let (tx, ty) = (px - x0 as f32, py - y0 as f32);
+            let (r0, r1) = (y0 * w, y1 * w);
+            let (a, b, c, d) = (data[r0 + x0], data[r0 + x1], data[r1 + x0], data[r1 + x1]);
+            let mut m = [0.0f32; 2];
+            for k in 0..2 {
+                let top = a[k] + (b[k] - a[k]) * tx;
+                let bottom = c[k] + (d[k] - c[k]) * tx;
+                m[k] = top + (bottom - top) * ty;
+            }
+            let next = [px + m[0], py + m[1]];
             if (0.0..=max_x).contains(&next[0]) && (0.0..=max_y).contains(&next[1]) {
                 *x = next;
             }
@@ -112,13 +136,17 @@ impl EulerSequence {
         progress: &Progress,
     ) -> Result<Self> {
         if interval == 0 {
-            return Err(Error::invalid("motion: checkpoint interval must be at least 1"));
+            return Err(Error::invalid(
+                "motion: checkpoint interval must be at least 1",
+            ));
         }
         if flow.len() > u32::MAX as usize {
             return Err(Error::invalid("motion: canvas too large"));
         }
         if sources.is_some_and(|s| !s.same_size(flow)) {
-            return Err(Error::invalid("motion: the source mask and the flow differ in size"));
+            return Err(Error::invalid(
+                "motion: the source mask and the flow differ in size",
+            ));
         }
         let flow = sanitised_flow(flow);
         let w = flow.width();
@@ -266,8 +294,8 @@ mod tests {
     fn only_source_pixels_are_integrated() {
         let flow = constant(16, 8, [0.5, 0.0]);
         let sources = Raster::from_fn(16, 8, |x, _| x < 4);
-        let seq = EulerSequence::with_interval(&flow, Some(&sources), 6, 2, &Progress::none())
-            .unwrap();
+        let seq =
+            EulerSequence::with_interval(&flow, Some(&sources), 6, 2, &Progress::none()).unwrap();
         let f = seq.displacement(6);
         assert_eq!(f.at(2, 3), [3.0, 0.0]);
         assert_eq!(f.at(8, 3), [0.0, 0.0]);
@@ -285,10 +313,16 @@ mod tests {
         assert_eq!(seq.displacement(50).at(5, 5), [1.0, 0.0]);
         // Checkpoints every ⌈√101⌉ = 11 frames: frames 0, 11, …, 99.
         assert_eq!(seq.memory_bytes(), 10 * 8 + 4);
-        let still = EulerSequence::new(&Raster::new(8, 8, [0.0f32; 2]), 100, &Progress::none())
-            .unwrap();
+        let still =
+            EulerSequence::new(&Raster::new(8, 8, [0.0f32; 2]), 100, &Progress::none()).unwrap();
         assert!(still.is_still());
-        assert!(still.displacement(77).data().iter().all(|v| *v == [0.0, 0.0]));
+        assert!(
+            still
+                .displacement(77)
+                .data()
+                .iter()
+                .all(|v| *v == [0.0, 0.0])
+        );
     }
 
     #[test]
@@ -306,7 +340,9 @@ mod tests {
         }
         // 100 px per frame on a 24 px canvas: every step leaves, nothing moves.
         let fast = constant(w, h, [100.0, 0.0]);
-        let f = EulerSequence::new(&fast, 10, &Progress::none()).unwrap().displacement(10);
+        let f = EulerSequence::new(&fast, 10, &Progress::none())
+            .unwrap()
+            .displacement(10);
         assert!(f.data().iter().all(|v| *v == [0.0, 0.0]));
         // NaN and infinite flow are treated as still.
         let mut bad = constant(w, h, [f32::NAN, 1.0]);
@@ -320,7 +356,9 @@ mod tests {
         assert_eq!(one.displacement(4).at(0, 0), [0.0, 0.0]);
         assert!(EulerSequence::with_interval(&fast, None, 3, 0, &Progress::none()).is_err());
         let wrong = MaskRaster::new(2, 2, true);
-        assert!(EulerSequence::with_interval(&fast, Some(&wrong), 3, 2, &Progress::none()).is_err());
+        assert!(
+            EulerSequence::with_interval(&fast, Some(&wrong), 3, 2, &Progress::none()).is_err()
+        );
     }
 
     #[test]

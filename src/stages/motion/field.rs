@@ -198,7 +198,9 @@ pub fn flow_from_spec(
             [0.0, 0.0]
         } else {
             let n = used.len() as f32;
-            let s = used.iter().fold([0.0f32; 2], |s, v| [s[0] + v[0], s[1] + v[1]]);
+            let s = used
+                .iter()
+                .fold([0.0f32; 2], |s, v| [s[0] + v[0], s[1] + v[1]]);
             [s[0] / n, s[1] / n]
         };
         let u = masked_harmonic(&support, &fixed, fallback, &sub)?;
@@ -434,7 +436,15 @@ impl Level {
             }
         }
         let mut x: Vec<[f32; 2]> = pixel_of.iter().map(|&i| value[i]).collect();
-        conjugate_gradients(&neighbours, &diagonal, &rhs, &mut x, max_iterations, scale, progress)?;
+        conjugate_gradients(
+            &neighbours,
+            &diagonal,
+            &rhs,
+            &mut x,
+            max_iterations,
+            scale,
+            progress,
+        )?;
         for (k, &i) in pixel_of.iter().enumerate() {
             value[i] = x[k];
         }
@@ -443,7 +453,12 @@ impl Level {
 }
 
 /// `(A·x)_k = diag_k·x_k − Σ_{j ∈ N(k)} x_j`.
-fn apply_laplacian(neighbours: &[[u32; 4]], diagonal: &[f32], x: &[[f32; 2]], out: &mut [[f32; 2]]) {
+fn apply_laplacian(
+    neighbours: &[[u32; 4]],
+    diagonal: &[f32],
+    x: &[[f32; 2]],
+    out: &mut [[f32; 2]],
+) {
     out.par_iter_mut().enumerate().for_each(|(k, o)| {
         let mut s = [diagonal[k] * x[k][0], diagonal[k] * x[k][1]];
         for &j in &neighbours[k] {
@@ -515,7 +530,13 @@ fn conjugate_gradients(
         }
         apply_laplacian(neighbours, diagonal, &p, &mut q);
         let pq = dot(&p, &q);
-        let alpha = [0, 1].map(|c| if pq[c] > 0.0 { (rz[c] / pq[c]) as f32 } else { 0.0 });
+        let alpha = [0, 1].map(|c| {
+            if pq[c] > 0.0 {
+                (rz[c] / pq[c]) as f32
+            } else {
+                0.0
+            }
+        });
         x.par_iter_mut()
             .zip(r.par_iter_mut())
             .zip(p.par_iter().zip(q.par_iter()))
@@ -527,7 +548,13 @@ fn conjugate_gradients(
             });
         precondition(&r, &mut z);
         let rz_new = dot(&r, &z);
-        let beta = [0, 1].map(|c| if rz[c] > 0.0 { (rz_new[c] / rz[c]) as f32 } else { 0.0 });
+        let beta = [0, 1].map(|c| {
+            if rz[c] > 0.0 {
+                (rz_new[c] / rz[c]) as f32
+            } else {
+                0.0
+            }
+        });
         rz = rz_new;
         p.par_iter_mut().zip(z.par_iter()).for_each(|(p, z)| {
             for c in 0..2 {
@@ -640,7 +667,10 @@ mod tests {
         }
     }
 
-    fn reference_harmonic(support: &MaskRaster, fixed: &Raster<Option<[f32; 2]>>) -> Raster<[f32; 2]> {
+    fn reference_harmonic(
+        support: &MaskRaster,
+        fixed: &Raster<Option<[f32; 2]>>,
+    ) -> Raster<[f32; 2]> {
         // Plain Gauss–Seidel to convergence, for comparison on small grids.
         let (w, h) = support.size();
         let mut u = Raster::from_fn(w, h, |x, y| fixed.at(x, y).unwrap_or([0.0; 2]));
@@ -713,7 +743,10 @@ mod tests {
         let u = masked_harmonic(&support, &fixed, [0.0, 0.0], &Progress::none()).unwrap();
         let reference = reference_harmonic(&support, &fixed);
         for (a, b) in u.data().iter().zip(reference.data()) {
-            assert!((a[0] - b[0]).abs() < 5e-3 && (a[1] - b[1]).abs() < 5e-3, "{a:?} {b:?}");
+            assert!(
+                (a[0] - b[0]).abs() < 5e-3 && (a[1] - b[1]).abs() < 5e-3,
+                "{a:?} {b:?}"
+            );
         }
     }
 
@@ -721,7 +754,7 @@ mod tests {
     fn unconstrained_components_take_the_fallback_and_outside_is_zero() {
         let (w, h) = (30, 10);
         // Three blocks; only the left one has a constraint, the middle one is outside.
-        let support = Raster::from_fn(w, h, |x, _| x < 10 || x >= 20);
+        let support = Raster::from_fn(w, h, |x, _| !(10..20).contains(&x));
         let fixed = Raster::from_fn(w, h, |x, y| (x == 2 && y == 2).then_some([1.0, 2.0]));
         let u = masked_harmonic(&support, &fixed, [-0.5, 0.25], &Progress::none()).unwrap();
         for y in 0..h {
@@ -776,7 +809,10 @@ mod tests {
             for x in 0..w {
                 let v = field.flow.at(x, y);
                 if (10..=50).contains(&x) && (5..=20).contains(&y) {
-                    assert!((v[0] - 0.75).abs() < 1e-3 && v[1].abs() < 1e-3, "({x},{y}) {v:?}");
+                    assert!(
+                        (v[0] - 0.75).abs() < 1e-3 && v[1].abs() < 1e-3,
+                        "({x},{y}) {v:?}"
+                    );
                 } else {
                     assert_eq!(v, [0.0, 0.0], "({x},{y}) must be exactly still");
                 }
@@ -930,7 +966,12 @@ mod tests {
         // No regions, an empty canvas, a NaN speed.
         let still = flow_from_spec(&MotionSpec::default(), 5, 5, &Progress::none()).unwrap();
         assert!(still.flow.data().iter().all(|v| *v == [0.0, 0.0]));
-        assert!(flow_from_spec(&all, 0, 0, &Progress::none()).unwrap().flow.is_empty());
+        assert!(
+            flow_from_spec(&all, 0, 0, &Progress::none())
+                .unwrap()
+                .flow
+                .is_empty()
+        );
         let nan = MotionSpec {
             speed: f32::NAN,
             ..all
@@ -969,6 +1010,9 @@ mod tests {
         let both = field.flow.at(20, 5);
         assert!((a[0] - 1.0).abs() < 1e-3 && a[1].abs() < 1e-3);
         assert!(b[0].abs() < 1e-3 && (b[1] - 1.0).abs() < 1e-3);
-        assert!((both[0] - 0.5).abs() < 1e-3 && (both[1] - 0.5).abs() < 1e-3, "{both:?}");
+        assert!(
+            (both[0] - 0.5).abs() < 1e-3 && (both[1] - 0.5).abs() < 1e-3,
+            "{both:?}"
+        );
     }
 }

@@ -68,10 +68,10 @@ impl LayeredDisplacement {
 pub fn front_layers(cloud: &PointCloud, width: usize, height: usize) -> Raster<u16> {
     let mut front = Raster::new(width, height, u16::MAX);
     for (pixel, &layer) in cloud.source_pixel.iter().zip(&cloud.layer) {
-        if let Some((x, y)) = pixel_of(*pixel, width, height) {
-            if layer < front.at(x, y) {
-                front.set(x, y, layer);
-            }
+        if let Some((x, y)) = pixel_of(*pixel, width, height)
+            && layer < front.at(x, y)
+        {
+            front.set(x, y, layer);
         }
     }
     front
@@ -81,7 +81,8 @@ pub fn front_layers(cloud: &PointCloud, width: usize, height: usize) -> Raster<u
 #[inline]
 fn pixel_of(p: [f32; 2], width: usize, height: usize) -> Option<(usize, usize)> {
     let (x, y) = (p[0].round(), p[1].round());
-    (x >= 0.0 && y >= 0.0 && x < width as f32 && y < height as f32).then_some((x as usize, y as usize))
+    (x >= 0.0 && y >= 0.0 && x < width as f32 && y < height as f32)
+        .then_some((x as usize, y as usize))
 }
 
 /// Square erosion by `radius` pixels (a pixel stays when every pixel within the
@@ -96,7 +97,13 @@ pub fn erode(mask: &MaskRaster, radius: usize) -> MaskRaster {
             let (c, n) = if horizontal { (x, w) } else { (y, h) };
             let lo = c.saturating_sub(radius);
             let hi = (c + radius).min(n - 1);
-            (lo..=hi).all(|k| if horizontal { src.at(k, y) } else { src.at(x, k) })
+            (lo..=hi).all(|k| {
+                if horizontal {
+                    src.at(k, y)
+                } else {
+                    src.at(x, k)
+                }
+            })
         })
     };
     pass(&pass(mask, true), false)
@@ -126,7 +133,13 @@ pub fn masked_diffusion(values: &VectorRaster, known: &MaskRaster) -> Result<Vec
     }
     // Level 0: normalised values and weights.
     let mut levels: Vec<(VectorRaster, Raster<f32>)> = vec![(
-        Raster::from_fn(w, h, |x, y| if known.at(x, y) { values.at(x, y) } else { [0.0; 2] }),
+        Raster::from_fn(w, h, |x, y| {
+            if known.at(x, y) {
+                values.at(x, y)
+            } else {
+                [0.0; 2]
+            }
+        }),
         known.map(|k| if k { 1.0 } else { 0.0 }),
     )];
     // Push: down to 1×1.
@@ -171,7 +184,11 @@ pub fn masked_diffusion(values: &VectorRaster, known: &MaskRaster) -> Result<Vec
                 }
                 let u = coarse.sample_bilinear(x as f32 * 0.5 - 0.25, y as f32 * 0.5 - 0.25);
                 let b = v.at(x, y);
-                v.set(x, y, [a * b[0] + (1.0 - a) * u[0], a * b[1] + (1.0 - a) * u[1]]);
+                v.set(
+                    x,
+                    y,
+                    [a * b[0] + (1.0 - a) * u[0], a * b[1] + (1.0 - a) * u[1]],
+                );
             }
         }
     }
@@ -192,7 +209,10 @@ fn box_smooth_unknown(v: &VectorRaster, known: &MaskRaster, r: usize) -> VectorR
         let row = v.row(y);
         let mut prefix = vec![[0.0f64; 2]; w + 1];
         for x in 0..w {
-            prefix[x + 1] = [prefix[x][0] + row[x][0] as f64, prefix[x][1] + row[x][1] as f64];
+            prefix[x + 1] = [
+                prefix[x][0] + row[x][0] as f64,
+                prefix[x][1] + row[x][1] as f64,
+            ];
         }
         for x in 0..w {
             let (lo, hi) = (x.saturating_sub(r), (x + r).min(w - 1));
@@ -244,7 +264,12 @@ pub fn layer_flows(
 ) -> Result<Vec<Option<LayerFlow>>> {
     let (w, h) = flow.size();
     let front = front_layers(cloud, w, h);
-    let layer_count = cloud.layer.iter().map(|&l| l as usize + 1).max().unwrap_or(0);
+    let layer_count = cloud
+        .layer
+        .iter()
+        .map(|&l| l as usize + 1)
+        .max()
+        .unwrap_or(0);
     let mut points = vec![MaskRaster::new(w, h, false); layer_count];
     for (pixel, &layer) in cloud.source_pixel.iter().zip(&cloud.layer) {
         if let Some((x, y)) = pixel_of(*pixel, w, h) {
@@ -269,7 +294,12 @@ pub fn layer_flows(
             seeds = visible.clone();
         }
         let mut layer_flow = masked_diffusion(flow, &seeds)?;
-        for ((out, &v), m) in layer_flow.data_mut().iter_mut().zip(visible.data()).zip(flow.data()) {
+        for ((out, &v), m) in layer_flow
+            .data_mut()
+            .iter_mut()
+            .zip(visible.data())
+            .zip(flow.data())
+        {
             if v {
                 *out = *m;
             }
@@ -303,7 +333,9 @@ pub fn displaced_positions(
     }
     let n = cloud.len();
     if cloud.source_pixel.len() != n || cloud.source_depth.len() != n || cloud.layer.len() != n {
-        return Err(Error::invalid("motion: point cloud arrays have different lengths"));
+        return Err(Error::invalid(
+            "motion: point cloud arrays have different lengths",
+        ));
     }
     if displacement.is_identity() {
         return Ok(cloud.positions.clone());
@@ -343,8 +375,18 @@ mod tests {
 
     fn cloud_of(depth: &GrayRaster, k: &Intrinsics, layer: u16) -> PointCloud {
         let image: RgbRaster = Raster::new(depth.width(), depth.height(), [0.5; 3]);
-        PointCloud::lift(&image, depth, k, None, None, LiftOptions { layer, min_alpha: 0.0 })
-            .expect("lift")
+        PointCloud::lift(
+            &image,
+            depth,
+            k,
+            None,
+            None,
+            LiftOptions {
+                layer,
+                min_alpha: 0.0,
+            },
+        )
+        .expect("lift")
     }
 
     #[test]
@@ -358,10 +400,10 @@ mod tests {
             layers: vec![Some(f.clone())],
         };
         let moved = displaced_positions(&cloud, &d, &k).unwrap();
-        for i in 0..cloud.len() {
+        for (i, point) in moved.iter().enumerate() {
             let [px, py] = cloud.source_pixel[i];
             let fp = f.at(px as usize, py as usize);
-            let (u, v, z) = k.project(moved[i]).unwrap();
+            let (u, v, z) = k.project(*point).unwrap();
             assert!((u - (px + fp[0])).abs() < 1e-3, "{u} vs {}", px + fp[0]);
             assert!((v - (py + fp[1])).abs() < 1e-3);
             assert!((z - cloud.source_depth[i]).abs() < 1e-6);
@@ -381,14 +423,23 @@ mod tests {
         };
         let moved = displaced_positions(&cloud, &zero, &k).unwrap();
         for (a, b) in moved.iter().zip(&cloud.positions) {
-            assert_eq!(a.to_array().map(f32::to_bits), b.to_array().map(f32::to_bits));
+            assert_eq!(
+                a.to_array().map(f32::to_bits),
+                b.to_array().map(f32::to_bits)
+            );
         }
-        assert_eq!(displaced_positions(&cloud, &LayeredDisplacement::identity(), &k).unwrap(), cloud.positions);
+        assert_eq!(
+            displaced_positions(&cloud, &LayeredDisplacement::identity(), &k).unwrap(),
+            cloud.positions
+        );
         // Another layer's displacement does not move layer 1.
         let other = LayeredDisplacement {
             layers: vec![Some(Raster::new(w, h, [3.0, 3.0]))],
         };
-        assert_eq!(displaced_positions(&cloud, &other, &k).unwrap(), cloud.positions);
+        assert_eq!(
+            displaced_positions(&cloud, &other, &k).unwrap(),
+            cloud.positions
+        );
         // Bad intrinsics are refused.
         let bad = Intrinsics { fx: 0.0, ..k };
         assert!(displaced_positions(&cloud, &other, &bad).is_err());
@@ -401,7 +452,10 @@ mod tests {
         let values = Raster::from_fn(w, h, |x, _| if x < 5 { [1.5, -0.5] } else { [99.0, 99.0] });
         let out = masked_diffusion(&values, &known).unwrap();
         for v in out.data() {
-            assert!((v[0] - 1.5).abs() < 1e-5 && (v[1] + 0.5).abs() < 1e-5, "{v:?}");
+            assert!(
+                (v[0] - 1.5).abs() < 1e-5 && (v[1] + 0.5).abs() < 1e-5,
+                "{v:?}"
+            );
         }
         // Two known values: the fill stays between them and is monotone across the gap.
         let known = Raster::from_fn(w, h, |x, _| x == 0 || x == w - 1);
@@ -419,7 +473,8 @@ mod tests {
         let none = masked_diffusion(&values, &MaskRaster::new(w, h, false)).unwrap();
         assert!(none.data().iter().all(|v| *v == [0.0, 0.0]));
         assert!(masked_diffusion(&values, &MaskRaster::new(2, 2, true)).is_err());
-        let one = masked_diffusion(&Raster::new(1, 1, [2.0, 2.0]), &MaskRaster::new(1, 1, true)).unwrap();
+        let one =
+            masked_diffusion(&Raster::new(1, 1, [2.0, 2.0]), &MaskRaster::new(1, 1, true)).unwrap();
         assert_eq!(one.at(0, 0), [2.0, 2.0]);
     }
 
@@ -444,7 +499,13 @@ mod tests {
             ..PointCloud::default()
         });
         // The painted flow: sky drifts right, the tree is still.
-        let flow = Raster::from_fn(w, h, |x, _| if (8..12).contains(&x) { [0.0; 2] } else { [0.5, 0.0] });
+        let flow = Raster::from_fn(w, h, |x, _| {
+            if (8..12).contains(&x) {
+                [0.0; 2]
+            } else {
+                [0.5, 0.0]
+            }
+        });
         let flows = layer_flows(&flow, &cloud, &Progress::none()).unwrap();
         assert_eq!(flows.len(), 2);
         assert!(flows[0].is_none(), "the tree does not move");
@@ -453,7 +514,10 @@ mod tests {
         for y in 0..h {
             for x in 0..w {
                 let v = sky.at(x, y);
-                assert!((v[0] - 0.5).abs() < 1e-5 && v[1].abs() < 1e-6, "({x},{y}) {v:?}");
+                assert!(
+                    (v[0] - 0.5).abs() < 1e-5 && v[1].abs() < 1e-6,
+                    "({x},{y}) {v:?}"
+                );
             }
         }
     }

@@ -23,7 +23,9 @@ pub mod suggest;
 
 pub use euler::{EulerSequence, VectorRaster, integrate};
 pub use field::{FlowField, flow_from_spec, masked_harmonic};
-pub use lift::{LayerFlow, LayeredDisplacement, displaced_positions, layer_flows, masked_diffusion};
+pub use lift::{
+    LayerFlow, LayeredDisplacement, displaced_positions, layer_flows, masked_diffusion,
+};
 pub use spec::{Anchor, Arrow, MotionRegion, MotionSpec, Stroke, rasterise_strokes};
 pub use suggest::suggest_motion;
 
@@ -84,7 +86,9 @@ impl MotionLoop {
         progress: &Progress,
     ) -> Result<Self> {
         if loop_frames == 0 {
-            return Err(Error::invalid("motion: the loop must be at least one frame long"));
+            return Err(Error::invalid(
+                "motion: the loop must be at least one frame long",
+            ));
         }
         let count = layer_flows.len().max(1) as f32;
         let mut forward = Vec::with_capacity(layer_flows.len());

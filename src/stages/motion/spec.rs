@@ -146,11 +146,14 @@ impl MotionSpec {
     /// and an arrow, or the global speed is zero). Such a scene renders exactly like the still
     /// one.
     pub fn is_still(&self) -> bool {
-        !(self.speed.is_finite() && self.speed != 0.0)
-            || !self.regions.iter().any(|r| {
-                r.strokes.iter().any(|s| !s.erase && !s.points.is_empty())
-                    && r.arrows.iter().any(|a| a.velocity().is_some() && a.speed != 0.0)
-            })
+        let moving_region = |r: &MotionRegion| {
+            r.strokes.iter().any(|s| !s.erase && !s.points.is_empty())
+                && r.arrows
+                    .iter()
+                    .any(|a| a.velocity().is_some() && a.speed != 0.0)
+        };
+        let moving = self.speed.is_finite() && self.speed != 0.0;
+        !(moving && self.regions.iter().any(moving_region))
     }
 }
 
@@ -207,7 +210,11 @@ pub(crate) fn pixel_span(a: f32, b: f32, r: f32, n: usize) -> Option<(usize, usi
 impl Stroke {
     /// The stroke's own brush coverage `b(dist(p, polyline))` over the pixels it touches, as
     /// `(x0, y0, w, h, values)`; `None` when it touches no pixel of a `width × height` canvas.
-    fn coverage(&self, width: usize, height: usize) -> Option<(usize, usize, usize, usize, Vec<f32>)> {
+    fn coverage(
+        &self,
+        width: usize,
+        height: usize,
+    ) -> Option<(usize, usize, usize, usize, Vec<f32>)> {
         let points: Vec<[f32; 2]> = self
             .points
             .iter()
@@ -403,19 +410,17 @@ mod tests {
         let spec: MotionSpec = serde_json::from_str("{}").expect("empty object parses");
         assert_eq!(spec, MotionSpec::default());
         assert!(spec.is_still());
-        let spec: MotionSpec =
-            serde_json::from_str(r#"{"regions":[{"strokes":[{"points":[[1,2]]}],"arrows":[{"end":[1,0]}]}]}"#)
-                .expect("partial spec parses");
+        let spec: MotionSpec = serde_json::from_str(
+            r#"{"regions":[{"strokes":[{"points":[[1,2]]}],"arrows":[{"end":[1,0]}]}]}"#,
+        )
+        .expect("partial spec parses");
         assert_eq!(spec.regions[0].strokes[0].radius, 20.0);
         assert_eq!(spec.regions[0].arrows[0].speed, 0.5);
         assert!(!spec.is_still());
         let round: MotionSpec =
             serde_json::from_str(&serde_json::to_string(&spec).unwrap()).unwrap();
         assert_eq!(round, spec);
-        let stopped = MotionSpec {
-            speed: 0.0,
-            ..spec
-        };
+        let stopped = MotionSpec { speed: 0.0, ..spec };
         assert!(stopped.is_still());
     }
 }

@@ -164,7 +164,11 @@ fn box_mean(v: &GrayRaster, r: usize) -> GrayRaster {
         }
         for x in 0..w {
             let (lo, hi) = (x.saturating_sub(r), (x + r).min(w - 1));
-            horizontal.set(x, y, ((prefix[hi + 1] - prefix[lo]) / (hi - lo + 1) as f64) as f32);
+            horizontal.set(
+                x,
+                y,
+                ((prefix[hi + 1] - prefix[lo]) / (hi - lo + 1) as f64) as f32,
+            );
         }
     }
     let mut out = GrayRaster::new(w, h, 0.0);
@@ -174,7 +178,11 @@ fn box_mean(v: &GrayRaster, r: usize) -> GrayRaster {
         }
         for y in 0..h {
             let (lo, hi) = (y.saturating_sub(r), (y + r).min(h - 1));
-            out.set(x, y, ((prefix[hi + 1] - prefix[lo]) / (hi - lo + 1) as f64) as f32);
+            out.set(
+                x,
+                y,
+                ((prefix[hi + 1] - prefix[lo]) / (hi - lo + 1) as f64) as f32,
+            );
         }
     }
     out
@@ -209,7 +217,8 @@ fn estimate_sky(image: &RgbRaster, texture: &GrayRaster) -> MaskRaster {
     let half = (w / 40).max(1);
     let smoothed: Vec<usize> = (0..w)
         .map(|x| {
-            let mut window: Vec<usize> = skyline[x.saturating_sub(half)..(x + half + 1).min(w)].to_vec();
+            let mut window: Vec<usize> =
+                skyline[x.saturating_sub(half)..(x + half + 1).min(w)].to_vec();
             window.sort_unstable();
             window[window.len() / 2]
         })
@@ -245,7 +254,12 @@ fn bin_of(c: [f32; 3]) -> [usize; 3] {
 }
 
 /// Water below `horizon` (see the module documentation).
-fn estimate_water(image: &RgbRaster, texture: &GrayRaster, sky: &MaskRaster, horizon: f32) -> MaskRaster {
+fn estimate_water(
+    image: &RgbRaster,
+    texture: &GrayRaster,
+    sky: &MaskRaster,
+    horizon: f32,
+) -> MaskRaster {
     let (w, h) = image.size();
     // Sky colour histogram, dilated by one bin.
     let mut histogram = vec![0u32; BINS * BINS * BINS];
@@ -297,8 +311,13 @@ fn estimate_water(image: &RgbRaster, texture: &GrayRaster, sky: &MaskRaster, hor
             && sky_coloured(image.at(x, y))
     });
     // Box vote, then keep large connected parts.
-    let vote = box_mean(&candidate.map(|c| if c { 1.0 } else { 0.0 }), (w.min(h) / 100).max(1));
-    let voted = Raster::from_fn(w, h, |x, y| candidate.at(x, y) || (y >= first_row && y >= sky_bottom[x] && vote.at(x, y) > 0.5));
+    let vote = box_mean(
+        &candidate.map(|c| if c { 1.0 } else { 0.0 }),
+        (w.min(h) / 100).max(1),
+    );
+    let voted = Raster::from_fn(w, h, |x, y| {
+        candidate.at(x, y) || (y >= first_row && y >= sky_bottom[x] && vote.at(x, y) > 0.5)
+    });
     let min_area = (MIN_WATER_AREA * (w * h) as f32).ceil() as usize;
     let min_width = (MIN_WATER_WIDTH * w as f32).ceil() as usize;
     let water = keep_large_components(&voted, min_area, min_width);
@@ -311,7 +330,9 @@ fn estimate_water(image: &RgbRaster, texture: &GrayRaster, sky: &MaskRaster, hor
         return water;
     };
     let margin = 0.02 * h as f32;
-    let flat = Raster::from_fn(w, h, |x, y| water.at(x, y) && y as f32 >= water_line - margin);
+    let flat = Raster::from_fn(w, h, |x, y| {
+        water.at(x, y) && y as f32 >= water_line - margin
+    });
     keep_large_components(&flat, min_area, min_width)
 }
 
@@ -346,9 +367,9 @@ fn keep_large_components(mask: &MaskRaster, min_area: usize, min_width: usize) -
                 }
             }
         }
-        let (lo, hi) = part
-            .iter()
-            .fold((usize::MAX, 0), |(lo, hi), &i| (lo.min(i % w), hi.max(i % w)));
+        let (lo, hi) = part.iter().fold((usize::MAX, 0), |(lo, hi), &i| {
+            (lo.min(i % w), hi.max(i % w))
+        });
         if part.len() >= min_area && hi + 1 - lo.min(hi) >= min_width {
             for &i in &part {
                 out.data_mut()[i] = true;
@@ -406,12 +427,16 @@ pub fn mask_to_strokes(mask: &MaskRaster, radius: f32) -> Vec<Stroke> {
 fn row_arrow(mask: &MaskRaster, q: f32, speed: f32) -> Option<Arrow> {
     let (w, h) = mask.size();
     let rows: Vec<f32> = (0..h)
-        .flat_map(|y| (0..w).filter(move |&x| mask.at(x, y)).map(move |_| y as f32))
+        .flat_map(|y| {
+            (0..w)
+                .filter(move |&x| mask.at(x, y))
+                .map(move |_| y as f32)
+        })
         .collect();
     let y = quantile(&rows, q)? as usize;
     let (start, end) = longest_run((0..w).map(|x| mask.at(x, y)))?;
     let len = (end - start) as f32;
-    (len >= 2.0).then(|| Arrow {
+    (len >= 2.0).then_some(Arrow {
         start: [start as f32 + 0.25 * len, y as f32],
         end: [start as f32 + 0.75 * len, y as f32],
         speed,
@@ -465,10 +490,10 @@ fn longest_run(values: impl Iterator<Item = bool>) -> Option<(usize, usize)> {
             }
             _ => {}
         }
-        if let (true, Some(s)) = (v, current) {
-            if best.is_none_or(|(a, b)| i - s > b - a) {
-                best = Some((s, i));
-            }
+        if let (true, Some(s)) = (v, current)
+            && best.is_none_or(|(a, b)| i - s > b - a)
+        {
+            best = Some((s, i));
         }
     }
     best
@@ -508,7 +533,10 @@ mod tests {
         let field = flow_from_spec(&spec, w, h, &Progress::none()).unwrap();
         // Sky: rightward drift at the suggested speed.
         let v = field.flow.at(80, 15);
-        assert!((v[0] - SKY_DRIFT_PER_WIDTH * w as f32).abs() < 1e-3 && v[1].abs() < 1e-3, "{v:?}");
+        assert!(
+            (v[0] - SKY_DRIFT_PER_WIDTH * w as f32).abs() < 1e-3 && v[1].abs() < 1e-3,
+            "{v:?}"
+        );
         // Water: downward, faster lower down.
         let upper = field.flow.at(80, 55);
         let lower = field.flow.at(80, 75);
@@ -550,7 +578,12 @@ mod tests {
         assert!(spec.regions.is_empty(), "{:?}", spec.regions);
         assert!(spec.is_still());
         let tiny = Raster::new(2, 2, [0.5; 3]);
-        assert!(suggest_motion(&tiny, None, None).unwrap().regions.is_empty());
+        assert!(
+            suggest_motion(&tiny, None, None)
+                .unwrap()
+                .regions
+                .is_empty()
+        );
         // An empty sky mask and a horizon off the image.
         let none = GrayRaster::new(w, h, 0.0);
         let spec = suggest_motion(&noise, Some(&none), Some(-1e9)).unwrap();
@@ -577,7 +610,10 @@ mod tests {
 
     #[test]
     fn real_photo_evening_glow() {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/evening_glow_320.jpg");
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/data/evening_glow_320.jpg"
+        );
         let Ok(decoded) = image::open(path) else {
             panic!("test data missing: {path}");
         };
@@ -585,7 +621,11 @@ mod tests {
         let (w, h) = (rgb.width() as usize, rgb.height() as usize);
         let image = Raster::from_vec(w, h, rgb.pixels().map(|p| p.0).collect()).unwrap();
         let spec = suggest_motion(&image, None, None).unwrap();
-        let sky = spec.regions.iter().find(|r| r.name == "sky").expect("sky found");
+        let sky = spec
+            .regions
+            .iter()
+            .find(|r| r.name == "sky")
+            .expect("sky found");
         let mask = rasterise_strokes(&sky.strokes, w, h);
         // The top of the sky is sky; the pebble shore at the bottom is not.
         assert!(mask.at(w / 2, 5) > 0.5);
