@@ -36,6 +36,11 @@
 //! and runs Jacobi-preconditioned CG (both components at once) until the RMS residual is below
 //! [`RESIDUAL_TOLERANCE`] of the largest hint. Dot products use fixed chunks, so the result
 //! does not depend on the number of threads.
+//!
+//! Accuracy: the smoothest error modes are the slowest for CG, and the coarse levels place
+//! constraints up to half a coarse cell off, so the result carries a smooth error of up to
+//! about 0.5 % of the largest hint at 1280×800 (measured on a linear ramp between two walls;
+//! 0.1 % costs 4× the time): 0.25 px of drift over a 100-frame loop at 0.5 px/frame.
 
 use super::spec::{MotionSpec, distance_to_segment, pixel_span, rasterise_strokes};
 use crate::error::{Error, Result};

@@ -367,6 +367,117 @@ pub fn displaced_positions(
         .collect())
 }
 
+/// Footprints (`tangent_u`, `tangent_v`) of `cloud`'s points displaced by `displacement`:
+/// the first-order change of the displaced surface `X_n(p) = X(p) + D(p)·K⁻¹[F_n(p); 0]`,
+///
+/// `t_u' = t_u + t_u.z·(F_x/f_x, F_y/f_y, 0) + D·(∂F_x/∂x / f_x, ∂F_y/∂x / f_y, 0)`
+///
+/// (and the same along `y`), with `∂F/∂x` from central differences over the neighbours that
+/// hold a point of the same layer (one-sided at the layer's border, zero without
+/// neighbours). Where the flow stretches the content the splats grow with it, so no cracks
+/// open; a point whose displacement and its differences are zero keeps its footprint bit for
+/// bit. A stretched footprint is limited to `MAX_FOOTPRINT_STRETCH` fronto-parallel pixels
+/// (or its original length, if longer).
+pub fn displaced_footprints(
+    cloud: &PointCloud,
+    displacement: &LayeredDisplacement,
+    intrinsics: &Intrinsics,
+) -> Result<(Vec<Vec3>, Vec<Vec3>)> {
+    if !intrinsics.is_valid() {
+        return Err(Error::invalid(format!(
+            "motion: invalid intrinsics {intrinsics:?}"
+        )));
+    }
+    let n = cloud.len();
+    let lengths = [
+        cloud.source_pixel.len(),
+        cloud.source_depth.len(),
+        cloud.layer.len(),
+        cloud.tangent_u.len(),
+        cloud.tangent_v.len(),
+    ];
+    if lengths.iter().any(|&l| l != n) {
+        return Err(Error::invalid(
+            "motion: point cloud arrays have different lengths",
+        ));
+    }
+    if displacement.is_identity() {
+        return Ok((cloud.tangent_u.clone(), cloud.tangent_v.clone()));
+    }
+    // Which pixels hold a point of each moving layer.
+    let mut present: Vec<Option<MaskRaster>> = displacement
+        .layers
+        .iter()
+        .map(|d| {
+            d.as_ref()
+                .map(|d| MaskRaster::new(d.width(), d.height(), false))
+        })
+        .collect();
+    for (pixel, &layer) in cloud.source_pixel.iter().zip(&cloud.layer) {
+        if let Some(Some(mask)) = present.get_mut(layer as usize)
+            && let Some((x, y)) = pixel_of(*pixel, mask.width(), mask.height())
+        {
+            mask.set(x, y, true);
+        }
+    }
+    let (inv_fx, inv_fy) = (1.0 / intrinsics.fx, 1.0 / intrinsics.fy);
+    let max_stretch = crate::stages::points::MAX_FOOTPRINT_STRETCH;
+    let footprints: Vec<(Vec3, Vec3)> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let (tu, tv) = (cloud.tangent_u[i], cloud.tangent_v[i]);
+            let layer = cloud.layer[i] as usize;
+            let (Some(field), Some(Some(mask))) =
+                (displacement.layer(cloud.layer[i]), present.get(layer))
+            else {
+                return (tu, tv);
+            };
+            let Some((x, y)) = pixel_of(cloud.source_pixel[i], field.width(), field.height())
+            else {
+                return (tu, tv);
+            };
+            let depth = cloud.source_depth[i];
+            let f = field.at(x, y);
+            // ∂F along one axis from the neighbours of the same layer.
+            let derivative = |dx: isize, dy: isize| -> [f32; 2] {
+                let at = |s: isize| {
+                    let (nx, ny) = (x as isize + dx * s, y as isize + dy * s);
+                    (nx >= 0
+                        && ny >= 0
+                        && (nx as usize) < field.width()
+                        && (ny as usize) < field.height()
+                        && mask.at(nx as usize, ny as usize))
+                    .then(|| field.at(nx as usize, ny as usize))
+                };
+                match (at(1), at(-1)) {
+                    (Some(a), Some(b)) => [(a[0] - b[0]) * 0.5, (a[1] - b[1]) * 0.5],
+                    (Some(a), None) => [a[0] - f[0], a[1] - f[1]],
+                    (None, Some(b)) => [f[0] - b[0], f[1] - b[1]],
+                    (None, None) => [0.0, 0.0],
+                }
+            };
+            let (fx_d, fy_d) = (derivative(1, 0), derivative(0, 1));
+            if !(depth.is_finite() && f.iter().chain(&fx_d).chain(&fy_d).all(|v| v.is_finite())) {
+                return (tu, tv);
+            }
+            let fronto = depth * inv_fx.max(inv_fy);
+            let update = |t: Vec3, d: [f32; 2]| -> Vec3 {
+                if f == [0.0, 0.0] && d == [0.0, 0.0] {
+                    return t;
+                }
+                let moved = t + Vec3::new(
+                    t.z * f[0] * inv_fx + depth * d[0] * inv_fx,
+                    t.z * f[1] * inv_fy + depth * d[1] * inv_fy,
+                    0.0,
+                );
+                moved.clamp_length_max((max_stretch * fronto).max(t.length()))
+            };
+            (update(tu, fx_d), update(tv, fy_d))
+        })
+        .collect();
+    Ok(footprints.into_iter().unzip())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -443,6 +554,43 @@ mod tests {
         // Bad intrinsics are refused.
         let bad = Intrinsics { fx: 0.0, ..k };
         assert!(displaced_positions(&cloud, &other, &bad).is_err());
+    }
+
+    #[test]
+    fn footprints_stretch_with_the_flow() {
+        let (w, h) = (12, 8);
+        let k = Intrinsics::from_hfov(w, h, 60.0);
+        let cloud = cloud_of(&Raster::new(w, h, 4.0), &k, 0);
+        // F_x = 0.5·x: every pixel step becomes 1.5 pixels wide; F_y constant: no change.
+        let f = Raster::from_fn(w, h, |x, _| [0.5 * x as f32, 2.0]);
+        let d = LayeredDisplacement {
+            layers: vec![Some(f)],
+        };
+        let (tu, tv) = displaced_footprints(&cloud, &d, &k).unwrap();
+        let pixel = 4.0 / k.fx;
+        for i in 0..cloud.len() {
+            assert!((tu[i].x - 1.5 * pixel).abs() < 1e-6, "{:?}", tu[i]);
+            assert!(tu[i].y.abs() < 1e-6);
+            assert!((tv[i] - cloud.tangent_v[i]).length() < 1e-6);
+            // Consistent with the displaced positions: the neighbour is t_u' away.
+        }
+        let moved = displaced_positions(&cloud, &d, &k).unwrap();
+        let (a, b) = (3 * w + 4, 3 * w + 5);
+        assert!(((moved[b] - moved[a]) - tu[a]).length() < 1e-5);
+        // Zero displacement: bit-identical footprints.
+        let zero = LayeredDisplacement {
+            layers: vec![Some(Raster::new(w, h, [0.0; 2]))],
+        };
+        let (tu, tv) = displaced_footprints(&cloud, &zero, &k).unwrap();
+        assert_eq!(tu, cloud.tangent_u);
+        assert_eq!(tv, cloud.tangent_v);
+        // A violent flow is limited to the maximum stretch.
+        let wild = LayeredDisplacement {
+            layers: vec![Some(Raster::from_fn(w, h, |x, _| [1000.0 * x as f32, 0.0]))],
+        };
+        let (tu, _) = displaced_footprints(&cloud, &wild, &k).unwrap();
+        let limit = crate::stages::points::MAX_FOOTPRINT_STRETCH * pixel;
+        assert!(tu.iter().all(|t| t.length() <= limit * 1.0001));
     }
 
     #[test]

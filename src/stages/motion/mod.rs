@@ -8,6 +8,7 @@
 //! let f = motion.frame(n)?;                       // F_m(M) and F_{N−m}(−M), m = n mod N
 //! let fwd = displaced_positions(&cloud, &f.forward, &canvas_intrinsics)?;
 //! let bwd = displaced_positions(&cloud, &f.backward, &canvas_intrinsics)?;
+//! // optional, so stretched content opens no cracks: displaced_footprints(…) → (t_u, t_v)
 //! // render both position sets with the frame's camera, then
 //! let frame = render::blend::symmetric_blend(&fwd_frame, &bwd_frame, f.t, DEFAULT_SHARPNESS)?;
 //! ```
@@ -24,7 +25,8 @@ pub mod suggest;
 pub use euler::{EulerSequence, VectorRaster, integrate};
 pub use field::{FlowField, flow_from_spec, masked_harmonic};
 pub use lift::{
-    LayerFlow, LayeredDisplacement, displaced_positions, layer_flows, masked_diffusion,
+    LayerFlow, LayeredDisplacement, displaced_footprints, displaced_positions, layer_flows,
+    masked_diffusion,
 };
 pub use spec::{Anchor, Arrow, MotionRegion, MotionSpec, Stroke, rasterise_strokes};
 pub use suggest::suggest_motion;
