@@ -241,9 +241,8 @@ pub fn flow_from_spec(
 
 /// Inclusive bounding box `(x0, y0, x1, y1)` of the pixels with a positive value.
 fn bounding_box(mask: &GrayRaster) -> Option<(usize, usize, usize, usize)> {
-    let (w, h) = mask.size();
     let mut bbox: Option<(usize, usize, usize, usize)> = None;
-    for y in 0..h {
+    for y in 0..mask.height() {
         for (x, &v) in mask.row(y).iter().enumerate() {
             if v > 0.0 {
                 bbox = Some(match bbox {
@@ -253,7 +252,6 @@ fn bounding_box(mask: &GrayRaster) -> Option<(usize, usize, usize, usize)> {
             }
         }
     }
-    let _ = w;
     bbox
 }
 
