@@ -1,5 +1,6 @@
 //! Rendering the point cloud into frames (algorithms.md §7).
 
+pub mod blend;
 pub mod cpu;
 
 use crate::error::{Error, Result};
