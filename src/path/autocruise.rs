@@ -25,15 +25,30 @@
 //! directions: `look ← normalise((1 − looklerp)·look + looklerp·new)`, the same with `movelerp`
 //! for `move`. The camera then steps `position += move·speed·near_depth·f` (`f` the obstacle
 //! factor below) and the pose is rebuilt from `look` and the previous camera's down vector
-//! ([`Pose::look_at`]).
+//! (or the input view's, with `level_horizon`).
+//!
+//! # Pacing
+//!
+//! InfNat-Zero takes one step (0.19 near depths) per frame, through a world it regenerates at
+//! every step. This scene is finite: at that pace the camera leaves what the photo shows within
+//! a few frames (measured on the test photos: holes above 2 % of the frame after 2–17 frames).
+//! Make-It-4D instead takes one step for its whole 100-frame clip. So one auto-pilot step is
+//! spread over [`AutocruiseParams::frames_per_step`] frames (default 30): speed `speed/n` per
+//! frame and blend rates `1 − (1 − lerp)^(1/n)`, i.e. the same flight in finer time steps (the
+//! analysis still runs every frame). `frames_per_step = 1` is InfNat-Zero's pace.
 //!
 //! # Additions to the method (each a parameter)
 //!
-//! * `h` is clamped to `[0, 1]`: the camera never moves toward what it cannot see, so the
-//!   obstacle check below always looks where the camera goes.
+//! * `h` is clamped to `[0, 1]`: the camera never moves steeply toward what it cannot see.
 //! * The look direction's elevation above the horizontal plane of the input view is limited to
-//!   `±max_pitch_deg`: with no ground in view (an all-sky scene) the method would otherwise pitch
-//!   down forever and tumble.
+//!   `±max_pitch_deg` (default 30°): with no ground in view (an all-sky scene) the method would
+//!   otherwise pitch down forever and tumble, and in a scene without sky (a forest) it would
+//!   tilt up into the canopy looking for the 40 % of sky it wants.
+//! * Free-space steering (`free_space_steering`, forward only): when the way straight ahead
+//!   (horizontally) is blocked within `lookahead_distance`, both the look and the move target
+//!   `x` move toward the image column whose horizontal direction has the longest free travel
+//!   (same swept-sphere test as below, 9 columns), in proportion to how blocked the way ahead
+//!   is. The method itself only turns toward open sky, which a scene without sky never offers.
 //! * Obstacles: the camera is a sphere of radius `stop_distance` (near depths) that must not
 //!   touch any point of the cloud (the thinned cloud of the analysis render, all of it, seen or
 //!   not: a camera turned away from a wall must not back into it). Sweeping the sphere along
@@ -73,6 +88,9 @@ use std::fmt;
 /// `ε` of the look target's left/right balance (Infinite Nature's value).
 pub const BALANCE_EPSILON: f32 = 1e-4;
 
+/// Candidate directions per side tried by free-space steering (columns `x = 0.5 ± 0.4·k/n`).
+const STEERING_CANDIDATES_PER_SIDE: usize = 4;
+
 /// A stopped camera moves again once its speed factor reaches this multiple of
 /// [`AutocruiseParams::stop_speed_factor`].
 pub const RESUME_FACTOR: f32 = 4.0;
@@ -94,8 +112,12 @@ pub enum CruiseDirection {
 pub struct AutocruiseParams {
     /// Fly into the scene or out of it.
     pub direction: CruiseDirection,
-    /// Distance per frame, in near depths (InfNat-Zero: 0.19).
+    /// Distance per auto-pilot step, in near depths (InfNat-Zero: 0.19).
     pub speed: f32,
+    /// Output frames per auto-pilot step (≥ 1). 1 is InfNat-Zero's one step per frame; `n`
+    /// spreads each step over `n` frames: speed `speed/n` per frame and blend rates
+    /// `1 − (1 − lerp)^(1/n)`, the same flight in finer time steps.
+    pub frames_per_step: f32,
     /// Disparity below which a pixel starts to count as sky (`sky = clamp(20·(t − D), 0, 1)`).
     pub sky_threshold: f32,
     /// Disparity above which a pixel starts to count as near ground
@@ -131,6 +153,14 @@ pub struct AutocruiseParams {
     pub stop_distance: f32,
     /// Speed factor below which the camera stops outright.
     pub stop_speed_factor: f32,
+    /// Steering toward free space, `[0, 1]`: when the way straight ahead (horizontally) is
+    /// blocked within `lookahead_distance`, the look target `x` moves toward the image column
+    /// whose horizontal direction has the longest free travel, in proportion to this weight
+    /// times how blocked the way ahead is. 0 is the method as published (sky balance only).
+    /// Forward flight only.
+    pub free_space_steering: f32,
+    /// How far ahead free-space steering looks, near depths.
+    pub lookahead_distance: f32,
     /// Points that must block the way before they count as an obstacle.
     pub obstacle_min_points: usize,
     /// A suggested keyframe every this many frames (plus the last frame).
@@ -144,6 +174,7 @@ impl Default for AutocruiseParams {
         Self {
             direction: CruiseDirection::Forward,
             speed: 0.19,
+            frames_per_step: 30.0,
             sky_threshold: 0.1,
             ground_threshold: 0.4,
             horizon: 0.4,
@@ -152,14 +183,16 @@ impl Default for AutocruiseParams {
             movelerp: 0.2,
             analysis_width: 96,
             hole_weight: 1.0,
-            max_pitch_deg: 60.0,
+            max_pitch_deg: 30.0,
             level_horizon: false,
             sky_fraction_min: 0.05,
             sky_fraction_max: 0.6,
             slow_distance: 1.0,
-            stop_distance: 0.3,
+            stop_distance: 0.15,
             stop_speed_factor: 0.05,
             obstacle_min_points: 3,
+            free_space_steering: 1.0,
+            lookahead_distance: 3.0,
             keyframe_interval: 10,
             splat: SplatSettings::default(),
         }
@@ -186,6 +219,12 @@ impl AutocruiseParams {
             }
         };
         finite("speed", self.speed)?;
+        if !(self.frames_per_step >= 1.0 && self.frames_per_step <= 1e6) {
+            return Err(Error::invalid(format!(
+                "autocruise frames per step {} is outside [1, 10⁶]",
+                self.frames_per_step
+            )));
+        }
         if self.speed < 0.0 {
             return Err(Error::invalid(
                 "autocruise speed must not be negative (the direction says which way)",
@@ -202,6 +241,7 @@ impl AutocruiseParams {
             ("minimum sky fraction", self.sky_fraction_min),
             ("maximum sky fraction", self.sky_fraction_max),
             ("stop speed factor", self.stop_speed_factor),
+            ("free-space steering", self.free_space_steering),
         ] {
             unit(name, v)?;
         }
@@ -218,6 +258,7 @@ impl AutocruiseParams {
         }
         for (name, v) in [
             ("slow distance", self.slow_distance),
+            ("lookahead distance", self.lookahead_distance),
             ("stop distance", self.stop_distance),
         ] {
             finite(name, v)?;
@@ -537,6 +578,7 @@ pub fn autocruise(
         let (disparity, weights) = disparity_map(&rendered, scene.near_depth, params.hole_weight);
         let balance = skyline_balance(&disparity, Some(&weights), params);
         let (mut look_x, mut move_y) = (balance.look_x, balance.move_y);
+        let mut move_x = 0.5f32;
         if params.direction == CruiseDirection::Backward {
             look_x = 1.0 - look_x;
             move_y = 1.0 - move_y;
@@ -549,10 +591,46 @@ pub fn autocruise(
             let ray = analysis_k.ray(tx * aw as f32 - 0.5, ty * ah as f32 - 0.5);
             (rotation * ray.as_dvec3()).normalize()
         };
+        let stop = params.stop_distance as f64 * near;
+        if params.free_space_steering > 0.0 && params.direction == CruiseDirection::Forward {
+            let lookahead = params.lookahead_distance as f64 * near;
+            let clearance_at = |x: f32| -> f64 {
+                let horizontal = ray_world(x, 0.5);
+                let horizontal = (horizontal - horizontal.dot(world_down) * world_down)
+                    .try_normalize()
+                    .unwrap_or(horizontal);
+                sphere_clearance(
+                    &preview,
+                    position,
+                    horizontal,
+                    stop,
+                    params.obstacle_min_points,
+                )
+                .map_or(lookahead, |c| c.min(lookahead))
+            };
+            let centre = clearance_at(0.5);
+            let blocked = (1.0 - centre / lookahead).clamp(0.0, 1.0) as f32;
+            if blocked > 0.0 {
+                // Candidates from the centre outwards, so ties keep the straighter course.
+                let mut best = (0.5f32, centre);
+                for k in 1..=STEERING_CANDIDATES_PER_SIDE {
+                    let offset = 0.4 * k as f32 / STEERING_CANDIDATES_PER_SIDE as f32;
+                    for x in [0.5 - offset, 0.5 + offset] {
+                        let c = clearance_at(x);
+                        if c > best.1 {
+                            best = (x, c);
+                        }
+                    }
+                }
+                let weight = params.free_space_steering.min(1.0) * blocked;
+                look_x += weight * (best.0 - look_x);
+                move_x += weight * (best.0 - move_x);
+            }
+        }
         let new_look = ray_world(look_x, balance.look_y);
-        let new_move = ray_world(0.5, move_y);
-        let ll = params.looklerp as f64;
-        let ml = params.movelerp as f64;
+        let new_move = ray_world(move_x, move_y);
+        let ll = per_frame_rate(params.looklerp, params.frames_per_step);
+        let ml = per_frame_rate(params.movelerp, params.frames_per_step);
         look = ((1.0 - ll) * look + ll * new_look)
             .try_normalize()
             .unwrap_or(look);
@@ -564,7 +642,6 @@ pub fn autocruise(
         // Obstacles along the motion.
         let travel_world = motion * sign;
         let slow = params.slow_distance as f64 * near;
-        let stop = params.stop_distance as f64 * near;
         let clearance = sphere_clearance(
             &preview,
             position,
@@ -598,7 +675,7 @@ pub fn autocruise(
                 });
             }
         }
-        let mut step = params.speed as f64 * near * speed_factor;
+        let mut step = params.speed as f64 / params.frames_per_step as f64 * near * speed_factor;
         if let Some(c) = clearance {
             step = step.min(c.max(0.0));
         }
@@ -632,6 +709,12 @@ pub fn autocruise(
         stopped_at,
         near_depth: scene.near_depth,
     })
+}
+
+/// The per-frame blend rate equivalent to `rate` per auto-pilot step when a step takes
+/// `frames_per_step` frames: `1 − (1 − rate)^(1/frames_per_step)`.
+fn per_frame_rate(rate: f32, frames_per_step: f32) -> f64 {
+    1.0 - (1.0 - rate as f64).powf(1.0 / frames_per_step as f64)
 }
 
 /// Disparity `D = clamp(near_depth/Z, 0, 1)` of a rendered frame (0 where uncovered) and the
@@ -812,6 +895,14 @@ pub(crate) mod tests {
         .unwrap()
     }
 
+    /// The method's pacing: one auto-pilot step per frame.
+    pub(crate) fn per_frame() -> AutocruiseParams {
+        AutocruiseParams {
+            frames_per_step: 1.0,
+            ..Default::default()
+        }
+    }
+
     fn assert_finite(result: &AutocruiseResult) {
         for (i, v) in result.views.iter().enumerate() {
             let p = v.world_from_camera;
@@ -871,7 +962,7 @@ pub(crate) mod tests {
     fn flies_forward_over_ground_deterministically() {
         let (cloud, k, depth) = landscape(96, 60, 60.0, 24.0, 1.0);
         let scene = scale_of(&depth, 100.0);
-        let params = AutocruiseParams::default();
+        let params = per_frame();
         let result = run(&cloud, &k, (96, 60), &scene, &params, 40);
         assert_eq!(result.views.len(), 40);
         assert_eq!(result.frames.len(), 40);
@@ -905,7 +996,7 @@ pub(crate) mod tests {
         let scene = scale_of(&depth, 100.0);
         let params = AutocruiseParams {
             direction: CruiseDirection::Backward,
-            ..Default::default()
+            ..per_frame()
         };
         let result = run(&cloud, &k, (96, 60), &scene, &params, 30);
         assert_finite(&result);
@@ -926,7 +1017,7 @@ pub(crate) mod tests {
             near_depth: 1.0,
         };
         let k = Intrinsics::from_hfov(64, 40, 55.0);
-        let params = AutocruiseParams::default();
+        let params = per_frame();
         let empty = PointCloud::default();
         let far_depth = Raster::new(64, 40, 1000.0f32);
         let far = PointCloud::lift(
@@ -955,7 +1046,7 @@ pub(crate) mod tests {
             for v in &result.views {
                 assert!(v.world_from_camera.forward().y <= max_sin);
             }
-            assert!(result.views[119].world_from_camera.forward().y > 0.8);
+            assert!(result.views[119].world_from_camera.forward().y > max_sin - 2e-3);
             assert!(result.travelled() > 100.0 * params.speed);
             assert_eq!(result.stopped_at, None);
             assert_eq!(
@@ -987,7 +1078,7 @@ pub(crate) mod tests {
             near_depth: wall_z,
         };
         let view_k = Intrinsics::from_hfov(80, 60, 55.0);
-        let params = AutocruiseParams::default();
+        let params = per_frame();
         let result = run(&cloud, &view_k, (80, 60), &scene, &params, 80);
         assert_finite(&result);
         assert!(
@@ -996,17 +1087,91 @@ pub(crate) mod tests {
             result.slowed_at
         );
         assert!(result.stopped_at.is_some(), "{result}");
-        // The safety sphere never touches the wall (up to the analysis render's sampling).
-        let stop_z = wall_z - params.stop_distance * scene.near_depth;
+        // The safety sphere never touches the wall (up to the cloud's sampling) while the camera
+        // is in front of it, and the camera never passes through it; it may fly around its edges.
+        let stop = params.stop_distance * scene.near_depth;
+        let half_width = wall_z * (79.0 - k.cx) / k.fx;
+        let half_height = wall_z * (59.0 - k.cy) / k.fy;
         for (i, v) in result.views.iter().enumerate() {
             let p = v.world_from_camera.translation;
+            let in_front = p.x.abs() < half_width && p.y.abs() < half_height;
+            if p.x.abs() < half_width - stop && p.y.abs() < half_height - stop {
+                assert!(
+                    p.z <= wall_z - stop + 0.01,
+                    "frame {i} at {p} is too near the wall"
+                );
+            }
             assert!(
-                p.z <= stop_z + 0.01,
-                "frame {i} at {p} is too near the wall"
+                p.z < wall_z || !in_front,
+                "frame {i} at {p} passed through the wall"
             );
         }
         assert!(result.warning_lines().iter().any(|l| l.contains("stopped")));
         assert!(format!("{result}").contains("stopped by an obstacle at frame"));
+    }
+
+    #[test]
+    fn finer_frames_per_step_fly_the_same_path() {
+        let (cloud, k, depth) = landscape(96, 60, 60.0, 24.0, 1.0);
+        let scene = scale_of(&depth, 100.0);
+        let coarse = run(&cloud, &k, (96, 60), &scene, &per_frame(), 11);
+        let fine_params = AutocruiseParams {
+            frames_per_step: 5.0,
+            ..per_frame()
+        };
+        let fine = run(&cloud, &k, (96, 60), &scene, &fine_params, 51);
+        let a = coarse.views[10].world_from_camera;
+        let b = fine.views[50].world_from_camera;
+        let travel = coarse.travelled();
+        assert!((fine.travelled() - travel).abs() < 1e-3 * travel);
+        assert!(
+            (a.translation - b.translation).length() < 0.03 * travel,
+            "{a:?} {b:?}"
+        );
+        assert!(a.rotation.angle_between(b.rotation) < 0.02);
+    }
+
+    #[test]
+    fn steers_through_a_gap_instead_of_stopping() {
+        // A wall at the near depth over the left 60 % of the view; far ground to the right.
+        let k = Intrinsics::from_hfov(80, 60, 60.0);
+        let depth = Raster::from_fn(80, 60, |x, _| if x < 48 { 1.0 } else { 50.0 });
+        let cloud = PointCloud::lift(
+            &Raster::new(80, 60, [0.4f32; 3]),
+            &depth,
+            &k,
+            None,
+            None,
+            LiftOptions::default(),
+        )
+        .unwrap();
+        let scene = SceneScale {
+            median_depth: 1.0,
+            near_depth: 1.0,
+        };
+        let blind = AutocruiseParams {
+            free_space_steering: 0.0,
+            ..per_frame()
+        };
+        let stuck = run(&cloud, &k, (80, 60), &scene, &blind, 60);
+        assert!(stuck.stopped_at.is_some(), "{stuck}");
+        let steered = run(&cloud, &k, (80, 60), &scene, &per_frame(), 60);
+        assert_finite(&steered);
+        let end = steered.views[59].world_from_camera;
+        assert!(end.translation.x > 0.2, "{steered}{end:?}");
+        assert!(end.forward().x > 0.05, "{end:?}");
+        assert!(
+            steered.travelled() > 2.0 * stuck.travelled(),
+            "{steered}{stuck}"
+        );
+        for v in &steered.views {
+            let p = v.world_from_camera.translation;
+            // Never within the stop distance of the wall's face while in front of it.
+            let wall_edge_x = (47.5 - k.cx) / k.fx;
+            if p.x < wall_edge_x - 0.15 {
+                assert!(p.z <= 1.0 - 0.15 + 0.01, "{p}");
+            }
+        }
     }
 
     #[test]
@@ -1129,5 +1294,242 @@ pub(crate) mod tests {
         assert!((limit_pitch(up, down, limit).y + limit.sin()).abs() < 1e-9);
         let level = DVec3::new(0.3, 0.1, 1.0).normalize();
         assert_eq!(limit_pitch(level, down, limit), level);
+    }
+
+    /// Real photos: classical depth, lifted, as the scene builder does it.
+    mod real_data {
+        use super::*;
+        use crate::image_io::{load_image, save_rgb_png};
+        use crate::path::diagnostics::{DiagnosticsParams, path_diagnostics};
+        use crate::stages::depth::DepthEstimator;
+        use crate::stages::depth::classical::ClassicalDepth;
+        use std::path::Path;
+
+        pub(crate) struct Photo {
+            pub cloud: PointCloud,
+            pub intrinsics: Intrinsics,
+            pub size: (usize, usize),
+            pub scene: SceneScale,
+            pub image: RgbRaster,
+        }
+
+        pub(crate) fn photo(name: &str) -> Photo {
+            let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("tests/data")
+                .join(name);
+            let image = load_image(&path).unwrap().rgb;
+            let (w, h) = image.size();
+            let k = Intrinsics::from_hfov(w, h, 55.0);
+            let estimate = ClassicalDepth::default()
+                .estimate(&image, &k, &Progress::none())
+                .unwrap();
+            let cloud = PointCloud::lift(
+                &image,
+                &estimate.depth,
+                &k,
+                None,
+                None,
+                LiftOptions::default(),
+            )
+            .unwrap();
+            let ground: Vec<f32> = estimate
+                .depth
+                .data()
+                .iter()
+                .zip(estimate.sky.data())
+                .filter(|&(_, &s)| s < 0.5)
+                .map(|(&z, _)| z)
+                .collect();
+            let values = if ground.is_empty() {
+                estimate.depth.data()
+            } else {
+                &ground
+            };
+            let scene = SceneScale {
+                median_depth: quantile(values, 0.5).unwrap(),
+                near_depth: quantile(values, 0.02).unwrap(),
+            };
+            Photo {
+                cloud,
+                intrinsics: k,
+                size: (w, h),
+                scene,
+                image,
+            }
+        }
+
+        fn cruise(photo: &Photo, params: &AutocruiseParams, frames: usize) -> AutocruiseResult {
+            run(
+                &photo.cloud,
+                &photo.intrinsics,
+                photo.size,
+                &photo.scene,
+                params,
+                frames,
+            )
+        }
+
+        #[test]
+        fn forest_path_cruise_moves_forward() {
+            let photo = photo("forest_path_320.jpg");
+            let params = AutocruiseParams::default();
+            let result = cruise(&photo, &params, 60);
+            assert_finite(&result);
+            assert_eq!(result.views[0].world_from_camera, Pose::IDENTITY);
+            let near = photo.scene.near_depth;
+            let end = result.views[59].world_from_camera;
+            // Forward (59 frames at speed/frames_per_step, unobstructed so early) and still facing
+            // the scene.
+            let per_frame_step = params.speed / params.frames_per_step * near;
+            assert!(
+                end.translation.z > 0.9 * 59.0 * per_frame_step,
+                "{result}{end:?}"
+            );
+            assert!(end.forward().z > 0.95, "{end:?}");
+            for pair in result.views.windows(2) {
+                let step =
+                    pair[1].world_from_camera.translation - pair[0].world_from_camera.translation;
+                assert!(step.length() <= per_frame_step * 1.0001);
+            }
+            // The method's own pacing flies into the trees and stops there.
+            let fast = cruise(&photo, &per_frame(), 60);
+            assert_finite(&fast);
+            assert!(
+                fast.stopped_at.is_some() || fast.slowed_at.is_some(),
+                "{fast}"
+            );
+            assert_eq!(result, cruise(&photo, &params, 60));
+        }
+
+        /// Renders a few frames of the autocruise path of two photos to
+        /// `$TMPDIR/makeit4d_autocruise/` and prints every photo's per-frame hole fractions.
+        #[test]
+        #[ignore = "writes images; run by hand and look at them"]
+        fn autocruise_frames_and_hole_fractions() {
+            let out = std::env::temp_dir().join("makeit4d_autocruise");
+            std::fs::create_dir_all(&out).unwrap();
+            let env = |name: &str| std::env::var(name).ok();
+            let frames: usize = env("CRUISE_FRAMES")
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(60);
+            let defaults = AutocruiseParams::default();
+            let speed = env("CRUISE_SPEED")
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(defaults.speed);
+            let hole_weight = env("CRUISE_HOLE_WEIGHT")
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(defaults.hole_weight);
+            let level_horizon = env("CRUISE_LEVEL").is_some();
+            let free_space_steering = env("CRUISE_STEER")
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(defaults.free_space_steering);
+            let frames_per_step = env("CRUISE_FPS")
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(defaults.frames_per_step);
+            let photos = env("CRUISE_PHOTOS").unwrap_or_else(|| {
+                "forest_path_320.jpg evening_glow_320.jpg cold_ripple_320.jpg starry_night_320.jpg aloe_left_q.jpg".into()
+            });
+            for name in photos.split_whitespace() {
+                let photo = photo(name);
+                let (w, h) = photo.size;
+                for direction in [CruiseDirection::Forward, CruiseDirection::Backward] {
+                    let params = AutocruiseParams {
+                        direction,
+                        speed,
+                        frames_per_step,
+                        hole_weight,
+                        free_space_steering,
+                        level_horizon,
+                        ..Default::default()
+                    };
+                    let result = cruise(&photo, &params, frames);
+                    let stem = name.trim_end_matches(".jpg");
+                    let tag = format!("{stem}_{direction:?}_s{speed}_n{frames_per_step}_w{hole_weight}_f{free_space_steering}").to_lowercase();
+                    eprintln!("== {tag}: scene {:?}\n{result}", photo.scene);
+                    for (i, (v, f)) in result.views.iter().zip(&result.frames).enumerate() {
+                        if i % 10 == 0 || i + 1 == frames {
+                            let p = v.world_from_camera.translation / photo.scene.near_depth;
+                            let fwd = v.world_from_camera.forward();
+                            let roll = (v.world_from_camera.rotation * Vec3::X)
+                                .y
+                                .asin()
+                                .to_degrees();
+                            eprintln!(
+                                "  frame {i:>3}: at ({:+.2}, {:+.2}, {:+.2}) near, facing ({:+.2}, {:+.2}, {:+.2}), roll {roll:+.1}°, sky {:.2}, ground {:.2}, speed {:.2}",
+                                p.x,
+                                p.y,
+                                p.z,
+                                fwd.x,
+                                fwd.y,
+                                fwd.z,
+                                f.sky_fraction,
+                                f.ground_fraction,
+                                f.speed_factor
+                            );
+                        }
+                    }
+                    let diagnostics = path_diagnostics(
+                        &photo.cloud,
+                        &result.views,
+                        w,
+                        h,
+                        &DiagnosticsParams {
+                            scale: 1.0,
+                            ..Default::default()
+                        },
+                        &Progress::none(),
+                    )
+                    .unwrap();
+                    let holes: Vec<String> = diagnostics
+                        .frames
+                        .iter()
+                        .map(|f| format!("{:.1}", 100.0 * f.hole_fraction))
+                        .collect();
+                    eprintln!("  hole % per frame (full size): {}", holes.join(" "));
+                    eprint!("{diagnostics}");
+                    if direction == CruiseDirection::Forward
+                        && (name.starts_with("forest") || name.starts_with("evening"))
+                        || name.starts_with("forest")
+                    {
+                        save_rgb_png(&out.join(format!("{tag}_input.png")), &photo.image, false)
+                            .unwrap();
+                        let input = render_cpu(
+                            &photo.cloud,
+                            None,
+                            &result.views[0],
+                            w,
+                            h,
+                            &SplatSettings::default(),
+                        )
+                        .unwrap();
+                        let (d, _) = disparity_map(&input, photo.scene.near_depth, 1.0);
+                        save_rgb_png(
+                            &out.join(format!("{tag}_disparity.png")),
+                            &d.map(|v| [v; 3]),
+                            false,
+                        )
+                        .unwrap();
+                        for i in [0, frames / 4, frames / 2, 3 * frames / 4, frames - 1] {
+                            let frame = render_cpu(
+                                &photo.cloud,
+                                None,
+                                &result.views[i],
+                                w,
+                                h,
+                                &SplatSettings::default(),
+                            )
+                            .unwrap();
+                            save_rgb_png(
+                                &out.join(format!("{tag}_{i:03}.png")),
+                                &frame.colour,
+                                false,
+                            )
+                            .unwrap();
+                        }
+                    }
+                }
+            }
+            eprintln!("frames in {}", out.display());
+        }
     }
 }
