@@ -749,12 +749,12 @@ fn sphere_clearance(
     let r2 = radius * radius;
     let mut blocking = Vec::new();
     for (p, alpha) in cloud.positions.iter().zip(&cloud.alphas) {
-        if !(*alpha > 0.0) {
+        if alpha.is_nan() || *alpha <= 0.0 {
             continue;
         }
         let relative = p.as_dvec3() - position;
         let along = relative.dot(travel);
-        if !(along > 0.0) {
+        if along.is_nan() || along <= 0.0 {
             continue;
         }
         let lateral2 = (relative.length_squared() - along * along).max(0.0);

@@ -1,7 +1,7 @@
 //! Path diagnostics: how much of each frame of a camera path the scene cannot fill.
 //!
-//! Every view is rendered at a low resolution (`scale` × the output size, at least 1 pixel a
-//! side) with the CPU splatter, and two fractions of its pixels are counted:
+//! Every view is rendered at a low resolution (`scale` × the output size, at most
+//! `max_render_width` pixels wide, at least 1 pixel a side) with the CPU splatter, and two fractions of its pixels are counted:
 //!
 //! * **holes**: coverage below [`HOLE_COVERAGE`] (nothing there: the path sees past what the
 //!   scene holds);
@@ -45,6 +45,8 @@ const MAX_TABLE_ROWS: usize = 24;
 pub struct DiagnosticsParams {
     /// Render size as a fraction of the output size, `(0, 1]`.
     pub scale: f32,
+    /// Largest render width, pixels (bounds the cost per frame for large outputs).
+    pub max_render_width: usize,
     /// Hole fraction above which a frame gets a warning.
     pub hole_threshold: f32,
     /// Splatting settings of the diagnostic renders.
@@ -55,6 +57,7 @@ impl Default for DiagnosticsParams {
     fn default() -> Self {
         Self {
             scale: 0.25,
+            max_render_width: 320,
             hole_threshold: 0.02,
             splat: SplatSettings::default(),
         }
@@ -69,6 +72,11 @@ impl DiagnosticsParams {
                 "diagnostics scale {} is outside (0, 1]",
                 self.scale
             )));
+        }
+        if self.max_render_width == 0 {
+            return Err(Error::invalid(
+                "diagnostics maximum render width must be positive",
+            ));
         }
         if !(0.0..=1.0).contains(&self.hole_threshold) {
             return Err(Error::invalid(format!(
@@ -261,8 +269,9 @@ pub fn path_diagnostics(
             "diagnostics: output size {width}×{height} has no pixels"
         )));
     }
-    let rw = ((width as f64 * params.scale as f64).round() as usize).max(1);
-    let rh = ((height as f64 * params.scale as f64).round() as usize).max(1);
+    let scale = (params.scale as f64).min(params.max_render_width as f64 / width as f64);
+    let rw = ((width as f64 * scale).round() as usize).clamp(1, params.max_render_width);
+    let rh = ((height as f64 * scale).round() as usize).max(1);
     let (sx, sy) = (rw as f32 / width as f32, rh as f32 / height as f32);
     let flagged = flag_cloud(&preview_cloud(cloud, width, rw));
     let mut frames = Vec::with_capacity(views.len());
@@ -402,7 +411,7 @@ mod tests {
         }
         assert!(d.frames[11].hole_fraction > 0.1, "{d}");
         let safe = d.safe_frames();
-        assert!(safe >= 1 && safe < 12, "{d}");
+        assert!((1..12).contains(&safe), "{d}");
         assert_eq!(d.safe_extent(), Some(safe - 1));
         assert!(d.frames[safe].hole_fraction > d.hole_threshold);
         assert_eq!(d.frames_over_threshold().first(), Some(&safe));
@@ -471,6 +480,17 @@ mod tests {
         )
         .unwrap();
         assert_eq!(one.render_size, (1, 1));
+        // Large outputs render at most `max_render_width` wide.
+        let big = path_diagnostics(
+            &cloud,
+            &[view(k.scaled(100.0, 100.0), Vec3::ZERO)],
+            6400,
+            4000,
+            &DiagnosticsParams::default(),
+            &Progress::none(),
+        )
+        .unwrap();
+        assert_eq!(big.render_size, (320, 200));
         for bad in [0.0, 1.5, f32::NAN] {
             let params = DiagnosticsParams {
                 scale: bad,
