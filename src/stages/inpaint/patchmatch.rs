@@ -1,0 +1,745 @@
+//! Example-based completion: PatchMatch search (Barnes et al. 2009) inside multi-scale EM
+//! completion (Wexler et al. 2007).
+//!
+//! The image, hole and source masks are reduced into a pyramid until the hole is shallow
+//! (every hole pixel within about one patch radius of known pixels). On the coarsest level the
+//! hole starts from the membrane fill; on every finer level it starts from the coarser
+//! nearest-neighbour field (NNF), scaled up and voted with the finer source pixels. Each EM
+//! iteration improves the NNF with PatchMatch passes (propagation from the scan-order
+//! neighbours plus random search at halving radii, plus one candidate drawn from the whole
+//! source) and then re-synthesises the hole by voting: every pixel becomes the weighted mean of
+//! the pixels that the overlapping patches copy onto it, each patch weighted by
+//! `exp(−d / 2σ²)` with `d` its mean squared distance and `σ²` the 75th percentile of those
+//! distances (Wexler's weights).
+//!
+//! Source restriction: a source patch must lie wholly on `allowed_source` pixels outside the
+//! hole. Known pixels that may not be copied and lie near the hole are synthesised along with
+//! it (so they never pull the match towards their colours), and stay unchanged in the output.
+//!
+//! Guide: a fourth channel (e.g. depth) normalised by its robust range and scaled by
+//! [`PatchMatchParams::guide_weight`] enters the patch distance and is voted with the same
+//! patches, which is how the completed guide is made.
+//!
+//! Determinism: the target rows are split into fixed bands that run in parallel; inside a band
+//! propagation runs in scan order, across bands it reads the field as it was before the pass.
+//! Every random draw is keyed by (seed, level, pass, pixel), and every sum runs in a fixed
+//! order, so the result is the same whatever the number of threads.
+
+use super::common::{self, KeyedRng, Plan};
+use super::harmonic::membrane_fill;
+use super::{InpaintRequest, InpaintResult, Inpainter};
+use crate::error::{Error, Result};
+use crate::progress::Progress;
+use crate::raster::quantile;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::str::FromStr;
+
+/// Marks a pixel that is not a target patch centre.
+const NONE: u32 = u32::MAX;
+/// Rows per band of the parallel PatchMatch pass (fixed: results must not depend on threads).
+const BAND_ROWS: usize = 16;
+/// A coarser level is used only when it keeps at least this many valid source patches.
+const MIN_SOURCE_PATCHES: usize = 16;
+/// An EM loop on a level stops early when the mean absolute change of the synthesised pixels
+/// falls below this.
+const CONVERGED_CHANGE: f32 = 2e-4;
+
+/// Quality presets of the PatchMatch inpainter.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum InpaintPreset {
+    /// Fastest: small patches, one pass per EM step, no EM at full resolution.
+    Draft,
+    /// Interactive preview: the default.
+    #[default]
+    Preview,
+    /// Best quality: more EM iterations on every level, including full resolution.
+    Final,
+}
+
+impl InpaintPreset {
+    /// Every preset, fastest first.
+    pub const ALL: [InpaintPreset; 3] = [
+        InpaintPreset::Draft,
+        InpaintPreset::Preview,
+        InpaintPreset::Final,
+    ];
+
+    /// The preset's name as the command line and project files spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            InpaintPreset::Draft => "draft",
+            InpaintPreset::Preview => "preview",
+            InpaintPreset::Final => "final",
+        }
+    }
+
+    /// The parameters this preset stands for.
+    pub fn params(self) -> PatchMatchParams {
+        match self {
+            InpaintPreset::Draft => PatchMatchParams {
+                patch_size: 5,
+                pm_iterations: 1,
+                em_iterations_coarse: 3,
+                em_iterations_fine: 0,
+                max_levels: 10,
+                guide_weight: 1.0,
+            },
+            InpaintPreset::Preview => PatchMatchParams {
+                patch_size: 7,
+                pm_iterations: 2,
+                em_iterations_coarse: 5,
+                em_iterations_fine: 1,
+                max_levels: 10,
+                guide_weight: 1.0,
+            },
+            InpaintPreset::Final => PatchMatchParams {
+                patch_size: 7,
+                pm_iterations: 3,
+                em_iterations_coarse: 10,
+                em_iterations_fine: 3,
+                max_levels: 10,
+                guide_weight: 1.0,
+            },
+        }
+    }
+}
+
+impl fmt::Display for InpaintPreset {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for InpaintPreset {
+    type Err = Error;
+
+    fn from_str(s: &str) -> Result<Self> {
+        InpaintPreset::ALL
+            .into_iter()
+            .find(|p| p.name().eq_ignore_ascii_case(s.trim()))
+            .ok_or_else(|| {
+                Error::invalid(format!(
+                    "unknown inpainting preset {s:?} (expected draft, preview or final)"
+                ))
+            })
+    }
+}
+
+/// The quality knobs of [`PatchMatchInpainter`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct PatchMatchParams {
+    /// Patch side in pixels (odd, ≥ 3; even values are rounded up). Smaller where the image or
+    /// the source is too small for it.
+    pub patch_size: usize,
+    /// PatchMatch passes (propagation + random search) per EM iteration.
+    pub pm_iterations: usize,
+    /// EM iterations on the coarsest level; the count falls linearly towards
+    /// `em_iterations_fine` on the finest.
+    pub em_iterations_coarse: usize,
+    /// EM iterations at full resolution; 0 = only scale up the coarser result and vote once.
+    pub em_iterations_fine: usize,
+    /// Most pyramid levels (1 = full resolution only). The count actually used stops once the
+    /// hole is shallow compared with the patch.
+    pub max_levels: usize,
+    /// Weight of the guide channel in the patch distance: a difference over the guide's whole
+    /// (robust) range counts like a full-scale difference in one colour channel.
+    pub guide_weight: f32,
+}
+
+impl Default for PatchMatchParams {
+    fn default() -> Self {
+        InpaintPreset::default().params()
+    }
+}
+
+impl From<InpaintPreset> for PatchMatchParams {
+    fn from(preset: InpaintPreset) -> Self {
+        preset.params()
+    }
+}
+
+/// PatchMatch completion as an [`Inpainter`].
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PatchMatchInpainter {
+    /// Quality knobs.
+    pub params: PatchMatchParams,
+}
+
+impl PatchMatchInpainter {
+    /// An inpainter with these parameters.
+    pub fn new(params: PatchMatchParams) -> Self {
+        Self { params }
+    }
+
+    /// An inpainter with a preset's parameters.
+    pub fn preset(preset: InpaintPreset) -> Self {
+        Self::new(preset.params())
+    }
+}
+
+impl Inpainter for PatchMatchInpainter {
+    fn name(&self) -> &str {
+        "patchmatch"
+    }
+
+    fn inpaint(&self, request: &InpaintRequest<'_>, progress: &Progress) -> Result<InpaintResult> {
+        let source = match common::plan(request)? {
+            Plan::Unchanged(result) => return Ok(result),
+            Plan::Fill { source } => source,
+        };
+        let p = &self.params;
+        let (w, h) = request.image.size();
+        let (pixels, scale) =
+            common::work_pixels(request.image, request.guide, &source, p.guide_weight);
+        let finest = Level {
+            w,
+            h,
+            pixels,
+            hole: request.hole.data().to_vec(),
+            source,
+        };
+        let pixels = complete(finest, p, request.seed, progress)?;
+        Ok(common::finish(request, &pixels, scale))
+    }
+}
+
+/// One pyramid level: working pixels, hole and source masks.
+struct Level {
+    w: usize,
+    h: usize,
+    pixels: Vec<[f32; 4]>,
+    hole: Vec<bool>,
+    source: Vec<bool>,
+}
+
+impl Level {
+    /// Half resolution: a coarse pixel is in the hole when any child is, a source when every
+    /// child is; its colour is the mean of its source children (else of its known children).
+    fn reduced(&self) -> Level {
+        let (w, h) = (self.w, self.h);
+        let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
+        let mut pixels = vec![[0.0f32; 4]; cw * ch];
+        let mut hole = vec![false; cw * ch];
+        let mut source = vec![true; cw * ch];
+        for cy in 0..ch {
+            for cx in 0..cw {
+                let ci = cy * cw + cx;
+                let mut sums = [[0.0f32; 4]; 2];
+                let mut counts = [0.0f32; 2];
+                for y in 2 * cy..(2 * cy + 2).min(h) {
+                    for x in 2 * cx..(2 * cx + 2).min(w) {
+                        let i = y * w + x;
+                        hole[ci] |= self.hole[i];
+                        source[ci] &= self.source[i];
+                        let kind = if self.source[i] {
+                            0
+                        } else if !self.hole[i] {
+                            1
+                        } else {
+                            continue;
+                        };
+                        for c in 0..4 {
+                            sums[kind][c] += self.pixels[i][c];
+                        }
+                        counts[kind] += 1.0;
+                    }
+                }
+                let kind = if counts[0] > 0.0 { 0 } else { 1 };
+                if counts[kind] > 0.0 {
+                    let n = counts[kind];
+                    let s = sums[kind];
+                    pixels[ci] = [s[0] / n, s[1] / n, s[2] / n, s[3] / n];
+                }
+            }
+        }
+        Level {
+            w: cw,
+            h: ch,
+            pixels,
+            hole,
+            source,
+        }
+    }
+}
+
+/// Builds the pyramid (finest first) and the patch radius for it.
+fn pyramid(finest: Level, params: &PatchMatchParams) -> (Vec<Level>, usize) {
+    let (w, h) = (finest.w, finest.h);
+    let mut radius = (params.patch_size.max(3) / 2).min((w.min(h).saturating_sub(1)) / 2);
+    // Shrink the patch until some source patch fits.
+    while radius > 0
+        && common::count(&common::erode_inside(&finest.source, w, h, radius)) < MIN_SOURCE_PATCHES
+    {
+        radius -= 1;
+    }
+    let mut levels = vec![finest];
+    while levels.len() < params.max_levels.max(1) {
+        let Some(current) = levels.last() else {
+            break;
+        };
+        let depth = common::chessboard_depth(&current.hole, current.w, current.h);
+        let thickness = depth.iter().copied().max().unwrap_or(0) as usize;
+        if thickness <= radius.max(1) {
+            break;
+        }
+        let next = current.reduced();
+        if next.w.min(next.h) < 2 * (2 * radius + 1) {
+            break;
+        }
+        let valid = common::erode_inside(&next.source, next.w, next.h, radius);
+        if common::count(&valid) < MIN_SOURCE_PATCHES || !next.hole.iter().any(|&b| b) {
+            break;
+        }
+        levels.push(next);
+    }
+    (levels, radius)
+}
+
+/// Masks and lists of one level's completion problem.
+struct Problem {
+    w: usize,
+    h: usize,
+    r: usize,
+    /// Pixels synthesised on this level: the hole plus the non-source pixels near it.
+    domain_list: Vec<u32>,
+    /// Target patch centres: within `r` of the hole and with the patch inside the image.
+    target: Vec<bool>,
+    /// Number of targets.
+    n_targets: usize,
+    /// Valid source patch centres: the whole patch on source pixels.
+    valid: Vec<bool>,
+    /// The valid centres as a list (for global random candidates).
+    valid_list: Vec<u32>,
+}
+
+impl Problem {
+    fn new(level: &Level, r: usize) -> Problem {
+        let (w, h) = (level.w, level.h);
+        let near_hole = common::dilate(&level.hole, w, h, 2 * r);
+        let domain_list: Vec<u32> = (0..w * h)
+            .filter(|&i| level.hole[i] || (near_hole[i] && !level.source[i]))
+            .map(|i| i as u32)
+            .collect();
+        let mut target = common::dilate(&level.hole, w, h, r);
+        for y in 0..h {
+            for x in 0..w {
+                if x < r || y < r || x + r >= w || y + r >= h {
+                    target[y * w + x] = false;
+                }
+            }
+        }
+        let n_targets = common::count(&target);
+        let valid = common::erode_inside(&level.source, w, h, r);
+        let valid_list: Vec<u32> = (0..w * h)
+            .filter(|&i| valid[i])
+            .map(|i| i as u32)
+            .collect();
+        Problem {
+            w,
+            h,
+            r,
+            domain_list,
+            target,
+            n_targets,
+            valid,
+            valid_list,
+        }
+    }
+
+    /// Sum of squared differences between the patches centred at `t` and `s` (both with the
+    /// patch inside the image); stops early once the sum reaches `bound`.
+    #[inline]
+    fn ssd(&self, pixels: &[[f32; 4]], t: usize, s: usize, bound: f32) -> f32 {
+        let (w, r) = (self.w, self.r);
+        let side = 2 * r + 1;
+        let t0 = t - r * w - r;
+        let s0 = s - r * w - r;
+        let mut sum = 0.0f32;
+        for row in 0..side {
+            let a = &pixels[t0 + row * w..t0 + row * w + side];
+            let b = &pixels[s0 + row * w..s0 + row * w + side];
+            let mut acc = [0.0f32; 4];
+            for (pa, pb) in a.iter().zip(b) {
+                for c in 0..4 {
+                    let d = pa[c] - pb[c];
+                    acc[c] += d * d;
+                }
+            }
+            sum += (acc[0] + acc[1]) + (acc[2] + acc[3]);
+            if sum >= bound {
+                return sum;
+            }
+        }
+        sum
+    }
+
+    fn patch_pixels(&self) -> f32 {
+        let side = 2 * self.r + 1;
+        (side * side) as f32
+    }
+
+    /// A random valid source centre.
+    #[inline]
+    fn random_source(&self, rng: &mut KeyedRng) -> u32 {
+        self.valid_list[rng.below(self.valid_list.len())]
+    }
+}
+
+/// The nearest-neighbour field: for each target centre its source centre and distance.
+struct Field {
+    nnf: Vec<u32>,
+    dist: Vec<f32>,
+}
+
+/// Runs the whole coarse-to-fine completion; returns the finest level's pixels.
+fn complete(
+    finest: Level,
+    params: &PatchMatchParams,
+    seed: u64,
+    progress: &Progress,
+) -> Result<Vec<[f32; 4]>> {
+    progress.report(0.0, "inpainting: pyramid");
+    let (mut levels, r) = pyramid(finest, params);
+    let n_levels = levels.len();
+    let pm = params.pm_iterations.max(1);
+    let em_at = |l: usize| -> usize {
+        if n_levels <= 1 {
+            return params.em_iterations_coarse.max(params.em_iterations_fine);
+        }
+        let (c, f) = (
+            params.em_iterations_coarse as f32,
+            params.em_iterations_fine as f32,
+        );
+        (f + (c - f) * l as f32 / (n_levels - 1) as f32).round() as usize
+    };
+    // Work estimate per level, for progress: pixels × passes.
+    let work: Vec<f32> = (0..n_levels)
+        .map(|l| {
+            let px = (levels[l].w * levels[l].h) as f32;
+            px * (em_at(l) * (pm + 1) + 1) as f32
+        })
+        .collect();
+    let total: f32 = work.iter().sum::<f32>().max(1.0);
+    let mut done = 0.0f32;
+
+    let mut coarser: Option<(Level, Field)> = None;
+    for l in (0..n_levels).rev() {
+        let Some(mut level) = levels.pop() else {
+            break;
+        };
+        progress.check()?;
+        let problem = Problem::new(&level, r);
+        let level_progress = progress.sub(done / total, (done + work[l]) / total);
+        let stage = format!("inpainting: level {} of {n_levels}", n_levels - l);
+        let key = |pass: usize| (l as u64, pass as u64);
+        let mut field = match coarser.take() {
+            None => {
+                // Coarsest: membrane fill of everything that is not a source, random field.
+                let unknown: Vec<bool> = level.source.iter().map(|&s| !s).collect();
+                membrane_fill(&mut level.pixels, level.w, level.h, &unknown, progress)?;
+                let nnf: Vec<u32> = (0..level.w * level.h)
+                    .map(|i| {
+                        if problem.target[i] {
+                            let mut rng = KeyedRng::new(seed, l as u64, u64::MAX, i as u64);
+                            problem.random_source(&mut rng)
+                        } else {
+                            NONE
+                        }
+                    })
+                    .collect();
+                let dist = vec![f32::INFINITY; nnf.len()];
+                Field { nnf, dist }
+            }
+            Some((coarse, coarse_field)) => {
+                let field = upsample(&problem, &mut level, &coarse, &coarse_field, seed, l);
+                drop(coarse);
+                let mut field = field;
+                refresh_distances(&problem, &level.pixels, &mut field);
+                vote(&problem, &mut level.pixels, &field);
+                field
+            }
+        };
+        let iterations = em_at(l);
+        let passes_total = (iterations * (pm + 1)).max(1) as f32;
+        let mut passes_done = 0.0f32;
+        for em in 0..iterations {
+            refresh_distances(&problem, &level.pixels, &mut field);
+            for k in 0..pm {
+                let (a, b) = key(em * pm + k);
+                patchmatch_pass(&problem, &level.pixels, &mut field, seed, a, b, k % 2 == 0, progress);
+                progress.check()?;
+                passes_done += 1.0;
+                level_progress.report(passes_done / passes_total, &stage);
+            }
+            let change = vote(&problem, &mut level.pixels, &field);
+            passes_done += 1.0;
+            level_progress.report(passes_done / passes_total, &stage);
+            if change < CONVERGED_CHANGE {
+                break;
+            }
+        }
+        done += work[l];
+        coarser = Some((level, field));
+    }
+    progress.report(1.0, "inpainting");
+    match coarser {
+        Some((level, _)) => Ok(level.pixels),
+        None => Err(Error::invalid("inpainting produced no level")),
+    }
+}
+
+/// Initial field and pixels on a finer level from the coarser solution: the synthesised pixels
+/// start from the bilinearly enlarged coarse pixels; each target's source is twice its coarse
+/// parent's source plus its offset inside the parent (a random source where that is invalid).
+fn upsample(
+    problem: &Problem,
+    level: &mut Level,
+    coarse: &Level,
+    coarse_field: &Field,
+    seed: u64,
+    l: usize,
+) -> Field {
+    let (w, h) = (level.w, level.h);
+    let (cw, ch) = (coarse.w, coarse.h);
+    for &q in &problem.domain_list {
+        let q = q as usize;
+        let (x, y) = (q % w, q / w);
+        let fx = ((x as f32 + 0.5) * 0.5 - 0.5).clamp(0.0, (cw - 1) as f32);
+        let fy = ((y as f32 + 0.5) * 0.5 - 0.5).clamp(0.0, (ch - 1) as f32);
+        let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
+        let (x1, y1) = ((x0 + 1).min(cw - 1), (y0 + 1).min(ch - 1));
+        let (tx, ty) = (fx - x0 as f32, fy - y0 as f32);
+        let (a, b) = (coarse.pixels[y0 * cw + x0], coarse.pixels[y0 * cw + x1]);
+        let (c, d) = (coarse.pixels[y1 * cw + x0], coarse.pixels[y1 * cw + x1]);
+        let mut v = [0.0f32; 4];
+        for k in 0..4 {
+            let top = a[k] + (b[k] - a[k]) * tx;
+            let bottom = c[k] + (d[k] - c[k]) * tx;
+            v[k] = top + (bottom - top) * ty;
+        }
+        level.pixels[q] = v;
+    }
+    let r = problem.r;
+    let nnf: Vec<u32> = (0..w * h)
+        .into_par_iter()
+        .with_min_len(4096)
+        .map(|i| {
+            if !problem.target[i] {
+                return NONE;
+            }
+            let (x, y) = (i % w, i / w);
+            let parent = (y / 2).min(ch - 1) * cw + (x / 2).min(cw - 1);
+            let sc = coarse_field.nnf[parent];
+            if sc != NONE {
+                let (scx, scy) = (sc as usize % cw, sc as usize / cw);
+                let sx = (2 * scx + x % 2).clamp(r, w - 1 - r);
+                let sy = (2 * scy + y % 2).clamp(r, h - 1 - r);
+                let s = sy * w + sx;
+                if problem.valid[s] {
+                    return s as u32;
+                }
+            }
+            let mut rng = KeyedRng::new(seed, l as u64, u64::MAX, i as u64);
+            problem.random_source(&mut rng)
+        })
+        .collect();
+    let dist = vec![f32::INFINITY; nnf.len()];
+    Field { nnf, dist }
+}
+
+/// Recomputes every target's distance to its current source (the pixels changed).
+fn refresh_distances(problem: &Problem, pixels: &[[f32; 4]], field: &mut Field) {
+    let w = problem.w;
+    field
+        .dist
+        .par_chunks_mut(BAND_ROWS * w)
+        .zip(field.nnf.par_chunks(BAND_ROWS * w))
+        .enumerate()
+        .for_each(|(b, (dist, nnf))| {
+            let base = b * BAND_ROWS * w;
+            for (k, (d, &s)) in dist.iter_mut().zip(nnf).enumerate() {
+                if s != NONE {
+                    *d = problem.ssd(pixels, base + k, s as usize, f32::INFINITY);
+                }
+            }
+        });
+}
+
+/// One PatchMatch pass over every target: propagation in scan order (`forward`: from the left
+/// and upper neighbours, else from the right and lower ones) and random search.
+#[allow(clippy::too_many_arguments)]
+fn patchmatch_pass(
+    problem: &Problem,
+    pixels: &[[f32; 4]],
+    field: &mut Field,
+    seed: u64,
+    level_key: u64,
+    pass_key: u64,
+    forward: bool,
+    progress: &Progress,
+) {
+    let (w, h, r) = (problem.w, problem.h, problem.r);
+    let before_nnf = field.nnf.clone();
+    let n = w * h;
+    let max_radius = w.max(h);
+    let step: isize = if forward { -1 } else { 1 };
+    field
+        .nnf
+        .par_chunks_mut(BAND_ROWS * w)
+        .zip(field.dist.par_chunks_mut(BAND_ROWS * w))
+        .enumerate()
+        .for_each(|(b, (nnf, dist))| {
+            if progress.is_cancelled() {
+                return;
+            }
+            let y0 = b * BAND_ROWS;
+            let rows = nnf.len() / w;
+            let base = y0 * w;
+            for ry in 0..rows {
+                let y = if forward { y0 + ry } else { y0 + rows - 1 - ry };
+                for rx in 0..w {
+                    let x = if forward { rx } else { w - 1 - rx };
+                    let i = y * w + x;
+                    if !problem.target[i] {
+                        continue;
+                    }
+                    let li = i - base;
+                    let mut best = nnf[li] as usize;
+                    let mut best_d = dist[li];
+                    let mut consider = |cand: isize, best: &mut usize, best_d: &mut f32| {
+                        if cand < 0 || cand as usize >= n {
+                            return;
+                        }
+                        let cand = cand as usize;
+                        if cand == *best || !problem.valid[cand] {
+                            return;
+                        }
+                        let d = problem.ssd(pixels, i, cand, *best_d);
+                        if d < *best_d {
+                            *best_d = d;
+                            *best = cand;
+                        }
+                    };
+                    // Propagation from the horizontal neighbour (same row, same band).
+                    let nx = x as isize + step;
+                    if nx >= 0 && (nx as usize) < w {
+                        let j = (i as isize + step) as usize;
+                        if problem.target[j] {
+                            let sj = nnf[j - base];
+                            consider(sj as isize - step, &mut best, &mut best_d);
+                        }
+                    }
+                    // Propagation from the vertical neighbour (this band, else the field as it
+                    // was before the pass).
+                    let ny = y as isize + step;
+                    if ny >= 0 && (ny as usize) < h {
+                        let j = (i as isize + step * w as isize) as usize;
+                        if problem.target[j] {
+                            let sj = if j >= base && j < base + nnf.len() {
+                                nnf[j - base]
+                            } else {
+                                before_nnf[j]
+                            };
+                            consider(
+                                sj as isize - step * w as isize,
+                                &mut best,
+                                &mut best_d,
+                            );
+                        }
+                    }
+                    // Random search around the current best, at halving radii.
+                    let mut rng = KeyedRng::new(seed, level_key, pass_key, i as u64);
+                    let mut radius = max_radius;
+                    while radius >= 1 {
+                        let (sx, sy) = ((best % w) as isize, (best / w) as isize);
+                        let cx = (sx + rng.symmetric(radius)).clamp(r as isize, (w - 1 - r) as isize);
+                        let cy = (sy + rng.symmetric(radius)).clamp(r as isize, (h - 1 - r) as isize);
+                        consider(cy * w as isize + cx, &mut best, &mut best_d);
+                        radius /= 2;
+                    }
+                    // One candidate from anywhere in the source (helps sparse sources).
+                    let global = problem.random_source(&mut rng);
+                    consider(global as isize, &mut best, &mut best_d);
+                    nnf[li] = best as u32;
+                    dist[li] = best_d;
+                }
+            }
+        });
+}
+
+/// Re-synthesises the domain pixels by weighted voting; returns the mean absolute change.
+fn vote(problem: &Problem, pixels: &mut [[f32; 4]], field: &Field) -> f32 {
+    let (w, h, r) = (problem.w, problem.h, problem.r);
+    let npix = problem.patch_pixels();
+    let mean_dists: Vec<f32> = field
+        .dist
+        .iter()
+        .zip(&field.nnf)
+        .filter(|&(_, &s)| s != NONE)
+        .map(|(&d, _)| d / npix)
+        .collect();
+    let sigma2 = quantile(&mean_dists, 0.75).unwrap_or(0.0).max(1e-6);
+    let weights: Vec<f32> = field
+        .dist
+        .par_iter()
+        .with_min_len(4096)
+        .map(|&d| {
+            let d = if d.is_finite() { d / npix } else { 0.0 };
+            (-d / (2.0 * sigma2)).exp().max(1e-12)
+        })
+        .collect();
+    let nnf = &field.nnf;
+    let old: &[[f32; 4]] = pixels;
+    let new_values: Vec<[f32; 4]> = problem
+        .domain_list
+        .par_iter()
+        .with_min_len(256)
+        .map(|&q| {
+            let q = q as usize;
+            let (qx, qy) = ((q % w) as isize, (q / w) as isize);
+            let mut acc = [0.0f32; 4];
+            let mut wsum = 0.0f32;
+            let ri = r as isize;
+            for dy in -ri..=ri {
+                let py = qy - dy;
+                if py < 0 || py >= h as isize {
+                    continue;
+                }
+                for dx in -ri..=ri {
+                    let px = qx - dx;
+                    if px < 0 || px >= w as isize {
+                        continue;
+                    }
+                    let p = py as usize * w + px as usize;
+                    let s = nnf[p];
+                    if s == NONE {
+                        continue;
+                    }
+                    let src = (s as isize + dy * w as isize + dx) as usize;
+                    let wgt = weights[p];
+                    let v = old[src];
+                    for c in 0..4 {
+                        acc[c] += wgt * v[c];
+                    }
+                    wsum += wgt;
+                }
+            }
+            if wsum > 0.0 {
+                [acc[0] / wsum, acc[1] / wsum, acc[2] / wsum, acc[3] / wsum]
+            } else {
+                old[q]
+            }
+        })
+        .collect();
+    let mut change = 0.0f64;
+    for (&q, v) in problem.domain_list.iter().zip(&new_values) {
+        let p = &mut pixels[q as usize];
+        change += ((p[0] - v[0]).abs() + (p[1] - v[1]).abs() + (p[2] - v[2]).abs()) as f64;
+        *p = *v;
+    }
+    (change / (3 * problem.domain_list.len().max(1)) as f64) as f32
+}
