@@ -3,4 +3,5 @@
 
 pub mod depth;
 pub mod inpaint;
+pub mod outpaint;
 pub mod points;
