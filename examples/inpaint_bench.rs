@@ -5,10 +5,10 @@
 //! `METHODS` (comma list of harmonic,draft,preview,final).
 
 use makeit4d::progress::Progress;
+use makeit4d::stages::inpaint::InpaintPreset;
 use makeit4d::stages::inpaint::bench::{
     BenchMethod, BenchOptions, HoleKind, bench_inpaint, default_bench_photos, format_bench_table,
 };
-use makeit4d::stages::inpaint::InpaintPreset;
 use std::path::PathBuf;
 
 fn main() -> anyhow::Result<()> {
@@ -36,7 +36,10 @@ fn main() -> anyhow::Result<()> {
             .split(',')
             .filter_map(|s| match s.trim() {
                 "harmonic" => Some(BenchMethod::Harmonic),
-                other => other.parse::<InpaintPreset>().ok().map(BenchMethod::PatchMatch),
+                other => other
+                    .parse::<InpaintPreset>()
+                    .ok()
+                    .map(BenchMethod::PatchMatch),
             })
             .collect();
     }

@@ -5,16 +5,19 @@
 //! (default photos: the shared photos).
 
 use makeit4d::progress::Progress;
+use makeit4d::stages::inpaint::InpaintRequest;
 use makeit4d::stages::inpaint::bench::{
     BenchMethod, HoleKind, damage, default_bench_photos, make_hole,
 };
 use makeit4d::stages::inpaint::command::{read_rgb, write_rgb_png};
-use makeit4d::stages::inpaint::InpaintRequest;
 use std::path::PathBuf;
 
 fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);
-    let out = PathBuf::from(args.next().unwrap_or_else(|| "out/inpaint_gallery".to_string()));
+    let out = PathBuf::from(
+        args.next()
+            .unwrap_or_else(|| "out/inpaint_gallery".to_string()),
+    );
     let mut photos: Vec<PathBuf> = args.map(PathBuf::from).collect();
     if photos.is_empty() {
         photos = default_bench_photos();

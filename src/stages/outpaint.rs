@@ -269,7 +269,7 @@ pub fn footprint_from_views(
     }
     let step = options.ray_step_px.max(1);
     let border = border_pixels(ow, oh, step);
-    let mut include = |fp: &mut Footprint, u: f32, v: f32| {
+    let include = |fp: &mut Footprint, u: f32, v: f32| {
         let cu = u.clamp(limit[0], limit[2]);
         let cv = v.clamp(limit[1], limit[3]);
         fp.min_u = fp.min_u.min(cu);
@@ -525,7 +525,8 @@ mod tests {
             let pose = v.world_from_camera;
             for py in 0..H {
                 for px in 0..W {
-                    let d = pose.transform_vector(v.intrinsics.unproject(px as f32, py as f32, 1.0));
+                    let d =
+                        pose.transform_vector(v.intrinsics.unproject(px as f32, py as f32, 1.0));
                     let o = pose.translation;
                     let planes = [depth.near, 0.5 * (depth.near + depth.far), depth.far];
                     let mut points: Vec<Vec3> = planes
@@ -581,7 +582,10 @@ mod tests {
         // The pan to the right needs more room on the right than on the left.
         assert!(layout.right_pad(W) > layout.left_pad, "{layout:?}");
         let (hits, outside) = coverage(&layout, &views, depth);
-        assert!(hits > 10_000 && outside == 0, "{hits} hits, {outside} outside {layout:?}");
+        assert!(
+            hits > 10_000 && outside == 0,
+            "{hits} hits, {outside} outside {layout:?}"
+        );
         // Without the margin the canvas still covers; a few pixels less on any side does not.
         let tight = canvas_from_views(
             (W, H),
@@ -617,7 +621,10 @@ mod tests {
             },
         ];
         for s in shrunk {
-            assert!(coverage(&s, &views, depth).1 > 0, "{s:?} should miss some rays");
+            assert!(
+                coverage(&s, &views, depth).1 > 0,
+                "{s:?} should miss some rays"
+            );
         }
         // The margin: every padded side has at least margin_px beyond the footprint.
         assert!((layout.left_pad as f32) >= -fp.min_u + options.margin_px as f32 - 1.0);
@@ -625,7 +632,10 @@ mod tests {
 
     #[test]
     fn looking_backwards_clamps_to_the_largest_canvas() {
-        let views = [view(Quat::from_rotation_y(std::f32::consts::PI), Vec3::ZERO)];
+        let views = [view(
+            Quat::from_rotation_y(std::f32::consts::PI),
+            Vec3::ZERO,
+        )];
         let depth = DepthRange::new(1.0, 10.0).unwrap();
         let options = CanvasOptions {
             max_factor: 1.5,
@@ -656,7 +666,13 @@ mod tests {
         assert!(DepthRange::new(2.0, 1.0).is_err());
         assert!(DepthRange::new(1.0, f32::INFINITY).is_err());
         let d = GrayRaster::from_vec(2, 2, vec![f32::NAN, 2.0, 4.0, -1.0]).unwrap();
-        assert_eq!(DepthRange::from_depth(&d).unwrap(), DepthRange { near: 2.0, far: 4.0 });
+        assert_eq!(
+            DepthRange::from_depth(&d).unwrap(),
+            DepthRange {
+                near: 2.0,
+                far: 4.0
+            }
+        );
         assert!(DepthRange::from_depth(&GrayRaster::new(2, 2, f32::NAN)).is_err());
         assert!(CanvasLayout::fixed((10, 10), 0.5, Placement::Centre).is_err());
     }
@@ -674,7 +690,10 @@ mod tests {
             }
         );
         let c = CanvasLayout::fixed((100, 60), 1.5, Placement::Centre).unwrap();
-        assert_eq!((c.left_pad, c.top_pad, c.width, c.height), (25, 15, 150, 90));
+        assert_eq!(
+            (c.left_pad, c.top_pad, c.width, c.height),
+            (25, 15, 150, 90)
+        );
         assert_eq!((c.right_pad(100), c.bottom_pad(60)), (25, 15));
         let k = Intrinsics::from_hfov(100, 60, 60.0);
         let kc = c.intrinsics(&k);
@@ -688,7 +707,10 @@ mod tests {
         let (canvas, mask) =
             outpaint(&img, &layout, &HarmonicInpainter, 1, &Progress::none()).unwrap();
         assert_eq!(canvas.size(), (30, 18));
-        assert_eq!(mask.data().iter().filter(|&&b| b).count(), 30 * 18 - 20 * 12);
+        assert_eq!(
+            mask.data().iter().filter(|&&b| b).count(),
+            30 * 18 - 20 * 12
+        );
         for y in 0..12 {
             for x in 0..20 {
                 assert_eq!(canvas.at(x + 5, y + 6), img.at(x, y));

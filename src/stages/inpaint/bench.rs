@@ -89,13 +89,13 @@ pub fn make_hole(kind: HoleKind, width: usize, height: usize, seed: u64) -> Mask
                     continue;
                 }
                 placed.push((cx, cy, radius));
-                let phases: [f32; 3] = [
-                    rng.unit() * 6.3,
-                    rng.unit() * 6.3,
-                    rng.unit() * 6.3,
-                ];
-                for y in (cy - radius).floor().max(0.0) as usize..((cy + radius).ceil() as usize).min(height) {
-                    for x in (cx - radius).floor().max(0.0) as usize..((cx + radius).ceil() as usize).min(width) {
+                let phases: [f32; 3] = [rng.unit() * 6.3, rng.unit() * 6.3, rng.unit() * 6.3];
+                for y in (cy - radius).floor().max(0.0) as usize
+                    ..((cy + radius).ceil() as usize).min(height)
+                {
+                    for x in (cx - radius).floor().max(0.0) as usize
+                        ..((cx + radius).ceil() as usize).min(width)
+                    {
                         let (dx, dy) = (x as f32 - cx, y as f32 - cy);
                         let theta = dy.atan2(dx);
                         let wobble = 0.8
@@ -270,7 +270,9 @@ pub fn bench_inpaint(
     progress: &Progress,
 ) -> Result<Vec<BenchRow>> {
     if photo_paths.is_empty() {
-        return Err(Error::invalid("the inpainting benchmark needs at least one photo"));
+        return Err(Error::invalid(
+            "the inpainting benchmark needs at least one photo",
+        ));
     }
     let repeats = options.repeats.max(1);
     let jobs = photo_paths.len() * options.holes.len() * options.methods.len();
@@ -344,7 +346,10 @@ pub fn damage(photo: &RgbRaster, hole: &MaskRaster) -> RgbRaster {
 /// and method (with the gain in PSNR over the harmonic baseline).
 pub fn format_bench_table(rows: &[BenchRow]) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "| photo | size | hole | hole % | method | PSNR dB | SSIM | seconds |");
+    let _ = writeln!(
+        s,
+        "| photo | size | hole | hole % | method | PSNR dB | SSIM | seconds |"
+    );
     let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
     for r in rows {
         let _ = writeln!(
@@ -444,7 +449,10 @@ mod tests {
             repeats: 1,
             seed: 3,
             holes: vec![HoleKind::Strokes],
-            methods: vec![BenchMethod::Harmonic, BenchMethod::PatchMatch(InpaintPreset::Draft)],
+            methods: vec![
+                BenchMethod::Harmonic,
+                BenchMethod::PatchMatch(InpaintPreset::Draft),
+            ],
         };
         let rows = bench_inpaint(&[path], &options, &Progress::none()).unwrap();
         assert_eq!(rows.len(), 2);

@@ -121,13 +121,17 @@ mod tests {
     fn mask_of_wrong_size_names_the_file() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("mask.png");
-        let img = image::GrayImage::from_fn(10, 6, |x, _| image::Luma([if x > 4 { 255 } else { 0 }]));
+        let img =
+            image::GrayImage::from_fn(10, 6, |x, _| image::Luma([if x > 4 { 255 } else { 0 }]));
         img.save(&path).unwrap();
         let ok = read_hole_mask(&path, (10, 6)).unwrap();
         assert!(ok.at(5, 0) && !ok.at(4, 0));
         let err = read_hole_mask(&path, (12, 6)).unwrap_err();
         let text = format!("{err:#}");
-        assert!(text.contains("mask.png") && text.contains("10×6") && text.contains("12×6"), "{text}");
+        assert!(
+            text.contains("mask.png") && text.contains("10×6") && text.contains("12×6"),
+            "{text}"
+        );
         let missing = read_hole_mask(&dir.path().join("nope.png"), (10, 6)).unwrap_err();
         assert!(format!("{missing:#}").contains("nope.png"));
     }
@@ -142,20 +146,30 @@ mod tests {
         assert_eq!(back.size(), (24, 16));
         assert!((back.at(23, 0)[0] - 1.0).abs() < 1e-6);
         let hole = MaskRaster::from_fn(24, 16, |x, y| (10..14).contains(&x) && (6..9).contains(&y));
-        let out = inpaint_command(&back, &hole, InpaintPreset::Draft, 1, &Progress::none()).unwrap();
-        for (i, (&m, (a, b))) in hole.data().iter().zip(out.data().iter().zip(back.data())).enumerate() {
+        let out =
+            inpaint_command(&back, &hole, InpaintPreset::Draft, 1, &Progress::none()).unwrap();
+        for (i, (&m, (a, b))) in hole
+            .data()
+            .iter()
+            .zip(out.data().iter().zip(back.data()))
+            .enumerate()
+        {
             if !m {
                 assert_eq!(a, b, "pixel {i} outside the hole changed");
             }
         }
         let empty = MaskRaster::new(24, 16, false);
-        let same = inpaint_command(&back, &empty, InpaintPreset::Final, 1, &Progress::none()).unwrap();
+        let same =
+            inpaint_command(&back, &empty, InpaintPreset::Final, 1, &Progress::none()).unwrap();
         assert_eq!(same, back);
         let full = MaskRaster::new(24, 16, true);
-        let err = inpaint_command(&back, &full, InpaintPreset::Draft, 1, &Progress::none()).unwrap_err();
+        let err =
+            inpaint_command(&back, &full, InpaintPreset::Draft, 1, &Progress::none()).unwrap_err();
         assert!(format!("{err}").contains("nothing to copy from"));
         let wrong = MaskRaster::new(23, 16, false);
-        assert!(inpaint_command(&back, &wrong, InpaintPreset::Draft, 1, &Progress::none()).is_err());
+        assert!(
+            inpaint_command(&back, &wrong, InpaintPreset::Draft, 1, &Progress::none()).is_err()
+        );
         assert!(format_inpaint_summary(&hole, InpaintPreset::Draft, 0.5).contains("12 pixels"));
     }
 }

@@ -4,7 +4,7 @@
 
 use super::{InpaintRequest, InpaintResult};
 use crate::error::{Error, Result};
-use crate::raster::{GrayRaster, MaskRaster, RgbRaster, quantile};
+use crate::raster::{GrayRaster, RgbRaster, quantile};
 
 /// What a validated request asks for.
 pub(crate) enum Plan {
@@ -149,9 +149,9 @@ pub(crate) fn work_pixels(
 
 /// Writes the working pixels back into the hole only: everything outside the hole stays the
 /// caller's, bit for bit. Colours are clamped to `[0, 1]`.
-pub(crate) fn finish(
+pub(crate) fn finish<const N: usize>(
     request: &InpaintRequest<'_>,
-    pixels: &[[f32; 4]],
+    pixels: &[[f32; N]],
     scale: Option<GuideScale>,
 ) -> InpaintResult {
     let mut image = request.image.clone();
@@ -227,7 +227,10 @@ impl KeyedRng {
 /// Chebyshev (chessboard) distance from every pixel to the nearest pixel where `inside` is
 /// false, in pixels (0 outside); pixels beyond the border count as outside. Two-pass chamfer.
 pub(crate) fn chessboard_depth(inside: &[bool], w: usize, h: usize) -> Vec<u32> {
-    let mut d: Vec<u32> = inside.iter().map(|&b| if b { u32::MAX } else { 0 }).collect();
+    let mut d: Vec<u32> = inside
+        .iter()
+        .map(|&b| if b { u32::MAX } else { 0 })
+        .collect();
     let at = |d: &Vec<u32>, x: isize, y: isize| -> u32 {
         if x < 0 || y < 0 || x >= w as isize || y >= h as isize {
             0
@@ -323,11 +326,6 @@ fn box_any(mask: &[bool], w: usize, h: usize, radius: usize) -> Vec<bool> {
 /// Number of true pixels.
 pub(crate) fn count(mask: &[bool]) -> usize {
     mask.iter().filter(|&&b| b).count()
-}
-
-/// A [`MaskRaster`] from a row-major vector (sizes known to match).
-pub(crate) fn mask_raster(w: usize, h: usize, data: Vec<bool>) -> MaskRaster {
-    MaskRaster::from_vec(w, h, data).unwrap_or_else(|| MaskRaster::new(w, h, false))
 }
 
 #[cfg(test)]

@@ -46,8 +46,8 @@ impl Inpainter for HarmonicInpainter {
 
 /// Replaces every `unknown` pixel of `pixels` (`w × h`, row-major) by the harmonic interpolant
 /// of the known ones. Needs at least one known pixel (otherwise leaves the values as they are).
-pub(crate) fn membrane_fill(
-    pixels: &mut [[f32; 4]],
+pub(crate) fn membrane_fill<const N: usize>(
+    pixels: &mut [[f32; N]],
     w: usize,
     h: usize,
     unknown: &[bool],
@@ -59,8 +59,8 @@ pub(crate) fn membrane_fill(
     solve_level(pixels, w, h, unknown, progress)
 }
 
-fn solve_level(
-    pixels: &mut [[f32; 4]],
+fn solve_level<const N: usize>(
+    pixels: &mut [[f32; N]],
     w: usize,
     h: usize,
     unknown: &[bool],
@@ -74,23 +74,18 @@ fn solve_level(
     let coarsest = n_unknown <= COARSEST_UNKNOWNS || w < 4 || h < 4;
     if coarsest {
         // Start from the mean of the known pixels.
-        let mut sum = [0.0f64; 4];
+        let mut sum = [0.0f64; N];
         let mut n = 0usize;
         for (p, &u) in pixels.iter().zip(unknown) {
             if !u {
-                for c in 0..4 {
+                for c in 0..N {
                     sum[c] += p[c] as f64;
                 }
                 n += 1;
             }
         }
         let n = n.max(1) as f64;
-        let mean = [
-            (sum[0] / n) as f32,
-            (sum[1] / n) as f32,
-            (sum[2] / n) as f32,
-            (sum[3] / n) as f32,
-        ];
+        let mean: [f32; N] = std::array::from_fn(|c| (sum[c] / n) as f32);
         for (p, &u) in pixels.iter_mut().zip(unknown) {
             if u {
                 *p = mean;
@@ -99,17 +94,17 @@ fn solve_level(
     } else {
         // Restrict: a coarse pixel is known when any of its children is (mean of those).
         let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
-        let mut coarse = vec![[0.0f32; 4]; cw * ch];
+        let mut coarse = vec![[0.0f32; N]; cw * ch];
         let mut coarse_unknown = vec![true; cw * ch];
         for cy in 0..ch {
             for cx in 0..cw {
-                let mut sum = [0.0f32; 4];
+                let mut sum = [0.0f32; N];
                 let mut n = 0.0f32;
                 for y in 2 * cy..(2 * cy + 2).min(h) {
                     for x in 2 * cx..(2 * cx + 2).min(w) {
                         let i = y * w + x;
                         if !unknown[i] {
-                            for c in 0..4 {
+                            for c in 0..N {
                                 sum[c] += pixels[i][c];
                             }
                             n += 1.0;
@@ -118,7 +113,7 @@ fn solve_level(
                 }
                 if n > 0.0 {
                     let ci = cy * cw + cx;
-                    coarse[ci] = [sum[0] / n, sum[1] / n, sum[2] / n, sum[3] / n];
+                    coarse[ci] = sum.map(|v| v / n);
                     coarse_unknown[ci] = false;
                 }
             }
@@ -141,8 +136,8 @@ fn solve_level(
                 let tx = fx - x0 as f32;
                 let (a, b) = (coarse[y0 * cw + x0], coarse[y0 * cw + x1]);
                 let (c, d) = (coarse[y1 * cw + x0], coarse[y1 * cw + x1]);
-                let mut v = [0.0f32; 4];
-                for k in 0..4 {
+                let mut v = [0.0f32; N];
+                for k in 0..N {
                     let top = a[k] + (b[k] - a[k]) * tx;
                     let bottom = c[k] + (d[k] - c[k]) * tx;
                     v[k] = top + (bottom - top) * ty;
@@ -160,8 +155,8 @@ fn solve_level(
 }
 
 /// Red-black successive over-relaxation of the 5-point Laplacian on the unknown pixels.
-fn sor(
-    pixels: &mut [[f32; 4]],
+fn sor<const N: usize>(
+    pixels: &mut [[f32; N]],
     w: usize,
     h: usize,
     unknown: &[bool],
@@ -207,16 +202,16 @@ fn sor(
                 if n == 0 {
                     continue;
                 }
-                let mut s = [0.0f32; 4];
+                let mut s = [0.0f32; N];
                 for &j in &nb[..n as usize] {
                     let p = pixels[j as usize];
-                    for c in 0..4 {
+                    for c in 0..N {
                         s[c] += p[c];
                     }
                 }
                 let inv = 1.0 / n as f32;
                 let p = &mut pixels[i as usize];
-                for c in 0..4 {
+                for c in 0..N {
                     p[c] += OMEGA * (s[c] * inv - p[c]);
                 }
             }
@@ -252,7 +247,9 @@ mod tests {
             guide: Some(&guide),
             seed: 0,
         };
-        let out = HarmonicInpainter.inpaint(&request, &Progress::none()).unwrap();
+        let out = HarmonicInpainter
+            .inpaint(&request, &Progress::none())
+            .unwrap();
         for (a, b) in out.image.data().iter().zip(ramp.data()) {
             for c in 0..3 {
                 assert!((a[c] - b[c]).abs() < 2e-3, "{a:?} vs {b:?}");
@@ -277,7 +274,9 @@ mod tests {
             guide: None,
             seed: 0,
         };
-        let out = HarmonicInpainter.inpaint(&request, &Progress::none()).unwrap();
+        let out = HarmonicInpainter
+            .inpaint(&request, &Progress::none())
+            .unwrap();
         for p in out.image.data() {
             assert!((p[0] - 0.25).abs() < 1e-4 && (p[2] - 0.75).abs() < 1e-4);
         }
@@ -305,7 +304,9 @@ mod tests {
             guide: None,
             seed: 0,
         };
-        let out = HarmonicInpainter.inpaint(&request, &Progress::none()).unwrap();
+        let out = HarmonicInpainter
+            .inpaint(&request, &Progress::none())
+            .unwrap();
         for y in 0..h {
             for x in 0..w {
                 let p = out.image.at(x, y);
