@@ -360,8 +360,8 @@ impl Level {
                         } else {
                             continue;
                         };
-                        for c in 0..CH {
-                            sums[kind][c] += self.pixels[i][c];
+                        for (sum, v) in sums[kind].iter_mut().zip(self.pixels[i]) {
+                            *sum += v;
                         }
                         counts[kind] += 1.0;
                     }
@@ -977,8 +977,8 @@ fn poisson_correct(
     membrane_fill(&mut correction, w, h, &unknown, progress)?;
     for &q in &problem.domain_list {
         let q = q as usize;
-        for c in 0..CH {
-            level.pixels[q][c] += correction[q][c];
+        for (v, dv) in level.pixels[q].iter_mut().zip(correction[q]) {
+            *v += dv;
         }
     }
     Ok(())
@@ -1014,7 +1014,7 @@ mod tests {
 
     fn checker(w: usize, h: usize, period: usize) -> RgbRaster {
         RgbRaster::from_fn(w, h, |x, y| {
-            let a = (x / period + y / period) % 2 == 0;
+            let a = (x / period + y / period).is_multiple_of(2);
             let t = (x % period) as f32 / period as f32;
             if a {
                 [0.9, 0.2 + 0.5 * t, 0.1]
