@@ -1,6 +1,17 @@
 //! Image completion: the [`Inpainter`] trait and its implementations.
 
 pub mod onnx;
+pub mod bench;
+pub mod command;
+mod common;
+pub mod harmonic;
+mod metrics;
+pub mod patchmatch;
+
+pub use bench::{BenchOptions, BenchRow, bench_inpaint, format_bench_table};
+pub use command::{inpaint_command, read_hole_mask};
+pub use harmonic::HarmonicInpainter;
+pub use patchmatch::{InpaintPreset, PatchMatchInpainter, PatchMatchParams};
 
 use crate::error::Result;
 use crate::progress::Progress;
