@@ -11,7 +11,7 @@ use makeit4d::path::{CameraPath, Preset, PresetKind};
 use makeit4d::progress::Progress;
 use makeit4d::project::Project;
 use makeit4d::render::cpu::CpuRenderer;
-use makeit4d::scene::build_scene;
+use makeit4d::scene::SceneBuilder;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -170,6 +170,58 @@ struct RenderArgs {
     /// Video quality as a constant rate factor (lower is better; default 18 for mp4, 30 for webm).
     #[arg(long)]
     crf: Option<u8>,
+    /// Depth layers: a count (1–16), `auto` (as many as the depth has), or `off` (one layer).
+    #[arg(long, value_parser = parse_layers)]
+    layers: Option<LayersArg>,
+    /// Do not inpaint what each layer hides (the paper's ablation).
+    #[arg(long)]
+    no_layer_inpaint: bool,
+    /// Keep the completed depth of inpainted pixels instead of re-estimating each layer's depth.
+    #[arg(long)]
+    no_layer_depth: bool,
+    /// Do not outpaint: the canvas is the photo.
+    #[arg(long)]
+    no_outpaint: bool,
+    /// Inpainting quality: draft, preview or final.
+    #[arg(long)]
+    inpaint_preset: Option<String>,
+    /// Seed for inpainting.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// An ONNX depth model manifest (falls back to the classical estimator, with a warning).
+    #[arg(long)]
+    depth_model: Option<PathBuf>,
+    /// A LaMa-style ONNX inpainting model manifest (falls back to PatchMatch, with a warning).
+    #[arg(long)]
+    inpaint_model: Option<PathBuf>,
+    /// Motion: `auto` applies the automatic sky/water suggestion; `off` removes the project's.
+    #[arg(long, value_enum)]
+    motion: Option<MotionArg>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum LayersArg {
+    Count(usize),
+    Auto,
+    Off,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum MotionArg {
+    Auto,
+    Off,
+}
+
+/// Parses `--layers`.
+fn parse_layers(s: &str) -> Result<LayersArg, String> {
+    match s.trim() {
+        "auto" => Ok(LayersArg::Auto),
+        "off" => Ok(LayersArg::Off),
+        n => match n.parse::<usize>() {
+            Ok(n) if (1..=16).contains(&n) => Ok(LayersArg::Count(n)),
+            _ => Err(format!("layers must be 1..=16, auto or off, got '{s}'")),
+        },
+    }
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -392,6 +444,7 @@ fn render_one(
         let kind: PresetKind = name.parse()?;
         project.camera.path = CameraPath::Preset(Preset::new(kind));
     }
+    apply_scene_flags(args, &mut project)?;
     project.validate()?;
     let options = ExportOptions {
         pattern: FramePattern::parse(&args.pattern)?,
@@ -415,7 +468,18 @@ fn render_one(
     };
     // Decode and validate everything before anything is written.
     let (bar, progress) = progress_bar(cancel);
-    let scene = build_scene(&project, &progress.sub(0.0, 0.1))?;
+    let mut builder = SceneBuilder::new();
+    let mut scene = builder.build(&project, &progress.sub(0.0, 0.1))?;
+    if args.motion == Some(MotionArg::Auto) {
+        // The suggestion lives in canvas pixels, so it is made on the built canvas; the second
+        // build re-uses every cached stage and runs only motion.
+        project.motion = makeit4d::stages::motion::suggest_motion(
+            &scene.canvas.image,
+            Some(&scene.canvas.sky),
+            None,
+        )?;
+        scene = builder.build(&project, &progress.sub(0.0, 0.1))?;
+    }
     for w in &scene.warnings {
         bar.suspend(|| eprintln!("warning: {w}"));
     }
@@ -544,6 +608,56 @@ fn doctor(args: DoctorArgs) -> anyhow::Result<()> {
             "ffmpeg: not found ({}): video export is off; PNG sequences still work",
             ffmpeg.display()
         ),
+    }
+    Ok(())
+}
+
+/// Applies the scene flags of `render` to `project`.
+fn apply_scene_flags(args: &RenderArgs, project: &mut Project) -> anyhow::Result<()> {
+    use makeit4d::stages::depth::DepthMethod;
+    use makeit4d::stages::inpaint::InpaintPreset;
+    use makeit4d::stages::layers::LayerCount;
+    match args.layers {
+        Some(LayersArg::Off) => project.layers.enabled = false,
+        Some(LayersArg::Auto) => {
+            project.layers.enabled = true;
+            project.layers.params.mode = LayerCount::default();
+        }
+        Some(LayersArg::Count(n)) => {
+            project.layers.enabled = true;
+            project.layers.params.mode = LayerCount::Count(n);
+        }
+        None => {}
+    }
+    if args.no_layer_inpaint {
+        project.layers.inpaint = false;
+    }
+    if args.no_layer_depth {
+        project.layers.layer_depth = false;
+    }
+    if args.no_outpaint {
+        project.canvas.enabled = false;
+    }
+    if let Some(p) = &args.inpaint_preset {
+        project.inpaint.preset = match p.as_str() {
+            "draft" => InpaintPreset::Draft,
+            "preview" => InpaintPreset::Preview,
+            "final" => InpaintPreset::Final,
+            other => bail!("inpaint preset must be draft, preview or final, got '{other}'"),
+        };
+    }
+    if let Some(seed) = args.seed {
+        project.inpaint.seed = seed;
+    }
+    if let Some(m) = &args.depth_model {
+        project.depth.method = DepthMethod::Onnx;
+        project.depth.model = Some(m.clone());
+    }
+    if let Some(m) = &args.inpaint_model {
+        project.inpaint.model = Some(m.clone());
+    }
+    if args.motion == Some(MotionArg::Off) {
+        project.motion = Default::default();
     }
     Ok(())
 }

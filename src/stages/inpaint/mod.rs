@@ -1,11 +1,11 @@
 //! Image completion: the [`Inpainter`] trait and its implementations.
 
-pub mod onnx;
 pub mod bench;
 pub mod command;
 mod common;
 pub mod harmonic;
 mod metrics;
+pub mod onnx;
 pub mod patchmatch;
 
 pub use bench::{BenchOptions, BenchRow, bench_inpaint, format_bench_table};
@@ -49,4 +49,17 @@ pub trait Inpainter: Send + Sync {
 
     /// Fills `request.hole`. Deterministic for a given seed.
     fn inpaint(&self, request: &InpaintRequest<'_>, progress: &Progress) -> Result<InpaintResult>;
+}
+
+/// The project's inpainting settings (canvas and layers share one inpainter).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct InpaintSettings {
+    /// PatchMatch quality preset.
+    pub preset: InpaintPreset,
+    /// Seed for every random choice.
+    pub seed: u64,
+    /// A LaMa-style ONNX inpainting model manifest; relative to the project file. Falls back to
+    /// PatchMatch, with a warning, when it cannot run.
+    pub model: Option<std::path::PathBuf>,
 }
