@@ -36,7 +36,7 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Render a photo (or a project) to a folder of PNG frames.
-    Render(RenderArgs),
+    Render(Box<RenderArgs>),
     /// Estimate the depth of a photo on its own (16-bit disparity PNG + JSON sidecar).
     Depth(DepthArgs),
     /// Score stages against ground truth.
@@ -308,7 +308,7 @@ fn main() -> ExitCode {
         });
     }
     let result = match cli.command {
-        Command::Render(args) => render(args, cancel),
+        Command::Render(args) => render(*args, cancel),
         Command::Depth(args) => depth(args, cancel),
         Command::Eval(EvalCommand::Depth(args)) => eval_depth(args, cancel),
         Command::Bench(BenchCommand::Depth(args)) => bench_depth(args),
