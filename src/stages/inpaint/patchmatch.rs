@@ -57,6 +57,9 @@ const KEEP_SOURCE_FRACTION: f32 = 0.5;
 /// An EM loop on a level stops early when the mean absolute change of the synthesised pixels
 /// falls below this.
 const CONVERGED_CHANGE: f32 = 2e-4;
+/// On levels finer than the coarsest the random search starts at this fraction of the level's
+/// larger side.
+const FINE_SEARCH_DIVISOR: usize = 8;
 /// Default weight of the texture features.
 const TEXTURE_WEIGHT: f32 = 3.0;
 /// Wexler's spatial weight base γ: a patch one pixel deeper in the hole weighs 1/γ as much.
@@ -104,6 +107,7 @@ impl InpaintPreset {
                 guide_weight: 1.0,
                 seamless: true,
                 texture_weight: TEXTURE_WEIGHT,
+                onion_peel: true,
             },
             InpaintPreset::Preview => PatchMatchParams {
                 patch_size: 7,
@@ -114,6 +118,7 @@ impl InpaintPreset {
                 guide_weight: 1.0,
                 seamless: true,
                 texture_weight: TEXTURE_WEIGHT,
+                onion_peel: true,
             },
             InpaintPreset::Final => PatchMatchParams {
                 patch_size: 7,
@@ -124,6 +129,7 @@ impl InpaintPreset {
                 guide_weight: 1.0,
                 seamless: true,
                 texture_weight: TEXTURE_WEIGHT,
+                onion_peel: true,
             },
         }
     }
@@ -176,6 +182,9 @@ pub struct PatchMatchParams {
     /// Weight of the texture features (local mean luma gradients) in the patch distance;
     /// 0 = colour and guide only.
     pub texture_weight: f32,
+    /// Start the coarsest level by onion peeling (fill from the border inwards, each pixel
+    /// copied from its best match on the known part of its patch) instead of the membrane.
+    pub onion_peel: bool,
 }
 
 impl Default for PatchMatchParams {
@@ -439,10 +448,13 @@ struct Problem {
     valid: Vec<bool>,
     /// The valid centres as a list (for global random candidates).
     valid_list: Vec<u32>,
+    /// Largest random-search radius: the whole level on the coarsest, a fraction of it on
+    /// finer levels (whose field comes from the coarser search already).
+    search_radius: usize,
 }
 
 impl Problem {
-    fn new(level: &Level, r: usize) -> Problem {
+    fn new(level: &Level, r: usize, coarsest: bool) -> Problem {
         let (w, h) = (level.w, level.h);
         let near_hole = common::dilate(&level.hole, w, h, 2 * r);
         let domain_list: Vec<u32> = (0..w * h)
@@ -464,10 +476,16 @@ impl Problem {
             .collect();
         let valid = common::erode_inside(&level.source, w, h, r);
         let valid_list: Vec<u32> = (0..w * h).filter(|&i| valid[i]).map(|i| i as u32).collect();
+        let search_radius = if coarsest {
+            w.max(h)
+        } else {
+            (w.max(h) / FINE_SEARCH_DIVISOR).max(4 * r).max(1)
+        };
         Problem {
             w,
             h,
             r,
+            search_radius,
             domain_list,
             target,
             confidence,
@@ -510,6 +528,33 @@ impl Problem {
         sum
     }
 
+    /// Like [`Problem::ssd`] but over the pixels of the target patch that are `known` only.
+    #[inline]
+    fn masked_ssd(&self, pixels: &[Px], known: &[bool], t: usize, s: usize, bound: f32) -> f32 {
+        let (w, r) = (self.w, self.r);
+        let side = 2 * r + 1;
+        let t0 = t - r * w - r;
+        let s0 = s - r * w - r;
+        let mut sum = 0.0f32;
+        for row in 0..side {
+            for col in 0..side {
+                let (ti, si) = (t0 + row * w + col, s0 + row * w + col);
+                if !known[ti] {
+                    continue;
+                }
+                let (a, b) = (&pixels[ti], &pixels[si]);
+                for c in 0..CH {
+                    let d = a[c] - b[c];
+                    sum += d * d;
+                }
+            }
+            if sum >= bound {
+                return sum;
+            }
+        }
+        sum
+    }
+
     fn patch_pixels(&self) -> f32 {
         let side = 2 * self.r + 1;
         (side * side) as f32
@@ -541,7 +586,7 @@ fn complete(
     let pm = params.pm_iterations.max(1);
     let em_at = |l: usize| -> usize {
         if n_levels <= 1 {
-            return params.em_iterations_coarse.max(params.em_iterations_fine);
+            return params.em_iterations_fine.max(2);
         }
         let (c, f) = (
             params.em_iterations_coarse as f32,
@@ -565,23 +610,32 @@ fn complete(
             break;
         };
         progress.check()?;
-        let problem = Problem::new(&level, r);
+        let problem = Problem::new(&level, r, coarser.is_none());
         let level_progress = progress.sub(done / total, (done + work[l]) / total);
         let stage = format!("inpainting: level {} of {n_levels}", n_levels - l);
         let key = |pass: usize| (l as u64, pass as u64);
         let mut field = match coarser.take() {
             None => {
-                // Coarsest: membrane fill of everything that is not a source, random field.
+                // Coarsest: membrane fill of everything that is not a source (the fallback),
+                // then onion peeling of the domain; the field starts from the peeled matches.
                 let unknown: Vec<bool> = level.source.iter().map(|&s| !s).collect();
                 membrane_fill(&mut level.pixels, level.w, level.h, &unknown, progress)?;
+                let peeled = if params.onion_peel {
+                    onion_peel(&problem, &mut level, seed, l as u64, progress)?
+                } else {
+                    vec![NONE; level.w * level.h]
+                };
                 let nnf: Vec<u32> = (0..level.w * level.h)
                     .map(|i| {
-                        if problem.target[i] {
-                            let mut rng = KeyedRng::new(seed, l as u64, u64::MAX, i as u64);
-                            problem.random_source(&mut rng)
-                        } else {
-                            NONE
+                        if !problem.target[i] {
+                            return NONE;
                         }
+                        let m = peeled[i];
+                        if m != NONE && problem.valid[m as usize] {
+                            return m;
+                        }
+                        let mut rng = KeyedRng::new(seed, l as u64, u64::MAX, i as u64);
+                        problem.random_source(&mut rng)
                     })
                     .collect();
                 let dist = vec![f32::INFINITY; nnf.len()];
@@ -635,6 +689,141 @@ fn complete(
         Some((level, _)) => Ok(level.pixels),
         None => Err(Error::invalid("inpainting produced no level")),
     }
+}
+
+/// Onion-peel initialisation of the coarsest level (Newson et al. 2017): the domain is filled
+/// ring by ring from its border inwards. Each ring pixel looks for the source patch closest to
+/// its own patch over the pixels already known (sources and earlier rings; propagation from
+/// filled neighbours, random sources, random search), and copies the pixel that match puts
+/// there. Returns, per pixel, the source patch centre its match suggests for a patch centred
+/// there (`NONE` where it was not peeled).
+fn onion_peel(
+    problem: &Problem,
+    level: &mut Level,
+    seed: u64,
+    level_key: u64,
+    progress: &Progress,
+) -> Result<Vec<u32>> {
+    const RANDOM_SOURCES: usize = 24;
+    let (w, h, r) = (problem.w, problem.h, problem.r);
+    let n = w * h;
+    let mut known = level.source.clone();
+    // Source pixel copied onto each peeled pixel.
+    let mut copied = vec![NONE; n];
+    let mut remaining: Vec<u32> = problem.domain_list.clone();
+    let max_radius = w.max(h);
+    let mut ring_index = 0u64;
+    while !remaining.is_empty() {
+        progress.check()?;
+        let (front, rest): (Vec<u32>, Vec<u32>) = remaining.iter().partition(|&&q| {
+            let (x, y) = (q as usize % w, q as usize / w);
+            (y.saturating_sub(1)..(y + 2).min(h))
+                .any(|yy| (x.saturating_sub(1)..(x + 2).min(w)).any(|xx| known[yy * w + xx]))
+        });
+        if front.is_empty() {
+            // Cut off from every source pixel: keep the membrane values.
+            break;
+        }
+        let pixels = &level.pixels;
+        let known_ref = &known;
+        let copied_ref = &copied;
+        let results: Vec<(u32, u32)> = front
+            .par_iter()
+            .with_min_len(64)
+            .map(|&q| {
+                let q = q as usize;
+                let (qx, qy) = (q % w, q / w);
+                let (cx, cy) = (qx.clamp(r, w - 1 - r), qy.clamp(r, h - 1 - r));
+                let c = cy * w + cx;
+                // The source centre that copies pixel `m` onto `q`.
+                let centre_for = |m: usize| -> Option<usize> {
+                    let (mx, my) = ((m % w) as isize, (m / w) as isize);
+                    let sx = mx - qx as isize + cx as isize;
+                    let sy = my - qy as isize + cy as isize;
+                    if sx < 0 || sy < 0 || sx >= w as isize || sy >= h as isize {
+                        return None;
+                    }
+                    let s = sy as usize * w + sx as usize;
+                    problem.valid[s].then_some(s)
+                };
+                let mut best = NONE as usize;
+                let mut best_d = f32::INFINITY;
+                let consider = |s: usize, best: &mut usize, best_d: &mut f32| {
+                    if s == *best || !problem.valid[s] {
+                        return;
+                    }
+                    let d = problem.masked_ssd(pixels, known_ref, c, s, *best_d);
+                    if d < *best_d {
+                        *best_d = d;
+                        *best = s;
+                    }
+                };
+                // Propagation: continue what the known neighbours copied.
+                for yy in qy.saturating_sub(1)..(qy + 2).min(h) {
+                    for xx in qx.saturating_sub(1)..(qx + 2).min(w) {
+                        let j = yy * w + xx;
+                        if copied_ref[j] == NONE {
+                            continue;
+                        }
+                        let m = copied_ref[j] as usize;
+                        // Neighbour j shows source pixel m; q would show m + (q − j).
+                        let mx = (m % w) as isize + qx as isize - xx as isize;
+                        let my = (m / w) as isize + qy as isize - yy as isize;
+                        if mx < 0 || my < 0 || mx >= w as isize || my >= h as isize {
+                            continue;
+                        }
+                        if let Some(s) = centre_for(my as usize * w + mx as usize) {
+                            consider(s, &mut best, &mut best_d);
+                        }
+                    }
+                }
+                let mut rng = KeyedRng::new(seed ^ 0x0710, level_key, ring_index, q as u64);
+                for _ in 0..RANDOM_SOURCES {
+                    consider(
+                        problem.random_source(&mut rng) as usize,
+                        &mut best,
+                        &mut best_d,
+                    );
+                }
+                let mut radius = max_radius;
+                while radius >= 1 && best != NONE as usize {
+                    let (sx, sy) = ((best % w) as isize, (best / w) as isize);
+                    let tx = (sx + rng.symmetric(radius)).clamp(r as isize, (w - 1 - r) as isize);
+                    let ty = (sy + rng.symmetric(radius)).clamp(r as isize, (h - 1 - r) as isize);
+                    consider(ty as usize * w + tx as usize, &mut best, &mut best_d);
+                    radius /= 2;
+                }
+                if best == NONE as usize {
+                    return (q as u32, NONE);
+                }
+                // The pixel of the matched patch that lands on q.
+                let m = (best + qy * w + qx) - c;
+                (q as u32, m as u32)
+            })
+            .collect();
+        for &(q, m) in &results {
+            let q = q as usize;
+            if m != NONE {
+                level.pixels[q] = level.pixels[m as usize];
+                copied[q] = m;
+            }
+            known[q] = true;
+        }
+        remaining = rest;
+        ring_index += 1;
+    }
+    // Per pixel: the source centre for a patch centred there, from what it copied.
+    let centres = (0..n)
+        .map(|p| {
+            let m = copied[p];
+            if m == NONE {
+                return NONE;
+            }
+            let s = m as usize;
+            if problem.valid[s] { s as u32 } else { NONE }
+        })
+        .collect();
+    Ok(centres)
 }
 
 /// Initial field and pixels on a finer level from the coarser solution: the synthesised pixels
@@ -730,7 +919,7 @@ fn patchmatch_pass(
     let (w, h, r) = (problem.w, problem.h, problem.r);
     let before_nnf = field.nnf.clone();
     let n = w * h;
-    let max_radius = w.max(h);
+    let max_radius = problem.search_radius;
     let step: isize = if forward { -1 } else { 1 };
     field
         .nnf
