@@ -60,6 +60,8 @@ const CONVERGED_CHANGE: f32 = 2e-4;
 /// On levels finer than the coarsest the random search starts at this fraction of the level's
 /// larger side.
 const FINE_SEARCH_DIVISOR: usize = 8;
+/// Default locality prior.
+const LOCALITY: f32 = 0.05;
 /// Default weight of the texture features.
 const TEXTURE_WEIGHT: f32 = 3.0;
 /// Wexler's spatial weight base γ: a patch one pixel deeper in the hole weighs 1/γ as much.
@@ -108,6 +110,7 @@ impl InpaintPreset {
                 seamless: true,
                 texture_weight: TEXTURE_WEIGHT,
                 onion_peel: true,
+                locality: LOCALITY,
             },
             InpaintPreset::Preview => PatchMatchParams {
                 patch_size: 7,
@@ -119,6 +122,7 @@ impl InpaintPreset {
                 seamless: true,
                 texture_weight: TEXTURE_WEIGHT,
                 onion_peel: true,
+                locality: LOCALITY,
             },
             InpaintPreset::Final => PatchMatchParams {
                 patch_size: 7,
@@ -130,6 +134,7 @@ impl InpaintPreset {
                 seamless: true,
                 texture_weight: TEXTURE_WEIGHT,
                 onion_peel: true,
+                locality: LOCALITY,
             },
         }
     }
@@ -185,6 +190,10 @@ pub struct PatchMatchParams {
     /// Start the coarsest level by onion peeling (fill from the border inwards, each pixel
     /// copied from its best match on the known part of its patch) instead of the membrane.
     pub onion_peel: bool,
+    /// Locality prior: the extra matching cost, per patch pixel, of a source a full image
+    /// diagonal away (growing with the squared offset); prefers nearby texture among near-equal
+    /// matches. 0 = none.
+    pub locality: f32,
 }
 
 impl Default for PatchMatchParams {
@@ -448,13 +457,15 @@ struct Problem {
     valid: Vec<bool>,
     /// The valid centres as a list (for global random candidates).
     valid_list: Vec<u32>,
+    /// Locality prior per squared pixel of offset (see [`Problem::cost`]).
+    locality_per_px2: f32,
     /// Largest random-search radius: the whole level on the coarsest, a fraction of it on
     /// finer levels (whose field comes from the coarser search already).
     search_radius: usize,
 }
 
 impl Problem {
-    fn new(level: &Level, r: usize, coarsest: bool) -> Problem {
+    fn new(level: &Level, r: usize, coarsest: bool, locality: f32) -> Problem {
         let (w, h) = (level.w, level.h);
         let near_hole = common::dilate(&level.hole, w, h, 2 * r);
         let domain_list: Vec<u32> = (0..w * h)
@@ -481,10 +492,18 @@ impl Problem {
         } else {
             (w.max(h) / FINE_SEARCH_DIVISOR).max(4 * r).max(1)
         };
+        let side = (2 * r + 1) as f32;
+        let diagonal2 = (w * w + h * h).max(1) as f32;
+        let locality_per_px2 = if locality.is_finite() && locality > 0.0 {
+            locality * side * side / diagonal2
+        } else {
+            0.0
+        };
         Problem {
             w,
             h,
             r,
+            locality_per_px2,
             search_radius,
             domain_list,
             target,
@@ -526,6 +545,26 @@ impl Problem {
             }
         }
         sum
+    }
+
+    /// The matching cost of source centre `s` for target centre `t`: the patch distance plus
+    /// the locality prior, a cost growing with the squared offset (a full-diagonal jump costs
+    /// `locality` per patch pixel), which prefers nearby texture among near-equal matches.
+    #[inline]
+    fn cost(&self, pixels: &[Px], t: usize, s: usize, bound: f32) -> f32 {
+        let prior = self.prior(t, s);
+        prior + self.ssd(pixels, t, s, bound - prior)
+    }
+
+    #[inline]
+    fn prior(&self, t: usize, s: usize) -> f32 {
+        if self.locality_per_px2 == 0.0 {
+            return 0.0;
+        }
+        let w = self.w;
+        let dx = (t % w) as f32 - (s % w) as f32;
+        let dy = (t / w) as f32 - (s / w) as f32;
+        self.locality_per_px2 * (dx * dx + dy * dy)
     }
 
     /// Like [`Problem::ssd`] but over the pixels of the target patch that are `known` only.
@@ -610,7 +649,7 @@ fn complete(
             break;
         };
         progress.check()?;
-        let problem = Problem::new(&level, r, coarser.is_none());
+        let problem = Problem::new(&level, r, coarser.is_none(), params.locality);
         let level_progress = progress.sub(done / total, (done + work[l]) / total);
         let stage = format!("inpainting: level {} of {n_levels}", n_levels - l);
         let key = |pass: usize| (l as u64, pass as u64);
@@ -897,7 +936,7 @@ fn refresh_distances(problem: &Problem, pixels: &[Px], field: &mut Field) {
             let base = b * BAND_ROWS * w;
             for (k, (d, &s)) in dist.iter_mut().zip(nnf).enumerate() {
                 if s != NONE {
-                    *d = problem.ssd(pixels, base + k, s as usize, f32::INFINITY);
+                    *d = problem.cost(pixels, base + k, s as usize, f32::INFINITY);
                 }
             }
         });
@@ -952,7 +991,7 @@ fn patchmatch_pass(
                         if cand == *best || !problem.valid[cand] {
                             return;
                         }
-                        let d = problem.ssd(pixels, i, cand, *best_d);
+                        let d = problem.cost(pixels, i, cand, *best_d);
                         if d < *best_d {
                             *best_d = d;
                             *best = cand;
