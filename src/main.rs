@@ -222,9 +222,10 @@ struct RenderArgs {
     /// Do not inpaint what each layer hides (the paper's ablation).
     #[arg(long)]
     no_layer_inpaint: bool,
-    /// Keep the completed depth of inpainted pixels instead of re-estimating each layer's depth.
+    /// Re-estimate each layer's depth on the inpainted overlay (paper eq. 4–5; off by default,
+    /// best with a learned depth model).
     #[arg(long)]
-    no_layer_depth: bool,
+    layer_depth: bool,
     /// Do not outpaint: the canvas is the photo.
     #[arg(long)]
     no_outpaint: bool,
@@ -681,8 +682,8 @@ fn apply_scene_flags(args: &RenderArgs, project: &mut Project) -> anyhow::Result
     if args.no_layer_inpaint {
         project.layers.inpaint = false;
     }
-    if args.no_layer_depth {
-        project.layers.layer_depth = false;
+    if args.layer_depth {
+        project.layers.layer_depth = true;
     }
     if args.no_outpaint {
         project.canvas.enabled = false;
