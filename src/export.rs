@@ -518,7 +518,7 @@ pub fn render_sequence(
                 }
                 resumed += 1;
             } else {
-                let frame = renderer.render(&views[i], width, height, None)?;
+                let frame = scene.render_frame(renderer, &views[i], i, width, height)?;
                 write_frame(&frame, &colour_path, options.sixteen_bit)?;
                 if options.passes.depth {
                     let d = depth_for_pass(&frame, scale);

@@ -11,7 +11,7 @@ use makeit4d::path::{CameraPath, Preset, PresetKind};
 use makeit4d::progress::Progress;
 use makeit4d::project::Project;
 use makeit4d::render::cpu::CpuRenderer;
-use makeit4d::scene::build_scene;
+use makeit4d::scene::SceneBuilder;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -36,9 +36,11 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Render a photo (or a project) to a folder of PNG frames.
-    Render(RenderArgs),
+    Render(Box<RenderArgs>),
     /// Estimate the depth of a photo on its own (16-bit disparity PNG + JSON sidecar).
     Depth(DepthArgs),
+    /// Fill the white pixels of a mask in a photo (PatchMatch), on its own.
+    Inpaint(InpaintArgs),
     /// Score stages against ground truth.
     #[command(subcommand)]
     Eval(EvalCommand),
@@ -71,6 +73,24 @@ struct DepthArgs {
     horizon: Option<f32>,
 }
 
+#[derive(Args, Debug)]
+struct InpaintArgs {
+    /// The photo.
+    image: PathBuf,
+    /// The hole mask: same size as the photo, white (≥ 50 %) = fill.
+    #[arg(long)]
+    mask: PathBuf,
+    /// The filled PNG to write.
+    #[arg(long)]
+    out: PathBuf,
+    /// Quality: draft, preview or final.
+    #[arg(long, default_value = "preview")]
+    preset: String,
+    /// Seed for the random search (same seed, same bytes).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
 #[derive(Subcommand, Debug)]
 enum EvalCommand {
     /// Depth accuracy against ground-truth disparity (scale-and-shift aligned, MiDaS protocol).
@@ -100,6 +120,32 @@ struct EvalDepthArgs {
 enum BenchCommand {
     /// The classical depth estimator: median seconds over several runs.
     Depth(BenchDepthArgs),
+    /// Inpainting presets against the harmonic baseline on holes cut from real photos.
+    Inpaint(BenchInpaintArgs),
+    /// Motion: flow solve, loop precompute, per-frame displacement and blend cost.
+    Motion(BenchMotionArgs),
+}
+
+#[derive(Args, Debug)]
+struct BenchInpaintArgs {
+    /// Photos (default: ../shared/data/photos/*.jpg when present, else tests/data).
+    photos: Vec<PathBuf>,
+    /// Timed repeats per case (the median is printed).
+    #[arg(long, default_value_t = 3)]
+    repeats: usize,
+}
+
+#[derive(Args, Debug)]
+struct BenchMotionArgs {
+    /// Canvas width.
+    #[arg(long, default_value_t = 1280)]
+    width: usize,
+    /// Canvas height.
+    #[arg(long, default_value_t = 800)]
+    height: usize,
+    /// Loop length N.
+    #[arg(long, default_value_t = 100)]
+    frames: u32,
 }
 
 #[derive(Args, Debug)]
@@ -170,6 +216,59 @@ struct RenderArgs {
     /// Video quality as a constant rate factor (lower is better; default 18 for mp4, 30 for webm).
     #[arg(long)]
     crf: Option<u8>,
+    /// Depth layers: a count (1–16), `auto` (as many as the depth has), or `off` (one layer).
+    #[arg(long, value_parser = parse_layers)]
+    layers: Option<LayersArg>,
+    /// Do not inpaint what each layer hides (the paper's ablation).
+    #[arg(long)]
+    no_layer_inpaint: bool,
+    /// Re-estimate each layer's depth on the inpainted overlay (paper eq. 4–5; off by default,
+    /// best with a learned depth model).
+    #[arg(long)]
+    layer_depth: bool,
+    /// Do not outpaint: the canvas is the photo.
+    #[arg(long)]
+    no_outpaint: bool,
+    /// Inpainting quality: draft, preview or final.
+    #[arg(long)]
+    inpaint_preset: Option<String>,
+    /// Seed for inpainting.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// An ONNX depth model manifest (falls back to the classical estimator, with a warning).
+    #[arg(long)]
+    depth_model: Option<PathBuf>,
+    /// A LaMa-style ONNX inpainting model manifest (falls back to PatchMatch, with a warning).
+    #[arg(long)]
+    inpaint_model: Option<PathBuf>,
+    /// Motion: `auto` applies the automatic sky/water suggestion; `off` removes the project's.
+    #[arg(long, value_enum)]
+    motion: Option<MotionArg>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum LayersArg {
+    Count(usize),
+    Auto,
+    Off,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum MotionArg {
+    Auto,
+    Off,
+}
+
+/// Parses `--layers`.
+fn parse_layers(s: &str) -> Result<LayersArg, String> {
+    match s.trim() {
+        "auto" => Ok(LayersArg::Auto),
+        "off" => Ok(LayersArg::Off),
+        n => match n.parse::<usize>() {
+            Ok(n) if (1..=16).contains(&n) => Ok(LayersArg::Count(n)),
+            _ => Err(format!("layers must be 1..=16, auto or off, got '{s}'")),
+        },
+    }
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -256,10 +355,13 @@ fn main() -> ExitCode {
         });
     }
     let result = match cli.command {
-        Command::Render(args) => render(args, cancel),
+        Command::Render(args) => render(*args, cancel),
         Command::Depth(args) => depth(args, cancel),
         Command::Eval(EvalCommand::Depth(args)) => eval_depth(args, cancel),
         Command::Bench(BenchCommand::Depth(args)) => bench_depth(args),
+        Command::Bench(BenchCommand::Inpaint(args)) => bench_inpaint(args, cancel),
+        Command::Bench(BenchCommand::Motion(args)) => bench_motion(args),
+        Command::Inpaint(args) => inpaint(args, cancel),
         Command::Doctor(args) => doctor(args),
     };
     match result {
@@ -392,6 +494,7 @@ fn render_one(
         let kind: PresetKind = name.parse()?;
         project.camera.path = CameraPath::Preset(Preset::new(kind));
     }
+    apply_scene_flags(args, &mut project)?;
     project.validate()?;
     let options = ExportOptions {
         pattern: FramePattern::parse(&args.pattern)?,
@@ -415,7 +518,18 @@ fn render_one(
     };
     // Decode and validate everything before anything is written.
     let (bar, progress) = progress_bar(cancel);
-    let scene = build_scene(&project, &progress.sub(0.0, 0.1))?;
+    let mut builder = SceneBuilder::new();
+    let mut scene = builder.build(&project, &progress.sub(0.0, 0.1))?;
+    if args.motion == Some(MotionArg::Auto) {
+        // The suggestion lives in canvas pixels, so it is made on the built canvas; the second
+        // build re-uses every cached stage and runs only motion.
+        project.motion = makeit4d::stages::motion::suggest_motion(
+            &scene.canvas.image,
+            Some(&scene.canvas.sky),
+            None,
+        )?;
+        scene = builder.build(&project, &progress.sub(0.0, 0.1))?;
+    }
     for w in &scene.warnings {
         bar.suspend(|| eprintln!("warning: {w}"));
     }
@@ -545,5 +659,118 @@ fn doctor(args: DoctorArgs) -> anyhow::Result<()> {
             ffmpeg.display()
         ),
     }
+    Ok(())
+}
+
+/// Applies the scene flags of `render` to `project`.
+fn apply_scene_flags(args: &RenderArgs, project: &mut Project) -> anyhow::Result<()> {
+    use makeit4d::stages::depth::DepthMethod;
+    use makeit4d::stages::inpaint::InpaintPreset;
+    use makeit4d::stages::layers::LayerCount;
+    match args.layers {
+        Some(LayersArg::Off) => project.layers.enabled = false,
+        Some(LayersArg::Auto) => {
+            project.layers.enabled = true;
+            project.layers.params.mode = LayerCount::default();
+        }
+        Some(LayersArg::Count(n)) => {
+            project.layers.enabled = true;
+            project.layers.params.mode = LayerCount::Count(n);
+        }
+        None => {}
+    }
+    if args.no_layer_inpaint {
+        project.layers.inpaint = false;
+    }
+    if args.layer_depth {
+        project.layers.layer_depth = true;
+    }
+    if args.no_outpaint {
+        project.canvas.enabled = false;
+    }
+    if let Some(p) = &args.inpaint_preset {
+        project.inpaint.preset = match p.as_str() {
+            "draft" => InpaintPreset::Draft,
+            "preview" => InpaintPreset::Preview,
+            "final" => InpaintPreset::Final,
+            other => bail!("inpaint preset must be draft, preview or final, got '{other}'"),
+        };
+    }
+    if let Some(seed) = args.seed {
+        project.inpaint.seed = seed;
+    }
+    if let Some(m) = &args.depth_model {
+        project.depth.method = DepthMethod::Onnx;
+        project.depth.model = Some(m.clone());
+    }
+    if let Some(m) = &args.inpaint_model {
+        project.inpaint.model = Some(m.clone());
+    }
+    if args.motion == Some(MotionArg::Off) {
+        project.motion = Default::default();
+    }
+    Ok(())
+}
+
+fn inpaint(args: InpaintArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::stages::inpaint::{InpaintPreset, command};
+    let preset: InpaintPreset = args.preset.parse()?;
+    let image = makeit4d::image_io::load_image(&args.image)?;
+    let hole = command::read_hole_mask(&args.mask, image.rgb.size())?;
+    let (bar, progress) = progress_bar(cancel);
+    let start = std::time::Instant::now();
+    let filled = command::inpaint_command(&image.rgb, &hole, preset, args.seed, &progress);
+    bar.finish_and_clear();
+    let filled = filled?;
+    makeit4d::image_io::save_rgb_png(&args.out, &filled, false)?;
+    println!(
+        "{}; wrote {}",
+        command::format_inpaint_summary(&hole, preset, start.elapsed().as_secs_f64()),
+        args.out.display()
+    );
+    Ok(())
+}
+
+fn bench_inpaint(args: BenchInpaintArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::stages::inpaint::{BenchOptions, bench_inpaint, format_bench_table};
+    let photos = if args.photos.is_empty() {
+        makeit4d::stages::inpaint::bench::default_bench_photos()
+    } else {
+        args.photos.clone()
+    };
+    let options = BenchOptions {
+        repeats: args.repeats.max(1),
+        ..BenchOptions::default()
+    };
+    let (bar, progress) = progress_bar(cancel);
+    let rows = bench_inpaint(&photos, &options, &progress);
+    bar.finish_and_clear();
+    print!("{}", format_bench_table(&rows?));
+    Ok(())
+}
+
+fn bench_motion(args: BenchMotionArgs) -> anyhow::Result<()> {
+    let t = makeit4d::stages::motion::bench_motion(args.width, args.height, args.frames, 3)?;
+    let blend = makeit4d::render::blend::bench_blend(args.width, args.height, 10)?;
+    println!("| step | seconds |");
+    println!("|---|---:|");
+    println!(
+        "| flow solve ({}×{}) | {:.3} |",
+        t.width, t.height, t.field_secs
+    );
+    println!(
+        "| spread flow into hidden layer pixels | {:.3} |",
+        t.layers_secs
+    );
+    println!(
+        "| precompute {}-frame loop (forward + backward) | {:.3} |",
+        t.loop_frames, t.integrate_secs
+    );
+    println!("| one frame's displacements | {:.4} |", t.frame_secs);
+    println!("| symmetric blend, one frame | {blend:.4} |");
+    println!(
+        "\nloop memory: {:.1} MB",
+        t.memory_bytes as f64 / (1024.0 * 1024.0)
+    );
     Ok(())
 }

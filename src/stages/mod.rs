@@ -5,4 +5,5 @@ pub mod depth;
 pub mod inpaint;
 pub mod layers;
 pub mod motion;
+pub mod outpaint;
 pub mod points;
