@@ -186,9 +186,14 @@ struct RenderArgs {
     /// Frames per second.
     #[arg(long)]
     fps: Option<f32>,
-    /// Camera preset.
+    /// Camera preset: still, fly-in, fly-out, orbit, swing, pan, dolly-zoom, or autocruise
+    /// (auto-pilot over the 3D scene; becomes editable keyframes in --save-project).
     #[arg(long)]
     preset: Option<String>,
+    /// Print per-frame hole and synthesised-content fractions of the path (low-resolution
+    /// renders), frames over the threshold, and the safe extent.
+    #[arg(long)]
+    diagnostics: bool,
     /// Output size WIDTHxHEIGHT (default: the input's).
     #[arg(long, value_parser = parse_size)]
     size: Option<(usize, usize)>,
@@ -490,9 +495,14 @@ fn render_one(
     if let Some(fov) = args.fov {
         project.camera.hfov_deg = fov;
     }
-    if let Some(name) = &args.preset {
+    let autocruise = args.preset.as_deref() == Some("autocruise");
+    if let Some(name) = args.preset.as_deref().filter(|_| !autocruise) {
         let kind: PresetKind = name.parse()?;
         project.camera.path = CameraPath::Preset(Preset::new(kind));
+    }
+    if autocruise {
+        // First pass: the photo's own cloud (a still path needs no canvas).
+        project.camera.path = CameraPath::Preset(Preset::new(PresetKind::Still));
     }
     apply_scene_flags(args, &mut project)?;
     project.validate()?;
@@ -520,6 +530,28 @@ fn render_one(
     let (bar, progress) = progress_bar(cancel);
     let mut builder = SceneBuilder::new();
     let mut scene = builder.build(&project, &progress.sub(0.0, 0.1))?;
+    if autocruise {
+        // Fly the auto-pilot over the scene, then rebuild with its keyframes so the canvas is
+        // outpainted for exactly that path (load and depth are re-used from the cache).
+        let (w, h) = makeit4d::export::output_size(&project, &scene);
+        let (iw, ih) = scene.input.rgb.size();
+        let k = scene
+            .intrinsics
+            .scaled(w as f32 / iw as f32, h as f32 / ih as f32);
+        let cruise = makeit4d::path::autocruise(
+            &scene.cloud,
+            &k,
+            w,
+            h,
+            &scene.scale,
+            &makeit4d::path::AutocruiseParams::default(),
+            project.output.frames,
+            &progress.sub(0.0, 0.1),
+        )?;
+        bar.suspend(|| eprintln!("{cruise}"));
+        project.camera.path = CameraPath::Keyframes(cruise.keyframes);
+        scene = builder.build(&project, &progress.sub(0.0, 0.1))?;
+    }
     if args.motion == Some(MotionArg::Auto) {
         // The suggestion lives in canvas pixels, so it is made on the built canvas; the second
         // build re-uses every cached stage and runs only motion.
@@ -532,6 +564,19 @@ fn render_one(
     }
     for w in &scene.warnings {
         bar.suspend(|| eprintln!("warning: {w}"));
+    }
+    if args.diagnostics {
+        let (w, h) = makeit4d::export::output_size(&project, &scene);
+        let views = makeit4d::export::output_views(&project, &scene)?;
+        let d = makeit4d::path::path_diagnostics(
+            &scene.cloud,
+            &views,
+            w,
+            h,
+            &makeit4d::path::DiagnosticsParams::default(),
+            &progress,
+        )?;
+        bar.suspend(|| println!("{d}"));
     }
     makeit4d::image_io::prepare_output_dir(out)?;
     if let Some(path) = &args.save_project {
