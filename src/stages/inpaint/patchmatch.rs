@@ -1200,27 +1200,15 @@ fn poisson_correct(
         queue.push_back(i);
     }
     while let Some(i) = queue.pop_front() {
-        let (x, y) = (i % w, i / w);
         let m = correction[i];
-        let mut visit = |j: usize| {
+        let visit = |j: usize| {
             if !known[j] && level.source[j] {
                 known[j] = true;
                 correction[j] = m;
                 queue.push_back(j);
             }
         };
-        if x > 0 {
-            visit(i - 1);
-        }
-        if x + 1 < w {
-            visit(i + 1);
-        }
-        if y > 0 {
-            visit(i - w);
-        }
-        if y + 1 < h {
-            visit(i + w);
-        }
+        crate::raster::for_each_neighbour4(i, w, h, visit);
     }
     let unknown: Vec<bool> = known.iter().map(|&k| !k).collect();
     membrane_fill(&mut correction, w, h, &unknown, progress)?;
