@@ -8,7 +8,7 @@ use makeit4d::export::render_sequence;
 use makeit4d::path::CameraPath;
 use makeit4d::progress::Progress;
 use makeit4d::project::Project;
-use makeit4d::render::cpu::CpuRenderer;
+use makeit4d::render::gpu::{RendererChoice, select_renderer};
 use makeit4d::scene::build_scene;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -65,6 +65,10 @@ struct RenderArgs {
     /// Horizontal field of view of the input photo, degrees.
     #[arg(long)]
     fov: Option<f32>,
+    /// Splat renderer: cpu, gpu (an error without a GPU adapter) or auto (the GPU on a hardware
+    /// adapter, else the CPU; prints which and why).
+    #[arg(long, default_value = "auto")]
+    renderer: RendererChoice,
 }
 
 /// Parses `WIDTHxHEIGHT`.
@@ -173,6 +177,9 @@ fn render(args: RenderArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
             CameraPath::preset(name).ok_or_else(|| anyhow!("unknown preset '{name}'"))?;
     }
     project.validate()?;
+    // Chosen before any work so that `--renderer gpu` without an adapter fails at once; said
+    // once everything else was validated (stderr stays one line on bad inputs).
+    let (mut renderer, why) = select_renderer(args.renderer, project.render)?;
     // Decode and validate everything before anything is written.
     let (bar, progress) = progress_bar(cancel);
     let scene = build_scene(&project, &progress.sub(0.0, 0.1))?;
@@ -182,11 +189,11 @@ fn render(args: RenderArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
             .save(path)
             .with_context(|| "saving the project".to_string())?;
     }
-    let mut renderer = CpuRenderer::new(project.render);
+    bar.suspend(|| eprintln!("renderer: {why}"));
     let summary = render_sequence(
         &project,
         &scene,
-        &mut renderer,
+        renderer.as_mut(),
         &args.out,
         &progress.sub(0.1, 1.0),
     );

@@ -1,6 +1,8 @@
 //! Rendering the point cloud into frames (algorithms.md §7).
 
+pub mod bench;
 pub mod cpu;
+pub mod gpu;
 
 use crate::error::{Error, Result};
 use crate::geometry::View;
