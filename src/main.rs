@@ -177,9 +177,6 @@ fn render(args: RenderArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
             CameraPath::preset(name).ok_or_else(|| anyhow!("unknown preset '{name}'"))?;
     }
     project.validate()?;
-    // Chosen before any work so that `--renderer gpu` without an adapter fails at once; said
-    // once everything else was validated (stderr stays one line on bad inputs).
-    let (mut renderer, why) = select_renderer(args.renderer, project.render)?;
     // Decode and validate everything before anything is written.
     let (bar, progress) = progress_bar(cancel);
     let scene = build_scene(&project, &progress.sub(0.0, 0.1))?;
@@ -189,6 +186,9 @@ fn render(args: RenderArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
             .save(path)
             .with_context(|| "saving the project".to_string())?;
     }
+    // Chosen once the inputs are known to be good: opening a GPU adapter can be slow and some
+    // Vulkan layers print to stderr, which would spoil the one-line error of a bad input.
+    let (mut renderer, why) = select_renderer(args.renderer, project.render)?;
     bar.suspend(|| eprintln!("renderer: {why}"));
     let summary = render_sequence(
         &project,

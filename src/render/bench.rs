@@ -237,7 +237,12 @@ fn splitmix64(state: &mut u64) -> u64 {
 
 /// The fly-in view the benchmark renders: forward 0.4 (near ground depth ≈ 2.6), a slight turn,
 /// at `width × height` with the input's field of view.
-pub fn fly_in_view(input: &Intrinsics, input_size: (usize, usize), width: usize, height: usize) -> View {
+pub fn fly_in_view(
+    input: &Intrinsics,
+    input_size: (usize, usize),
+    width: usize,
+    height: usize,
+) -> View {
     View {
         intrinsics: input.scaled(
             width as f32 / input_size.0 as f32,
@@ -388,7 +393,9 @@ pub fn bench_render(options: &BenchOptions, mut log: impl FnMut(&str)) -> Result
                 Ok(())
             })?;
             let gpu_timing = match gpu.as_mut() {
-                Some(g) => Some(time_gpu(g, &cloud, &view, width, height, &reference, options)?),
+                Some(g) => Some(time_gpu(
+                    g, &cloud, &view, width, height, &reference, options,
+                )?),
                 None => None,
             };
             let row = BenchRow {

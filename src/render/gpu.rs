@@ -87,9 +87,8 @@ impl GpuContext {
     /// Opens the best adapter of any enabled back end (`WGPU_BACKEND` and the other wgpu
     /// environment variables are honoured). Errors with [`Error::Gpu`] when there is none.
     pub fn new() -> Result<Self> {
-        let instance = wgpu::Instance::new(
-            wgpu::InstanceDescriptor::new_without_display_handle_from_env(),
-        );
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
             power_preference: wgpu::PowerPreference::HighPerformance,
             ..Default::default()
@@ -349,7 +348,11 @@ impl GpuSplatter {
                 near_bits: storage_buffer(&device, "near depth", 16),
                 blend_uniform: uniform("blend", std::mem::size_of::<BlendUniform>() as u64),
                 present_uniform: uniform("present", std::mem::size_of::<PresentUniform>() as u64),
-                slots: [slot("camera forward"), slot("camera backward"), slot("unused")],
+                slots: [
+                    slot("camera forward"),
+                    slot("camera backward"),
+                    slot("unused"),
+                ],
                 readback: None,
                 context: context.clone(),
             })
@@ -448,7 +451,9 @@ impl GpuSplatter {
         positions: Positions,
     ) -> Result<()> {
         if slot == FrameSlot::Blended {
-            return Err(Error::invalid("gpu render: the blended slot is written by the blend"));
+            return Err(Error::invalid(
+                "gpu render: the blended slot is written by the blend",
+            ));
         }
         self.settings.validate()?;
         if width == 0 || height == 0 {
@@ -479,7 +484,12 @@ impl GpuSplatter {
         self.check_binding("frame", frame_bytes(width, height))?;
         self.check_binding("tile offsets", ((n_tiles + 1) * 4) as u64)?;
         self.ensure_grow_points(n)?;
-        grow_to(&device, &mut self.tile_counts, "tile counts", (n_tiles * 4) as u64);
+        grow_to(
+            &device,
+            &mut self.tile_counts,
+            "tile counts",
+            (n_tiles * 4) as u64,
+        );
         grow_to(
             &device,
             &mut self.tile_offsets,
@@ -622,7 +632,9 @@ impl GpuSplatter {
             )));
         }
         let size = self.slots[0].size;
-        if self.slots[1].size != size || self.slots[0].frame.is_none() || self.slots[1].frame.is_none()
+        if self.slots[1].size != size
+            || self.slots[0].frame.is_none()
+            || self.slots[1].frame.is_none()
         {
             return Err(Error::invalid(
                 "blend: forward and backward frames must have equal sizes",
@@ -744,11 +756,7 @@ impl GpuSplatter {
         });
         pass.set_pipeline(&self.pipelines.present);
         pass.set_bind_group(0, &group, &[]);
-        pass.dispatch_workgroups(
-            width.div_ceil(TILE) as u32,
-            height.div_ceil(TILE) as u32,
-            1,
-        );
+        pass.dispatch_workgroups(width.div_ceil(TILE) as u32, height.div_ceil(TILE) as u32, 1);
         Ok(())
     }
 
@@ -860,7 +868,14 @@ impl GpuSplatter {
         };
         for _ in 0..3 {
             let mut encoder = self.encoder();
-            self.encode_render(&mut encoder, FrameSlot::Forward, view, width, height, source)?;
+            self.encode_render(
+                &mut encoder,
+                FrameSlot::Forward,
+                view,
+                width,
+                height,
+                source,
+            )?;
             let (frame, needed) = self.read_frame(encoder, FrameSlot::Forward)?;
             if self.ensure_entries(needed[0] as usize)? {
                 return Ok(frame);
@@ -1167,7 +1182,9 @@ impl std::str::FromStr for RendererChoice {
             "cpu" => Ok(Self::Cpu),
             "gpu" => Ok(Self::Gpu),
             "auto" => Ok(Self::Auto),
-            _ => Err(format!("unknown renderer '{s}' (expected cpu, gpu or auto)")),
+            _ => Err(format!(
+                "unknown renderer '{s}' (expected cpu, gpu or auto)"
+            )),
         }
     }
 }
@@ -1265,7 +1282,13 @@ mod tests {
     }
 
     fn bits(frame: &Frame) -> Vec<u32> {
-        let mut out: Vec<u32> = frame.colour.data().iter().flatten().map(|v| v.to_bits()).collect();
+        let mut out: Vec<u32> = frame
+            .colour
+            .data()
+            .iter()
+            .flatten()
+            .map(|v| v.to_bits())
+            .collect();
         out.extend(frame.coverage.data().iter().map(|v| v.to_bits()));
         out.extend(frame.depth.data().iter().map(|v| v.to_bits()));
         out
@@ -1288,7 +1311,11 @@ mod tests {
         let horizon = 0.4 * h as f32;
         let depth = Raster::from_fn(w, h, |_, y| {
             let dv = y as f32 - horizon;
-            if dv > 1.0 { (k.fy / dv).clamp(1.0, 80.0) } else { 80.0 }
+            if dv > 1.0 {
+                (k.fy / dv).clamp(1.0, 80.0)
+            } else {
+                80.0
+            }
         });
         let cloud =
             PointCloud::lift(&image, &depth, &k, None, None, LiftOptions::default()).unwrap();
@@ -1346,10 +1373,22 @@ mod tests {
         eprintln!(
             "{what}: colour PSNR {psnr:.1} dB, coverage mean |Δ| {coverage_mad:.2e}, holes cpu {holes_cpu:.5} gpu {holes_gpu:.5}, depth mean relative |Δ| {depth_rel:.2e}"
         );
-        assert!(psnr >= 40.0, "{what}: GPU vs CPU colour PSNR {psnr:.1} dB < 40 dB");
-        assert!(coverage_mad < 1e-3, "{what}: coverage differs by {coverage_mad}");
-        assert!((holes_cpu - holes_gpu).abs() < 1e-3, "{what}: hole fractions differ");
-        assert!(depth_rel < 1e-3, "{what}: depth differs by {depth_rel} (relative)");
+        assert!(
+            psnr >= 40.0,
+            "{what}: GPU vs CPU colour PSNR {psnr:.1} dB < 40 dB"
+        );
+        assert!(
+            coverage_mad < 1e-3,
+            "{what}: coverage differs by {coverage_mad}"
+        );
+        assert!(
+            (holes_cpu - holes_gpu).abs() < 1e-3,
+            "{what}: hole fractions differ"
+        );
+        assert!(
+            depth_rel < 1e-3,
+            "{what}: depth differs by {depth_rel} (relative)"
+        );
     }
 
     #[test]
@@ -1364,7 +1403,10 @@ mod tests {
         on_disk.sort();
         let mut listed: Vec<String> = SHADERS.iter().map(|(n, _)| n.to_string()).collect();
         listed.sort();
-        assert_eq!(on_disk, listed, "every shaders/*.wgsl must be listed in SHADERS");
+        assert_eq!(
+            on_disk, listed,
+            "every shaders/*.wgsl must be listed in SHADERS"
+        );
         for name in &on_disk {
             let source = std::fs::read_to_string(dir.join(name)).unwrap();
             let module = naga::front::wgsl::parse_str(&source)
@@ -1462,7 +1504,9 @@ mod tests {
         let mut cloud = PointCloud::default();
         let mut state = 7u64;
         let mut next = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (state >> 40) as f32 / (1u64 << 24) as f32
         };
         for i in 0..400 {
@@ -1483,7 +1527,10 @@ mod tests {
             });
         }
         gpu.set_cloud(&cloud).unwrap();
-        let v = view(k, Pose::new(Quat::from_rotation_z(0.1), Vec3::new(0.0, 0.0, 0.2)));
+        let v = view(
+            k,
+            Pose::new(Quat::from_rotation_z(0.1), Vec3::new(0.0, 0.0, 0.2)),
+        );
         let f = gpu.render(&v, 24, 16, None).unwrap();
         let c = render_cpu(&cloud, None, &v, 24, 16, &gpu.settings).unwrap();
         assert_agrees(&c, &f, "random discs with depth ties");
@@ -1585,7 +1632,10 @@ mod tests {
         let k = Intrinsics::from_hfov(8, 8, 60.0);
         let v = view(k, Pose::IDENTITY);
         let no_cloud = gpu.render(&v, 8, 8, None).unwrap_err();
-        assert!(no_cloud.to_string().contains("no point cloud"), "{no_cloud}");
+        assert!(
+            no_cloud.to_string().contains("no point cloud"),
+            "{no_cloud}"
+        );
         // An empty cloud renders an empty frame.
         gpu.set_cloud(&PointCloud::default()).unwrap();
         let f = gpu.render(&v, 8, 8, None).unwrap();
@@ -1598,9 +1648,16 @@ mod tests {
         assert!(gpu.render(&bad, 8, 8, None).is_err());
         // Extreme depths, behind the camera and NaN positions stay finite and match the CPU.
         let mut cloud = PointCloud::default();
-        for (i, z) in [1e-7f32, 1e-6, 1e-3, 1.0, 1e6, -1.0, f32::NAN].into_iter().enumerate() {
+        for (i, z) in [1e-7f32, 1e-6, 1e-3, 1.0, 1e6, -1.0, f32::NAN]
+            .into_iter()
+            .enumerate()
+        {
             let u = 1.0 + i as f32;
-            let p = if z.is_nan() { Vec3::NAN } else { k.unproject(u, 4.0, z) };
+            let p = if z.is_nan() {
+                Vec3::NAN
+            } else {
+                k.unproject(u, 4.0, z)
+            };
             cloud.append(PointCloud {
                 positions: vec![p],
                 colours: vec![[1.0; 3]],
@@ -1614,7 +1671,10 @@ mod tests {
             });
         }
         gpu.set_cloud(&cloud).unwrap();
-        for pose in [Pose::IDENTITY, Pose::new(Quat::IDENTITY, Vec3::new(0.0, 0.0, 0.5))] {
+        for pose in [
+            Pose::IDENTITY,
+            Pose::new(Quat::IDENTITY, Vec3::new(0.0, 0.0, 0.5)),
+        ] {
             let v = view(k, pose);
             let f = gpu.render(&v, 8, 8, None).unwrap();
             let c = render_cpu(&cloud, None, &v, 8, 8, &gpu.settings).unwrap();
@@ -1644,12 +1704,26 @@ mod tests {
                 0.0
             }
         };
-        let cover = |c: f32| if c.is_finite() { c.clamp(0.0, 1.0) } else { 0.0 };
+        let cover = |c: f32| {
+            if c.is_finite() {
+                c.clamp(0.0, 1.0)
+            } else {
+                0.0
+            }
+        };
         let (w, h) = forward.colour.size();
         let mut out = forward.clone();
         for i in 0..w * h {
-            let f = (forward.colour.data()[i], forward.coverage.data()[i], forward.depth.data()[i]);
-            let b = (backward.colour.data()[i], backward.coverage.data()[i], backward.depth.data()[i]);
+            let f = (
+                forward.colour.data()[i],
+                forward.coverage.data()[i],
+                forward.depth.data()[i],
+            );
+            let b = (
+                backward.colour.data()[i],
+                backward.coverage.data()[i],
+                backward.depth.data()[i],
+            );
             let log_weight = |time: f32, z: f32, c: f32| {
                 let c = cover(c);
                 (time > 0.0 && c > 0.0).then(|| time.ln() + a * disparity(z) + c.ln())
@@ -1711,7 +1785,14 @@ mod tests {
             depth: Raster::from_fn(13, 7, |x, y| 1.0 + ((x * y + seed) % 9) as f32),
         };
         let (f, b) = (varied(0), varied(3));
-        for (t, a) in [(0.0, 4.0), (0.25, 4.0), (0.5, 0.0), (0.5, 4.0), (0.9, 40.0), (1.0, 4.0)] {
+        for (t, a) in [
+            (0.0, 4.0),
+            (0.25, 4.0),
+            (0.5, 0.0),
+            (0.5, 4.0),
+            (0.9, 40.0),
+            (1.0, 4.0),
+        ] {
             let gpu_out = gpu.blend_frames(&f, &b, t, a).unwrap();
             let cpu_out = cpu_blend(&f, &b, t, a);
             let diff = max_abs_diff(&gpu_out, &cpu_out);
@@ -1785,7 +1866,8 @@ mod tests {
         let v = view(k, fly_in());
         let frame = gpu.render(&v, w, h, None).unwrap();
         let mut encoder = gpu.encoder();
-        gpu.encode_present(&mut encoder, FrameSlot::Forward, &target).unwrap();
+        gpu.encode_present(&mut encoder, FrameSlot::Forward, &target)
+            .unwrap();
         let row = (w * 4).div_ceil(256) * 256;
         let readback = device.create_buffer(&wgpu::BufferDescriptor {
             label: None,
@@ -1810,7 +1892,9 @@ mod tests {
             },
         );
         gpu.context().queue.submit(Some(encoder.finish()));
-        readback.slice(..).map_async(wgpu::MapMode::Read, |r| r.unwrap());
+        readback
+            .slice(..)
+            .map_async(wgpu::MapMode::Read, |r| r.unwrap());
         device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
         let data = readback.slice(..).get_mapped_range().unwrap();
         for y in (0..h).step_by(7) {
