@@ -253,6 +253,8 @@ fn scatter(@builtin(global_invocation_id) gid: vec3<u32>) {
 var<workgroup> list_start: u32;
 var<workgroup> list_end: u32;
 var<workgroup> batch_splat: array<vec4<f32>, BATCH>;
+// Per disc: the pixel span `(x_lo, x_hi, y_lo, y_hi)`, computed once per disc, not per pixel.
+var<workgroup> batch_span: array<vec4<f32>, BATCH>;
 var<workgroup> batch_alpha: array<f32, BATCH>;
 var<workgroup> batch_index: array<u32, BATCH>;
 
@@ -290,7 +292,9 @@ fn raster(
         let j = base + li;
         if j < end {
             let index = entries[j];
-            batch_splat[li] = splats[index];
+            let s = splats[index];
+            batch_splat[li] = s;
+            batch_span[li] = vec4<f32>(span_lo(s.x, s.w), span_hi(s.x, s.w), span_lo(s.y, s.w), span_hi(s.y, s.w));
             batch_alpha[li] = min(alphas[index], 1.0);
             batch_index[li] = index;
         }
@@ -298,12 +302,12 @@ fn raster(
         let count = min(BATCH, end - base);
         if inside {
             for (var q = 0u; q < count; q++) {
-                let s = batch_splat[q];
-                let radius = s.w;
-                if x < span_lo(s.x, radius) || x > span_hi(s.x, radius) || y < span_lo(s.y, radius)
-                    || y > span_hi(s.y, radius) {
+                let span = batch_span[q];
+                if x < span.x || x > span.y || y < span.z || y > span.w {
                     continue;
                 }
+                let s = batch_splat[q];
+                let radius = s.w;
                 let r2 = radius * radius;
                 let dx = x - s.x;
                 let dy = y - s.y;

@@ -19,9 +19,9 @@
 //! total order and the output does not depend on how rayon schedules the work: the same input
 //! gives the same bytes.
 //!
-//! **Speed.** Points are projected in parallel, binned into 16×16 tiles (a counting sort that
-//! keeps point order), and tiles are rasterised in parallel with per-tile K-lists that stay in
-//! cache.
+//! **Speed.** Points are projected in parallel, binned into 16×16 tiles (a parallel counting
+//! sort that keeps point order), and rows of tiles are rasterised in parallel, each straight into
+//! the output rows it owns, with per-tile K-lists that stay in cache.
 
 use crate::error::{Error, Result};
 use crate::geometry::{View, WorldToCamera};
@@ -31,6 +31,7 @@ use crate::stages::points::PointCloud;
 use glam::Vec3;
 use rayon::prelude::*;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU32, Ordering};
 
 /// Tile side, pixels.
 const TILE: usize = 16;
@@ -173,126 +174,86 @@ pub fn render_cpu(
         )));
     }
     let splats = project(cloud, positions, view, width, height, settings);
-
-    // Counting sort of splats into tiles, keeping point order inside each tile.
     let tiles_x = width.div_ceil(TILE);
     let tiles_y = height.div_ceil(TILE);
-    let n_tiles = tiles_x * tiles_y;
-    let tile_range = |s: &Splat| -> Option<(usize, usize, usize, usize)> {
-        let (x0, x1) = pixel_span(s.u, s.radius, width)?;
-        let (y0, y1) = pixel_span(s.v, s.radius, height)?;
-        Some((x0 / TILE, x1 / TILE, y0 / TILE, y1 / TILE))
-    };
-    let mut counts = vec![0u32; n_tiles + 1];
-    for s in &splats {
-        if let Some((tx0, tx1, ty0, ty1)) = tile_range(s) {
-            for ty in ty0..=ty1 {
-                for tx in tx0..=tx1 {
-                    counts[ty * tiles_x + tx + 1] += 1;
-                }
-            }
-        }
-    }
-    for t in 0..n_tiles {
-        counts[t + 1] += counts[t];
-    }
-    let mut cursor = counts.clone();
-    let mut binned = vec![0u32; counts[n_tiles] as usize];
-    for (si, s) in splats.iter().enumerate() {
-        if let Some((tx0, tx1, ty0, ty1)) = tile_range(s) {
-            for ty in ty0..=ty1 {
-                for tx in tx0..=tx1 {
-                    let t = ty * tiles_x + tx;
-                    binned[cursor[t] as usize] = si as u32;
-                    cursor[t] += 1;
-                }
-            }
-        }
-    }
+    let (tile_starts, binned) = bin_into_tiles(&splats, width, height, tiles_x, tiles_y);
 
-    let k_max = settings.k;
-    let tiles: Vec<TileOut> = (0..n_tiles)
-        .into_par_iter()
-        .map(|t| {
-            let tx = t % tiles_x;
-            let ty = t / tiles_x;
-            let x_start = tx * TILE;
-            let y_start = ty * TILE;
-            let tw = TILE.min(width - x_start);
-            let th = TILE.min(height - y_start);
-            let mut entries = vec![Entry::default(); tw * th * k_max];
-            let mut lens = vec![0u8; tw * th];
-            for &si in &binned[counts[t] as usize..counts[t + 1] as usize] {
-                let s = splats[si as usize];
-                let r2 = s.radius * s.radius;
-                let Some((x0, x1)) = pixel_span(s.u, s.radius, width) else {
-                    continue;
-                };
-                let Some((y0, y1)) = pixel_span(s.v, s.radius, height) else {
-                    continue;
-                };
-                let x0 = x0.max(x_start);
-                let x1 = x1.min(x_start + tw - 1);
-                let y0 = y0.max(y_start);
-                let y1 = y1.min(y_start + th - 1);
-                for y in y0..=y1 {
-                    let dy = y as f32 - s.v;
-                    for x in x0..=x1 {
-                        let dx = x as f32 - s.u;
-                        let d2 = dx * dx + dy * dy;
-                        if d2 >= r2 {
-                            continue;
-                        }
-                        let w = s.alpha * (1.0 - d2 / r2);
-                        if w <= 0.0 {
-                            continue;
-                        }
-                        let p = (y - y_start) * tw + (x - x_start);
-                        insert(
-                            &mut entries[p * k_max..(p + 1) * k_max],
-                            &mut lens[p],
-                            Entry {
-                                z: s.z,
-                                w,
-                                index: s.index,
-                            },
-                        );
-                    }
-                }
-            }
-            let mut out = TileOut {
-                colour: vec![[0.0; 3]; tw * th],
-                coverage: vec![0.0; tw * th],
-                depth: vec![0.0; tw * th],
-            };
-            for p in 0..tw * th {
-                let list = &entries[p * k_max..p * k_max + lens[p] as usize];
-                let (c, a, z) = composite(
-                    list.iter()
-                        .map(|e| (e.w, cloud.colours[e.index as usize], e.z)),
-                );
-                out.colour[p] = c;
-                out.coverage[p] = a;
-                out.depth[p] = z;
-            }
-            out
-        })
-        .collect();
-
+    // Rasterise one row of tiles per task, straight into the output rows it owns.
     let mut colour = Raster::new(width, height, [0.0f32; 3]);
     let mut coverage = Raster::new(width, height, 0.0f32);
     let mut depth = Raster::new(width, height, 0.0f32);
-    for (t, tile) in tiles.iter().enumerate() {
-        let x_start = (t % tiles_x) * TILE;
-        let y_start = (t / tiles_x) * TILE;
-        let tw = TILE.min(width - x_start);
-        for (row, y) in (y_start..(y_start + TILE).min(height)).enumerate() {
-            let src = row * tw..(row + 1) * tw;
-            colour.row_mut(y)[x_start..x_start + tw].copy_from_slice(&tile.colour[src.clone()]);
-            coverage.row_mut(y)[x_start..x_start + tw].copy_from_slice(&tile.coverage[src.clone()]);
-            depth.row_mut(y)[x_start..x_start + tw].copy_from_slice(&tile.depth[src]);
-        }
-    }
+    let k_max = settings.k;
+    let band = width * TILE;
+    colour
+        .data_mut()
+        .par_chunks_mut(band)
+        .zip(coverage.data_mut().par_chunks_mut(band))
+        .zip(depth.data_mut().par_chunks_mut(band))
+        .enumerate()
+        .for_each(|(ty, ((colour, coverage), depth))| {
+            let y_start = ty * TILE;
+            let th = TILE.min(height - y_start);
+            let mut entries = vec![Entry::default(); TILE * TILE * k_max];
+            let mut lens = [0u8; TILE * TILE];
+            for tx in 0..tiles_x {
+                let x_start = tx * TILE;
+                let tw = TILE.min(width - x_start);
+                lens.fill(0);
+                let t = ty * tiles_x + tx;
+                for si in &binned[tile_starts[t] as usize..tile_starts[t + 1] as usize] {
+                    let s = splats[si.load(Ordering::Relaxed) as usize];
+                    let r2 = s.radius * s.radius;
+                    let Some((x0, x1)) = pixel_span(s.u, s.radius, width) else {
+                        continue;
+                    };
+                    let Some((y0, y1)) = pixel_span(s.v, s.radius, height) else {
+                        continue;
+                    };
+                    let x0 = x0.max(x_start);
+                    let x1 = x1.min(x_start + tw - 1);
+                    let y0 = y0.max(y_start);
+                    let y1 = y1.min(y_start + th - 1);
+                    for y in y0..=y1 {
+                        let dy = y as f32 - s.v;
+                        for x in x0..=x1 {
+                            let dx = x as f32 - s.u;
+                            let d2 = dx * dx + dy * dy;
+                            if d2 >= r2 {
+                                continue;
+                            }
+                            let w = s.alpha * (1.0 - d2 / r2);
+                            if w <= 0.0 {
+                                continue;
+                            }
+                            let p = (y - y_start) * TILE + (x - x_start);
+                            insert(
+                                &mut entries[p * k_max..(p + 1) * k_max],
+                                &mut lens[p],
+                                Entry {
+                                    z: s.z,
+                                    w,
+                                    index: s.index,
+                                },
+                            );
+                        }
+                    }
+                }
+                for row in 0..th {
+                    for col in 0..tw {
+                        let p = row * TILE + col;
+                        let list = &entries[p * k_max..p * k_max + lens[p] as usize];
+                        let (c, a, z) = composite(
+                            list.iter()
+                                .map(|e| (e.w, cloud.colours[e.index as usize], e.z)),
+                        );
+                        let out = row * width + x_start + col;
+                        colour[out] = c;
+                        coverage[out] = a;
+                        depth[out] = z;
+                    }
+                }
+            }
+        });
     Ok(Frame {
         colour,
         coverage,
@@ -300,10 +261,82 @@ pub fn render_cpu(
     })
 }
 
-struct TileOut {
-    colour: Vec<[f32; 3]>,
-    coverage: Vec<f32>,
-    depth: Vec<f32>,
+/// Inclusive tile range `(tx0, tx1, ty0, ty1)` of a splat's pixels, `None` when it has none.
+#[inline]
+fn tile_range(s: &Splat, width: usize, height: usize) -> Option<(usize, usize, usize, usize)> {
+    let (x0, x1) = pixel_span(s.u, s.radius, width)?;
+    let (y0, y1) = pixel_span(s.v, s.radius, height)?;
+    Some((x0 / TILE, x1 / TILE, y0 / TILE, y1 / TILE))
+}
+
+/// Counting sort of splats into the tiles they reach, in parallel and keeping splat order inside
+/// each tile. Returns the start of each tile's list (one extra entry holds the total) and the
+/// lists (indices into `splats`; atomics only so that threads can fill disjoint slots safely,
+/// every access is a plain relaxed load or store).
+fn bin_into_tiles(
+    splats: &[Splat],
+    width: usize,
+    height: usize,
+    tiles_x: usize,
+    tiles_y: usize,
+) -> (Vec<u32>, Vec<AtomicU32>) {
+    let n_tiles = tiles_x * tiles_y;
+    let chunk = splats
+        .len()
+        .div_ceil(4 * rayon::current_num_threads())
+        .max(1 << 14);
+    // Per chunk: how many of its splats reach each tile.
+    let mut chunk_counts: Vec<Vec<u32>> = splats
+        .par_chunks(chunk)
+        .map(|c| {
+            let mut counts = vec![0u32; n_tiles];
+            for s in c {
+                if let Some((tx0, tx1, ty0, ty1)) = tile_range(s, width, height) {
+                    for ty in ty0..=ty1 {
+                        for tx in tx0..=tx1 {
+                            counts[ty * tiles_x + tx] += 1;
+                        }
+                    }
+                }
+            }
+            counts
+        })
+        .collect();
+    // Tile-major prefix sum: each chunk's counts become its write cursors.
+    let mut tile_starts = vec![0u32; n_tiles + 1];
+    let mut total = 0u32;
+    for t in 0..n_tiles {
+        tile_starts[t] = total;
+        for counts in chunk_counts.iter_mut() {
+            let c = counts[t];
+            counts[t] = total;
+            total += c;
+        }
+    }
+    tile_starts[n_tiles] = total;
+    let binned: Vec<AtomicU32> = (0..total)
+        .into_par_iter()
+        .map(|_| AtomicU32::new(0))
+        .collect();
+    splats
+        .par_chunks(chunk)
+        .zip(chunk_counts.par_iter_mut())
+        .enumerate()
+        .for_each(|(ci, (c, cursor))| {
+            for (i, s) in c.iter().enumerate() {
+                if let Some((tx0, tx1, ty0, ty1)) = tile_range(s, width, height) {
+                    for ty in ty0..=ty1 {
+                        for tx in tx0..=tx1 {
+                            let t = ty * tiles_x + tx;
+                            binned[cursor[t] as usize]
+                                .store((ci * chunk + i) as u32, Ordering::Relaxed);
+                            cursor[t] += 1;
+                        }
+                    }
+                }
+            }
+        });
+    (tile_starts, binned)
 }
 
 /// Inserts `e` into the depth-sorted list `list[..len]` of capacity `list.len()`, dropping the
@@ -561,6 +594,242 @@ mod tests {
         let c = render_cpu(&rev, None, &moved, 64, 48, &SplatSettings::default()).unwrap();
         assert_eq!(a.coverage, c.coverage);
         assert_eq!(a.colour, c.colour);
+    }
+
+    /// The renderer as it was before the tile rows were rasterised in place and the binning ran
+    /// in parallel (kept to prove that the output did not change by a single bit).
+    fn render_cpu_serial_binning(
+        cloud: &PointCloud,
+        positions: Option<&[Vec3]>,
+        view: &View,
+        width: usize,
+        height: usize,
+        settings: &SplatSettings,
+    ) -> Result<Frame> {
+        settings.validate()?;
+        if width == 0 || height == 0 {
+            return Err(Error::invalid(format!(
+                "render: output size {width}×{height} has no pixels"
+            )));
+        }
+        if !view.intrinsics.is_valid() {
+            return Err(Error::invalid(format!(
+                "render: invalid intrinsics {:?}",
+                view.intrinsics
+            )));
+        }
+        let positions = positions.unwrap_or(&cloud.positions);
+        if positions.len() != cloud.len() {
+            return Err(Error::invalid(format!(
+                "render: {} positions for {} points",
+                positions.len(),
+                cloud.len()
+            )));
+        }
+        let splats = project(cloud, positions, view, width, height, settings);
+
+        // Counting sort of splats into tiles, keeping point order inside each tile.
+        let tiles_x = width.div_ceil(TILE);
+        let tiles_y = height.div_ceil(TILE);
+        let n_tiles = tiles_x * tiles_y;
+        let tile_range = |s: &Splat| -> Option<(usize, usize, usize, usize)> {
+            let (x0, x1) = pixel_span(s.u, s.radius, width)?;
+            let (y0, y1) = pixel_span(s.v, s.radius, height)?;
+            Some((x0 / TILE, x1 / TILE, y0 / TILE, y1 / TILE))
+        };
+        let mut counts = vec![0u32; n_tiles + 1];
+        for s in &splats {
+            if let Some((tx0, tx1, ty0, ty1)) = tile_range(s) {
+                for ty in ty0..=ty1 {
+                    for tx in tx0..=tx1 {
+                        counts[ty * tiles_x + tx + 1] += 1;
+                    }
+                }
+            }
+        }
+        for t in 0..n_tiles {
+            counts[t + 1] += counts[t];
+        }
+        let mut cursor = counts.clone();
+        let mut binned = vec![0u32; counts[n_tiles] as usize];
+        for (si, s) in splats.iter().enumerate() {
+            if let Some((tx0, tx1, ty0, ty1)) = tile_range(s) {
+                for ty in ty0..=ty1 {
+                    for tx in tx0..=tx1 {
+                        let t = ty * tiles_x + tx;
+                        binned[cursor[t] as usize] = si as u32;
+                        cursor[t] += 1;
+                    }
+                }
+            }
+        }
+
+        let k_max = settings.k;
+        let tiles: Vec<TileOut> = (0..n_tiles)
+            .into_par_iter()
+            .map(|t| {
+                let tx = t % tiles_x;
+                let ty = t / tiles_x;
+                let x_start = tx * TILE;
+                let y_start = ty * TILE;
+                let tw = TILE.min(width - x_start);
+                let th = TILE.min(height - y_start);
+                let mut entries = vec![Entry::default(); tw * th * k_max];
+                let mut lens = vec![0u8; tw * th];
+                for &si in &binned[counts[t] as usize..counts[t + 1] as usize] {
+                    let s = splats[si as usize];
+                    let r2 = s.radius * s.radius;
+                    let Some((x0, x1)) = pixel_span(s.u, s.radius, width) else {
+                        continue;
+                    };
+                    let Some((y0, y1)) = pixel_span(s.v, s.radius, height) else {
+                        continue;
+                    };
+                    let x0 = x0.max(x_start);
+                    let x1 = x1.min(x_start + tw - 1);
+                    let y0 = y0.max(y_start);
+                    let y1 = y1.min(y_start + th - 1);
+                    for y in y0..=y1 {
+                        let dy = y as f32 - s.v;
+                        for x in x0..=x1 {
+                            let dx = x as f32 - s.u;
+                            let d2 = dx * dx + dy * dy;
+                            if d2 >= r2 {
+                                continue;
+                            }
+                            let w = s.alpha * (1.0 - d2 / r2);
+                            if w <= 0.0 {
+                                continue;
+                            }
+                            let p = (y - y_start) * tw + (x - x_start);
+                            insert(
+                                &mut entries[p * k_max..(p + 1) * k_max],
+                                &mut lens[p],
+                                Entry {
+                                    z: s.z,
+                                    w,
+                                    index: s.index,
+                                },
+                            );
+                        }
+                    }
+                }
+                let mut out = TileOut {
+                    colour: vec![[0.0; 3]; tw * th],
+                    coverage: vec![0.0; tw * th],
+                    depth: vec![0.0; tw * th],
+                };
+                for p in 0..tw * th {
+                    let list = &entries[p * k_max..p * k_max + lens[p] as usize];
+                    let (c, a, z) = composite(
+                        list.iter()
+                            .map(|e| (e.w, cloud.colours[e.index as usize], e.z)),
+                    );
+                    out.colour[p] = c;
+                    out.coverage[p] = a;
+                    out.depth[p] = z;
+                }
+                out
+            })
+            .collect();
+
+        let mut colour = Raster::new(width, height, [0.0f32; 3]);
+        let mut coverage = Raster::new(width, height, 0.0f32);
+        let mut depth = Raster::new(width, height, 0.0f32);
+        for (t, tile) in tiles.iter().enumerate() {
+            let x_start = (t % tiles_x) * TILE;
+            let y_start = (t / tiles_x) * TILE;
+            let tw = TILE.min(width - x_start);
+            for (row, y) in (y_start..(y_start + TILE).min(height)).enumerate() {
+                let src = row * tw..(row + 1) * tw;
+                colour.row_mut(y)[x_start..x_start + tw].copy_from_slice(&tile.colour[src.clone()]);
+                coverage.row_mut(y)[x_start..x_start + tw]
+                    .copy_from_slice(&tile.coverage[src.clone()]);
+                depth.row_mut(y)[x_start..x_start + tw].copy_from_slice(&tile.depth[src]);
+            }
+        }
+        Ok(Frame {
+            colour,
+            coverage,
+            depth,
+        })
+    }
+
+    struct TileOut {
+        colour: Vec<[f32; 3]>,
+        coverage: Vec<f32>,
+        depth: Vec<f32>,
+    }
+
+    #[test]
+    fn parallel_binning_is_bit_identical_to_the_serial_renderer() {
+        let bits = |f: &Frame| -> Vec<u32> {
+            let mut v: Vec<u32> = f
+                .colour
+                .data()
+                .iter()
+                .flatten()
+                .map(|x| x.to_bits())
+                .collect();
+            v.extend(f.coverage.data().iter().map(|x| x.to_bits()));
+            v.extend(f.depth.data().iter().map(|x| x.to_bits()));
+            v
+        };
+        // A slanted ground with depth steps and a few hundred thousand points, so that the
+        // binning really runs in several chunks.
+        let (w, h) = (700, 420);
+        let k = Intrinsics::from_hfov(w, h, 60.0);
+        let image = Raster::from_fn(w, h, |x, y| {
+            [
+                (x * 7 % 11) as f32 / 10.0,
+                (y * 3 % 7) as f32 / 6.0,
+                ((x ^ y) % 5) as f32 / 4.0,
+            ]
+        });
+        let depth = Raster::from_fn(w, h, |x, y| {
+            if (x / 40) % 3 == 1 && y < 300 {
+                3.0
+            } else {
+                1.0 + 0.02 * (h - y) as f32
+            }
+        });
+        let mut cloud =
+            PointCloud::lift(&image, &depth, &k, None, None, LiftOptions::default()).unwrap();
+        for (i, a) in cloud.alphas.iter_mut().enumerate() {
+            if i % 7 == 0 {
+                *a = 0.4;
+            }
+        }
+        let views = [
+            view(k),
+            View {
+                intrinsics: k.scaled(0.8, 0.8),
+                world_from_camera: Pose::new(
+                    glam::Quat::from_rotation_y(0.05),
+                    Vec3::new(0.05, -0.02, 0.4),
+                ),
+            },
+        ];
+        for (settings, v) in [
+            (SplatSettings::default(), views[0]),
+            (SplatSettings::default(), views[1]),
+            (
+                SplatSettings {
+                    k: 3,
+                    radius_scale: 2.5,
+                    ..SplatSettings::default()
+                },
+                views[1],
+            ),
+        ] {
+            let (ow, oh) = (
+                (w as f32 * v.intrinsics.fx / k.fx).round() as usize,
+                (h as f32 * v.intrinsics.fy / k.fy).round() as usize,
+            );
+            let new = render_cpu(&cloud, None, &v, ow, oh, &settings).unwrap();
+            let old = render_cpu_serial_binning(&cloud, None, &v, ow, oh, &settings).unwrap();
+            assert_eq!(bits(&new), bits(&old));
+        }
     }
 
     fn reverse(cloud: &PointCloud) -> PointCloud {

@@ -61,6 +61,8 @@ use std::sync::mpsc;
 const TILE: usize = 16;
 /// Invocations per workgroup of the per-point and per-pixel passes.
 const WORKGROUP: usize = 256;
+// The K-lists in splat.wgsl hold `MAX_K = 16` entries.
+const _: () = assert!(crate::render::cpu::MAX_K == 16);
 
 const SPLAT_WGSL: &str = include_str!("../../shaders/splat.wgsl");
 const BLEND_WGSL: &str = include_str!("../../shaders/blend.wgsl");
