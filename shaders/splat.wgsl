@@ -5,8 +5,9 @@
 //            every 16×16 tile its disc reaches.
 //   scan     one workgroup: exclusive prefix sum of the tile counts (tile list offsets).
 //   scatter  one invocation per point: writes its index into each tile list it reaches.
-//   raster   one workgroup per tile, one invocation per pixel: keeps the K nearest discs by
-//            (depth, point index) in a private list, composites front to back, writes the pixel.
+//   raster   one workgroup per tile, one invocation per pixel: gathers the discs that reach
+//            each pixel, keeps the K nearest by (depth, point index) in a private list,
+//            composites front to back, writes the pixel.
 //
 // Every float formula mirrors `src/render/cpu.rs` operation by operation.
 
@@ -253,16 +254,78 @@ fn scatter(@builtin(global_invocation_id) gid: vec3<u32>) {
 var<workgroup> list_start: u32;
 var<workgroup> list_end: u32;
 var<workgroup> batch_splat: array<vec4<f32>, BATCH>;
-// Per disc: the pixel span `(x_lo, x_hi, y_lo, y_hi)`, computed once per disc, not per pixel.
-var<workgroup> batch_span: array<vec4<f32>, BATCH>;
 var<workgroup> batch_alpha: array<f32, BATCH>;
 var<workgroup> batch_index: array<u32, BATCH>;
+// Per pixel of the tile: how many discs of the batch have it in their span, and the first
+// `CANDIDATES` of them as batch slots (bytes, four to a word).
+const CANDIDATES: u32 = 32u;
+var<workgroup> candidate_count: array<atomic<u32>, BATCH>;
+var<workgroup> candidate_slots: array<atomic<u32>, 2048>; // BATCH * CANDIDATES / 4
 
 // `cpu::Entry::before`: nearer first, ties by point index (a total order).
 fn before(z: f32, index: u32, other_z: f32, other_index: u32) -> bool {
     return z < other_z || (z == other_z && index < other_index);
 }
 
+// One pixel's K-list (private to the invocation).
+struct KList {
+    z: array<f32, MAX_K>,
+    w: array<f32, MAX_K>,
+    index: array<u32, MAX_K>,
+    len: u32,
+}
+
+// Tests the disc in batch slot `q` against pixel `(x, y)` and inserts it into `list` when it
+// covers the pixel (`cpu::insert`: keep the K nearest, sorted, drop the farthest when full).
+fn consider(list: ptr<function, KList>, q: u32, x: f32, y: f32, k: u32) {
+    let s = batch_splat[q];
+    let radius = s.w;
+    if x < span_lo(s.x, radius) || x > span_hi(s.x, radius) || y < span_lo(s.y, radius)
+        || y > span_hi(s.y, radius) {
+        return;
+    }
+    let r2 = radius * radius;
+    let dx = x - s.x;
+    let dy = y - s.y;
+    let d2 = dx * dx + dy * dy;
+    if d2 >= r2 {
+        return;
+    }
+    let w = batch_alpha[q] * (1.0 - d2 / r2);
+    if w <= 0.0 {
+        return;
+    }
+    let z = s.z;
+    let index = batch_index[q];
+    let n = (*list).len;
+    if n == k {
+        if !before(z, index, (*list).z[k - 1u], (*list).index[k - 1u]) {
+            return;
+        }
+    } else {
+        (*list).len = n + 1u;
+    }
+    var at = min(n, k - 1u);
+    loop {
+        if at == 0u || !before(z, index, (*list).z[at - 1u], (*list).index[at - 1u]) {
+            break;
+        }
+        (*list).z[at] = (*list).z[at - 1u];
+        (*list).w[at] = (*list).w[at - 1u];
+        (*list).index[at] = (*list).index[at - 1u];
+        at -= 1u;
+    }
+    (*list).z[at] = z;
+    (*list).w[at] = w;
+    (*list).index[at] = index;
+}
+
+// Each batch runs in two phases. Disc-parallel: every invocation takes one disc and records its
+// batch slot at each pixel of the tile inside the disc's span (so the work is proportional to
+// the pixels the discs cover, as on the CPU, not to discs × 256 pixels). Pixel-parallel: every
+// invocation inserts its candidates into its K-list; a pixel with more than `CANDIDATES`
+// candidates in one batch (large, overlapping discs) tests the whole batch instead. The
+// candidates arrive in atomic order, but a K-list of a total order does not depend on it.
 @compute @workgroup_size(16, 16)
 fn raster(
     @builtin(workgroup_id) wid: vec3<u32>,
@@ -276,73 +339,67 @@ fn raster(
     }
     let start = workgroupUniformLoad(&list_start);
     let end = workgroupUniformLoad(&list_end);
-    let px = wid.x * TILE + lid.x;
-    let py = wid.y * TILE + lid.y;
+    let tile_x0 = wid.x * TILE;
+    let tile_y0 = wid.y * TILE;
+    let px = tile_x0 + lid.x;
+    let py = tile_y0 + lid.y;
     let inside = px < camera.width && py < camera.height;
     let x = f32(px);
     let y = f32(py);
     let k = camera.k;
+    // The tile's last pixel inside the image.
+    let tile_x1 = min(tile_x0 + TILE, camera.width) - 1u;
+    let tile_y1 = min(tile_y0 + TILE, camera.height) - 1u;
 
-    var list_z: array<f32, MAX_K>;
-    var list_w: array<f32, MAX_K>;
-    var list_i: array<u32, MAX_K>;
-    var len = 0u;
+    var list: KList;
+    list.len = 0u;
 
     for (var base = start; base < end; base += BATCH) {
         let j = base + li;
+        atomicStore(&candidate_count[li], 0u);
+        for (var word = 0u; word < CANDIDATES / 4u; word++) {
+            atomicStore(&candidate_slots[li * (CANDIDATES / 4u) + word], 0u);
+        }
         if j < end {
             let index = entries[j];
-            let s = splats[index];
-            batch_splat[li] = s;
-            batch_span[li] = vec4<f32>(span_lo(s.x, s.w), span_hi(s.x, s.w), span_lo(s.y, s.w), span_hi(s.y, s.w));
+            batch_splat[li] = splats[index];
             batch_alpha[li] = min(alphas[index], 1.0);
             batch_index[li] = index;
         }
         workgroupBarrier();
         let count = min(BATCH, end - base);
+        if li < count {
+            let s = batch_splat[li];
+            // The disc's pixel span clipped to the tile (empty when it misses the tile).
+            let x0 = max(i32(span_lo(s.x, s.w)), i32(tile_x0));
+            let x1 = min(i32(span_hi(s.x, s.w)), i32(tile_x1));
+            let y0 = max(i32(span_lo(s.y, s.w)), i32(tile_y0));
+            let y1 = min(i32(span_hi(s.y, s.w)), i32(tile_y1));
+            for (var cy = y0; cy <= y1; cy++) {
+                for (var cx = x0; cx <= x1; cx++) {
+                    let p = u32(cy - i32(tile_y0)) * TILE + u32(cx - i32(tile_x0));
+                    let slot = atomicAdd(&candidate_count[p], 1u);
+                    if slot < CANDIDATES {
+                        atomicOr(
+                            &candidate_slots[p * (CANDIDATES / 4u) + slot / 4u],
+                            li << (8u * (slot % 4u)),
+                        );
+                    }
+                }
+            }
+        }
+        workgroupBarrier();
         if inside {
-            for (var q = 0u; q < count; q++) {
-                let span = batch_span[q];
-                if x < span.x || x > span.y || y < span.z || y > span.w {
-                    continue;
+            let n = atomicLoad(&candidate_count[li]);
+            if n <= CANDIDATES {
+                for (var c = 0u; c < n; c++) {
+                    let word = atomicLoad(&candidate_slots[li * (CANDIDATES / 4u) + c / 4u]);
+                    consider(&list, (word >> (8u * (c % 4u))) & 0xffu, x, y, k);
                 }
-                let s = batch_splat[q];
-                let radius = s.w;
-                let r2 = radius * radius;
-                let dx = x - s.x;
-                let dy = y - s.y;
-                let d2 = dx * dx + dy * dy;
-                if d2 >= r2 {
-                    continue;
+            } else {
+                for (var q = 0u; q < count; q++) {
+                    consider(&list, q, x, y, k);
                 }
-                let w = batch_alpha[q] * (1.0 - d2 / r2);
-                if w <= 0.0 {
-                    continue;
-                }
-                let z = s.z;
-                let index = batch_index[q];
-                // `cpu::insert`: keep the K nearest, sorted, dropping the farthest when full.
-                let n = len;
-                if n == k {
-                    if !before(z, index, list_z[k - 1u], list_i[k - 1u]) {
-                        continue;
-                    }
-                } else {
-                    len = n + 1u;
-                }
-                var at = min(n, k - 1u);
-                loop {
-                    if at == 0u || !before(z, index, list_z[at - 1u], list_i[at - 1u]) {
-                        break;
-                    }
-                    list_z[at] = list_z[at - 1u];
-                    list_w[at] = list_w[at - 1u];
-                    list_i[at] = list_i[at - 1u];
-                    at -= 1u;
-                }
-                list_z[at] = z;
-                list_w[at] = w;
-                list_i[at] = index;
             }
         }
         workgroupBarrier();
@@ -356,15 +413,15 @@ fn raster(
     var c = vec3<f32>(0.0);
     var a = 0.0;
     var zsum = 0.0;
-    for (var e = 0u; e < len; e++) {
-        let w = list_w[e];
+    for (var e = 0u; e < list.len; e++) {
+        let w = list.w[e];
         let wt = w * transmittance;
-        let index = list_i[e];
+        let index = list.index[e];
         c.x += wt * colours[3u * index];
         c.y += wt * colours[3u * index + 1u];
         c.z += wt * colours[3u * index + 2u];
         a += wt;
-        zsum += wt * list_z[e];
+        zsum += wt * list.z[e];
         transmittance *= 1.0 - w;
         if transmittance <= 0.0 {
             break;
