@@ -19,9 +19,9 @@
 //! total order and the output does not depend on how rayon schedules the work: the same input
 //! gives the same bytes.
 //!
-//! **Speed.** Points are projected in parallel, binned into 16×16 tiles (a parallel counting
-//! sort that keeps point order), and rows of tiles are rasterised in parallel, each straight into
-//! the output rows it owns, with per-tile K-lists that stay in cache.
+//! **Speed.** Points are projected in parallel chunks, each chunk's splats sorted into 16×16
+//! tiles (a counting sort that keeps point order), and rows of tiles are rasterised in parallel,
+//! each straight into the output rows it owns, with per-tile K-lists that stay in cache.
 
 use crate::error::{Error, Result};
 use crate::geometry::{View, WorldToCamera};
@@ -31,7 +31,6 @@ use crate::stages::points::PointCloud;
 use glam::Vec3;
 use rayon::prelude::*;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU32, Ordering};
 
 /// Tile side, pixels.
 const TILE: usize = 16;
@@ -40,7 +39,7 @@ const TILE: usize = 16;
 pub const MAX_K: usize = 16;
 
 /// A projected point.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 struct Splat {
     u: f32,
     v: f32,
@@ -88,7 +87,71 @@ pub fn splat_radius_px(
     }
 }
 
+/// What projecting a point needs, computed once per render.
+struct Projector<'a> {
+    cloud: &'a PointCloud,
+    positions: &'a [Vec3],
+    w2c: WorldToCamera,
+    intrinsics: crate::geometry::Intrinsics,
+    width: f32,
+    height: f32,
+    settings: &'a SplatSettings,
+}
+
+impl<'a> Projector<'a> {
+    fn new(
+        cloud: &'a PointCloud,
+        positions: &'a [Vec3],
+        view: &View,
+        width: usize,
+        height: usize,
+        settings: &'a SplatSettings,
+    ) -> Self {
+        Self {
+            cloud,
+            positions,
+            w2c: WorldToCamera::new(&view.world_from_camera),
+            intrinsics: view.intrinsics,
+            width: width as f32,
+            height: height as f32,
+            settings,
+        }
+    }
+
+    /// Point `i` as a disc in the view, `None` when it is culled.
+    #[inline]
+    fn splat(&self, i: usize) -> Option<Splat> {
+        let alpha = self.cloud.alphas[i];
+        if alpha <= 0.0 || alpha.is_nan() {
+            return None;
+        }
+        let k = &self.intrinsics;
+        let p = self.w2c.apply(self.positions[i]);
+        let (u, v, z) = k.project(p)?;
+        let tu = self.w2c.rotation * self.cloud.tangent_u[i];
+        let tv = self.w2c.rotation * self.cloud.tangent_v[i];
+        let radius = splat_radius_px(k, p, tu, tv, self.settings);
+        if radius <= 0.0
+            || u + radius < -0.5
+            || v + radius < -0.5
+            || u - radius > self.width - 0.5
+            || v - radius > self.height - 0.5
+        {
+            return None;
+        }
+        Some(Splat {
+            u,
+            v,
+            z,
+            radius,
+            alpha: alpha.min(1.0),
+            index: i as u32,
+        })
+    }
+}
+
 /// Projects every point; returns splats in point order.
+#[cfg(test)]
 fn project(
     cloud: &PointCloud,
     positions: &[Vec3],
@@ -97,48 +160,43 @@ fn project(
     height: usize,
     settings: &SplatSettings,
 ) -> Vec<Splat> {
-    let w2c = WorldToCamera::new(&view.world_from_camera);
-    let k = view.intrinsics;
-    let (wf, hf) = (width as f32, height as f32);
+    let projector = Projector::new(cloud, positions, view, width, height, settings);
     (0..positions.len())
         .into_par_iter()
         .with_min_len(4096)
-        .filter_map(|i| {
-            let alpha = cloud.alphas[i];
-            if alpha <= 0.0 || alpha.is_nan() {
-                return None;
-            }
-            let p = w2c.apply(positions[i]);
-            let (u, v, z) = k.project(p)?;
-            let tu = w2c.rotation * cloud.tangent_u[i];
-            let tv = w2c.rotation * cloud.tangent_v[i];
-            let radius = splat_radius_px(&k, p, tu, tv, settings);
-            if radius <= 0.0
-                || u + radius < -0.5
-                || v + radius < -0.5
-                || u - radius > wf - 0.5
-                || v - radius > hf - 0.5
-            {
-                return None;
-            }
-            Some(Splat {
-                u,
-                v,
-                z,
-                radius,
-                alpha: alpha.min(1.0),
-                index: i as u32,
-            })
-        })
+        .filter_map(|i| projector.splat(i))
         .collect()
+}
+
+/// `x.floor() as i64` without the `floorf` library call that baseline x86-64 (no SSE4.1 `roundss`)
+/// makes for `f32::floor`: truncation is exact for every `f32`, and the same saturation applies.
+#[inline]
+fn floor_to_i64(x: f32) -> i64 {
+    let i = x as i64;
+    if (i as f32) > x {
+        i.saturating_sub(1)
+    } else {
+        i
+    }
+}
+
+/// `x.ceil() as i64` without a library call (see [`floor_to_i64`]).
+#[inline]
+fn ceil_to_i64(x: f32) -> i64 {
+    let i = x as i64;
+    if (i as f32) < x {
+        i.saturating_add(1)
+    } else {
+        i
+    }
 }
 
 /// Inclusive pixel range `[lo, hi]` strictly within `radius` of `centre` along one axis,
 /// clipped to `[0, size)`; `None` when empty.
 #[inline]
 fn pixel_span(centre: f32, radius: f32, size: usize) -> Option<(usize, usize)> {
-    let lo = (centre - radius).floor() as i64 + 1;
-    let hi = (centre + radius).ceil() as i64 - 1;
+    let lo = floor_to_i64(centre - radius) + 1;
+    let hi = ceil_to_i64(centre + radius) - 1;
     let lo = lo.max(0);
     let hi = hi.min(size as i64 - 1);
     (lo <= hi).then_some((lo as usize, hi as usize))
@@ -173,10 +231,10 @@ pub fn render_cpu(
             cloud.len()
         )));
     }
-    let splats = project(cloud, positions, view, width, height, settings);
     let tiles_x = width.div_ceil(TILE);
     let tiles_y = height.div_ceil(TILE);
-    let (tile_starts, binned) = bin_into_tiles(&splats, width, height, tiles_x, tiles_y);
+    let projector = Projector::new(cloud, positions, view, width, height, settings);
+    let chunks = project_and_bin(&projector, width, height, tiles_x, tiles_y);
 
     // Rasterise one row of tiles per task, straight into the output rows it owns.
     let mut colour = Raster::new(width, height, [0.0f32; 3]);
@@ -200,8 +258,11 @@ pub fn render_cpu(
                 let tw = TILE.min(width - x_start);
                 lens.fill(0);
                 let t = ty * tiles_x + tx;
-                for si in &binned[tile_starts[t] as usize..tile_starts[t + 1] as usize] {
-                    let s = splats[si.load(Ordering::Relaxed) as usize];
+                // Chunks in point order, each tile's splats in point order within a chunk.
+                let tile_splats = chunks
+                    .iter()
+                    .flat_map(|c| &c.splats[c.starts[t] as usize..c.starts[t + 1] as usize]);
+                for &s in tile_splats {
                     let r2 = s.radius * s.radius;
                     let Some((x0, x1)) = pixel_span(s.u, s.radius, width) else {
                         continue;
@@ -269,74 +330,66 @@ fn tile_range(s: &Splat, width: usize, height: usize) -> Option<(usize, usize, u
     Some((x0 / TILE, x1 / TILE, y0 / TILE, y1 / TILE))
 }
 
-/// Counting sort of splats into the tiles they reach, in parallel and keeping splat order inside
-/// each tile. Returns the start of each tile's list (one extra entry holds the total) and the
-/// lists (indices into `splats`; atomics only so that threads can fill disjoint slots safely,
-/// every access is a plain relaxed load or store).
-fn bin_into_tiles(
-    splats: &[Splat],
+/// The splats of one chunk of points, sorted by tile.
+struct BinnedChunk {
+    /// Splats grouped by tile (a splat reaching several tiles appears in each), point order
+    /// inside a tile.
+    splats: Vec<Splat>,
+    /// Start of each tile's group in `splats`; one extra entry holds the total.
+    starts: Vec<u32>,
+}
+
+/// Projects the points in parallel chunks and sorts each chunk's splats into the tiles they reach
+/// (a counting sort that keeps point order). Reading the chunks in order gives every tile its
+/// splats in point order, as one global sort would, without any shared writes.
+fn project_and_bin(
+    projector: &Projector<'_>,
     width: usize,
     height: usize,
     tiles_x: usize,
     tiles_y: usize,
-) -> (Vec<u32>, Vec<AtomicU32>) {
+) -> Vec<BinnedChunk> {
+    let n = projector.positions.len();
     let n_tiles = tiles_x * tiles_y;
-    let chunk = splats
-        .len()
-        .div_ceil(4 * rayon::current_num_threads())
-        .max(1 << 14);
-    // Per chunk: how many of its splats reach each tile.
-    let mut chunk_counts: Vec<Vec<u32>> = splats
-        .par_chunks(chunk)
+    let chunk = n.div_ceil(4 * rayon::current_num_threads()).max(1 << 14);
+    (0..n.div_ceil(chunk))
+        .into_par_iter()
         .map(|c| {
-            let mut counts = vec![0u32; n_tiles];
-            for s in c {
-                if let Some((tx0, tx1, ty0, ty1)) = tile_range(s, width, height) {
+            let points = c * chunk..((c + 1) * chunk).min(n);
+            let mut projected = Vec::with_capacity(points.len());
+            let mut starts = vec![0u32; n_tiles + 1];
+            for i in points {
+                let Some(s) = projector.splat(i) else {
+                    continue;
+                };
+                if let Some((tx0, tx1, ty0, ty1)) = tile_range(&s, width, height) {
                     for ty in ty0..=ty1 {
                         for tx in tx0..=tx1 {
-                            counts[ty * tiles_x + tx] += 1;
+                            starts[ty * tiles_x + tx + 1] += 1;
                         }
                     }
+                    projected.push(s);
                 }
             }
-            counts
-        })
-        .collect();
-    // Tile-major prefix sum: each chunk's counts become its write cursors.
-    let mut tile_starts = vec![0u32; n_tiles + 1];
-    let mut total = 0u32;
-    for t in 0..n_tiles {
-        tile_starts[t] = total;
-        for counts in chunk_counts.iter_mut() {
-            let c = counts[t];
-            counts[t] = total;
-            total += c;
-        }
-    }
-    tile_starts[n_tiles] = total;
-    let binned: Vec<AtomicU32> = (0..total)
-        .into_par_iter()
-        .map(|_| AtomicU32::new(0))
-        .collect();
-    splats
-        .par_chunks(chunk)
-        .zip(chunk_counts.par_iter_mut())
-        .enumerate()
-        .for_each(|(ci, (c, cursor))| {
-            for (i, s) in c.iter().enumerate() {
-                if let Some((tx0, tx1, ty0, ty1)) = tile_range(s, width, height) {
+            for t in 0..n_tiles {
+                starts[t + 1] += starts[t];
+            }
+            let mut cursor = starts.clone();
+            let mut splats = vec![Splat::default(); starts[n_tiles] as usize];
+            for s in projected {
+                if let Some((tx0, tx1, ty0, ty1)) = tile_range(&s, width, height) {
                     for ty in ty0..=ty1 {
                         for tx in tx0..=tx1 {
                             let t = ty * tiles_x + tx;
-                            binned[cursor[t] as usize]
-                                .store((ci * chunk + i) as u32, Ordering::Relaxed);
+                            splats[cursor[t] as usize] = s;
                             cursor[t] += 1;
                         }
                     }
                 }
             }
-        });
-    (tile_starts, binned)
+            BinnedChunk { splats, starts }
+        })
+        .collect()
 }
 
 /// Inserts `e` into the depth-sorted list `list[..len]` of capacity `list.len()`, dropping the
@@ -596,8 +649,8 @@ mod tests {
         assert_eq!(a.colour, c.colour);
     }
 
-    /// The renderer as it was before the tile rows were rasterised in place and the binning ran
-    /// in parallel (kept to prove that the output did not change by a single bit).
+    /// The renderer as it was before projection and binning ran in chunks and tile rows were
+    /// rasterised in place (kept to prove that the output did not change by a single bit).
     fn render_cpu_serial_binning(
         cloud: &PointCloud,
         positions: Option<&[Vec3]>,
@@ -762,7 +815,51 @@ mod tests {
     }
 
     #[test]
-    fn parallel_binning_is_bit_identical_to_the_serial_renderer() {
+    fn integer_floor_and_ceil_match_the_float_ones() {
+        let mut values = vec![
+            0.0f32,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            0.999_999_94,
+            -0.999_999_94,
+            1.000_000_1,
+            8_388_607.5,
+            -8_388_607.5,
+            8_388_608.0,
+            16_777_217.0,
+            -16_777_217.0,
+            9.2e18,
+            -9.2e18,
+            9.3e18,
+            -9.3e18,
+            1e30,
+            -1e30,
+            f32::MAX,
+            f32::MIN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+            f32::MIN_POSITIVE,
+            -f32::MIN_POSITIVE,
+        ];
+        let mut state = 1u32;
+        for _ in 0..100_000 {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            let v = f32::from_bits(state);
+            values.push(v);
+            values.push((state >> 8) as f32 / 4096.0 - 2048.0);
+        }
+        for v in values {
+            assert_eq!(floor_to_i64(v), v.floor() as i64, "floor {v:e}");
+            assert_eq!(ceil_to_i64(v), v.ceil() as i64, "ceil {v:e}");
+        }
+    }
+
+    #[test]
+    fn chunked_binning_is_bit_identical_to_the_serial_renderer() {
         let bits = |f: &Frame| -> Vec<u32> {
             let mut v: Vec<u32> = f
                 .colour
