@@ -69,3 +69,40 @@ fn renderer_choice_is_honoured_and_said() {
         assert!(stderr.contains("GPU"), "{stderr}");
     }
 }
+
+/// `render` with the Vulkan drivers hidden (and wgpu limited to Vulkan): no adapter exists.
+fn render_without_adapter(out: &Path, renderer: &str) -> Output {
+    let missing = "/nonexistent/makeit4d_icd.json";
+    std::process::Command::new(env!("CARGO_BIN_EXE_makeit4d"))
+        .arg("render")
+        .arg(data("evening_glow_320.jpg"))
+        .args(["--frames", "2", "--size", "80x45", "--renderer", renderer])
+        .arg("--out")
+        .arg(out)
+        .env("WGPU_BACKEND", "vulkan")
+        .env("VK_ICD_FILENAMES", missing)
+        .env("VK_DRIVER_FILES", missing)
+        .output()
+        .expect("spawn makeit4d")
+}
+
+#[test]
+fn forced_gpu_without_an_adapter_is_a_clean_error_and_auto_falls_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("gpu");
+    let o = render_without_adapter(&out, "gpu");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("no GPU adapter"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let frames = std::fs::read_dir(&out).map(|d| d.count()).unwrap_or(0);
+    assert_eq!(frames, 0, "frames written without a renderer");
+
+    let o = render_without_adapter(&dir.path().join("auto"), "auto");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("renderer: cpu renderer: GPU: no GPU adapter"),
+        "{stderr}"
+    );
+}
