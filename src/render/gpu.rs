@@ -45,6 +45,12 @@
 //! is shared by all renders and grows on demand: the tile-list capacity is a guess that the scan
 //! checks, and a render that needed more is redone once after growing it.
 //!
+//! **Speed.** On hardware every pass is a plain streaming kernel and a frame costs a few
+//! memory passes over the cloud. On lavapipe (Mesa's CPU Vulkan), which is what CI and the
+//! 2-core development VM have, a frame is 2.5–8× slower than the CPU renderer (`render::bench`),
+//! mostly workgroup barriers and the private K-list arrays, which lavapipe keeps in scratch
+//! memory; so [`RendererChoice::Auto`] takes the CPU renderer on a software adapter.
+//!
 //! **Editor use.** [`GpuSplatter`] can be built from an existing `wgpu::Device`/`Queue`
 //! ([`GpuContext::from_device`], e.g. egui_wgpu's render state) and only records passes into a
 //! caller's encoder ([`GpuSplatter::encode_render`], [`GpuSplatter::encode_blend`],
