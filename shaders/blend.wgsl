@@ -3,7 +3,8 @@
 //   w_f = (1 − t)·exp(a·disp_f)·A_f,   w_b = t·exp(a·disp_b)·A_b,
 //
 // normalised by w_f + w_b, with disp = z_near / z ∈ (0, 1] and z_near the smallest covered depth
-// of both frames (`near_depth` finds it, `blend` mixes). Same semantics as `render::blend`.
+// of both frames (`near_depth` finds it, `blend` mixes). Mirrors `render::blend::symmetric_blend`
+// expression by expression.
 
 // Keep in sync with `BlendUniform` in src/render/gpu.rs.
 struct Params {
@@ -14,6 +15,11 @@ struct Params {
     pixel_count: u32,
     // Invocations per dispatch row (2-D dispatch of large frames).
     threads_per_row: u32,
+    // ln(t / (1 − t)), computed by the host exactly as `render::blend` does.
+    log_time_ratio: f32,
+    _pad0: f32,
+    _pad1: f32,
+    _pad2: f32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -132,10 +138,9 @@ fn blend(@builtin(global_invocation_id) gid: vec3<u32>) {
     let z_near = bitcast<f32>(atomicLoad(&near_bits));
     let t = params.t;
     let a = params.sharpness;
-    // Log-domain weights, so that a large sharpness cannot overflow.
     let cf = clean_coverage(f.coverage);
     let cb = clean_coverage(b.coverage);
-    let has_f = (1.0 - t) > 0.0 && cf > 0.0;
+    let has_f = t < 1.0 && cf > 0.0;
     let has_b = t > 0.0 && cb > 0.0;
     if has_f && !has_b {
         store(p, f);
@@ -153,11 +158,13 @@ fn blend(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         return;
     }
-    let lf = log(1.0 - t) + a * disparity(z_near, f.depth) + log(cf);
-    let lb = log(t) + a * disparity(z_near, b.depth) + log(cb);
-    // w_f / (w_f + w_b) = 1 / (1 + e^(lb − lf)); the exponent is clamped because `exp` of a
-    // huge argument is not guaranteed to give +∞ on every GPU (e^80 already makes a share < 1e-34).
-    let pf = 1.0 / (1.0 + exp(clamp(lb - lf, -80.0, 80.0)));
-    let pb = 1.0 / (1.0 + exp(clamp(lf - lb, -80.0, 80.0)));
-    store(p, Pixel(pf * f.colour + pb * b.colour, pf * f.coverage + pb * b.coverage, pf * f.depth + pb * b.depth));
+    // w_b/w_f = e^(ln(t/(1 − t)) + a·(disp_b − disp_f))·A_b/A_f. The exponent is clamped
+    // because `exp` of a huge argument need not give +∞ (or 0) on every GPU; e^±88 already makes
+    // one share exactly 1 and the other below 1e-38.
+    let log_ratio = params.log_time_ratio
+        + a * (disparity(z_near, b.depth) - disparity(z_near, f.depth));
+    let ratio = exp(clamp(log_ratio, -88.0, 88.0)) * (cb / cf);
+    let pf = 1.0 / (1.0 + ratio);
+    let pb = 1.0 - pf;
+    store(p, Pixel(pf * f.colour + pb * b.colour, pf * cf + pb * cb, pf * f.depth + pb * b.depth));
 }

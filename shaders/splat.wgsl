@@ -37,6 +37,11 @@ struct Camera {
     threads_per_row: u32,
     // Which `stats` word this render's entry count goes to.
     slot: u32,
+    // A disc is at most this many times the paper's fronto-parallel radius.
+    max_stretch: f32,
+    _pad0: f32,
+    _pad1: f32,
+    _pad2: f32,
 }
 
 const TILE: u32 = 16u;
@@ -66,6 +71,8 @@ const MIN_DEPTH: f32 = 1e-6;
 @group(0) @binding(10) var<storage, read_write> stats: array<u32>;
 // The frame, planar: colour `C/A` (3 floats per pixel), then coverage, then depth.
 @group(0) @binding(11) var<storage, read_write> frame: array<f32>;
+// World size of one source pixel at each point (`cpu::source_pixel_size`, computed on upload).
+@group(0) @binding(12) var<storage, read> source_pixel_size: array<f32>;
 
 fn is_finite(x: f32) -> bool {
     return (bitcast<u32>(x) & 0x7f800000u) != 0x7f800000u;
@@ -96,25 +103,45 @@ fn dot3(a: vec3<f32>, b: vec3<f32>) -> f32 {
     return a.x * b.x + a.y * b.y + a.z * b.z;
 }
 
-// `cpu::splat_radius_px`: r = r0·max(|J·t_u|, |J·t_v|), clamped to [min, max].
-fn splat_radius_px(p: vec3<f32>, tu: vec3<f32>, tv: vec3<f32>) -> f32 {
+// Rust's `f32::min`: a NaN operand is ignored.
+fn min_ignoring_nan(a: f32, b: f32) -> f32 {
+    if is_nan(a) {
+        return b;
+    }
+    if is_nan(b) {
+        return a;
+    }
+    return min(a, b);
+}
+
+// `cpu::splat_radius_px`: r = r0·max(|J·t_u|, |J·t_v|), at most `max_stretch` times the paper's
+// fronto-parallel radius r0·f·s/z (s = the source pixel size) and within [min, max].
+fn splat_radius_px(p: vec3<f32>, tu: vec3<f32>, tv: vec3<f32>, pixel_size: f32) -> f32 {
     let iz = 1.0 / p.z;
     let j0 = vec3<f32>(camera.fx * iz, 0.0, -camera.fx * p.x * iz * iz);
     let j1 = vec3<f32>(0.0, camera.fy * iz, -camera.fy * p.y * iz * iz);
     let a = vec2<f32>(dot3(j0, tu), dot3(j1, tu));
     let b = vec2<f32>(dot3(j0, tv), dot3(j1, tv));
+    let fronto = camera.radius_scale * camera.fx * pixel_size / p.z;
+    let cap = min_ignoring_nan(camera.max_stretch * fronto, camera.max_radius_px);
     let la = sqrt(a.x * a.x + a.y * a.y);
     let lb = sqrt(b.x * b.x + b.y * b.y);
-    // Rust's `f32::max` ignores a NaN operand.
-    var longest = la;
-    if is_nan(la) || lb > la {
-        longest = lb;
-    }
-    let r = camera.radius_scale * longest;
-    if is_finite(r) {
-        return clamp(r, camera.min_radius_px, camera.max_radius_px);
+    let r = camera.radius_scale * max_ignoring_nan(la, lb);
+    if is_finite(r) && is_finite(cap) {
+        return max(min(r, cap), camera.min_radius_px);
     }
     return camera.max_radius_px;
+}
+
+// Rust's `f32::max`: a NaN operand is ignored.
+fn max_ignoring_nan(a: f32, b: f32) -> f32 {
+    if is_nan(a) {
+        return b;
+    }
+    if is_nan(b) {
+        return a;
+    }
+    return max(a, b);
 }
 
 // `(u, v, z, radius)` of point `i`, radius 0 when it is culled (as `cpu::project`).
@@ -136,7 +163,7 @@ fn project_point(i: u32) -> vec4<f32> {
     }
     let tu = rotate(load3_tangent_u(i));
     let tv = rotate(load3_tangent_v(i));
-    let radius = splat_radius_px(p, tu, tv);
+    let radius = splat_radius_px(p, tu, tv, source_pixel_size[i]);
     let wf = f32(camera.width);
     let hf = f32(camera.height);
     if !(radius > 0.0) || u + radius < -0.5 || v + radius < -0.5 || u - radius > wf - 0.5

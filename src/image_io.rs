@@ -233,14 +233,22 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     })();
     if let Err(e) = result {
         let _ = std::fs::remove_file(&tmp);
-        let message = if e.raw_os_error() == Some(28) {
-            "no space left on the device".to_string()
-        } else {
-            e.to_string()
-        };
-        return Err(Error::file(path, format!("cannot write: {message}")));
+        return Err(Error::file(
+            path,
+            format!("cannot write: {}", describe_io_error(&e)),
+        ));
     }
     Ok(())
+}
+
+/// One line for an I/O error, naming the common causes plainly.
+pub fn describe_io_error(e: &std::io::Error) -> String {
+    match e.raw_os_error() {
+        Some(28) => "no space left on the device".to_string(),
+        Some(122) => "disk quota exceeded".to_string(),
+        Some(30) => "the file system is read-only".to_string(),
+        _ => e.to_string(),
+    }
 }
 
 /// Writes a colour raster as an 8- or 16-bit PNG, atomically.
@@ -395,6 +403,17 @@ mod tests {
         let p = dir.path().join("missing").join("x.png");
         let e = write_atomic(&p, b"abc").unwrap_err().to_string();
         assert!(e.contains("x.png") && e.contains("cannot write"), "{e}");
+    }
+
+    #[test]
+    fn full_device_is_named_plainly() {
+        // /dev/full fails every write with ENOSPC.
+        let Ok(mut f) = std::fs::OpenOptions::new().write(true).open("/dev/full") else {
+            return;
+        };
+        let e = f.write_all(&[0u8; 4096]).and_then(|_| f.sync_all());
+        let e = e.expect_err("/dev/full accepted a write");
+        assert_eq!(describe_io_error(&e), "no space left on the device");
     }
 
     #[test]

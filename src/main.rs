@@ -1,15 +1,17 @@
 //! The `makeit4d` command line.
 
-use anyhow::{Context, anyhow, bail};
+use anyhow::{Context, bail};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use makeit4d::Error;
-use makeit4d::export::render_sequence;
-use makeit4d::path::CameraPath;
+use makeit4d::export::{
+    ExportOptions, FramePattern, Passes, VideoFormat, VideoOptions, render_sequence,
+};
+use makeit4d::path::{CameraPath, Preset, PresetKind};
 use makeit4d::progress::Progress;
 use makeit4d::project::Project;
 use makeit4d::render::gpu::{RendererChoice, select_renderer};
-use makeit4d::scene::build_scene;
+use makeit4d::scene::SceneBuilder;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -34,19 +36,147 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Render a photo (or a project) to a folder of PNG frames.
-    Render(RenderArgs),
+    Render(Box<RenderArgs>),
+    /// Estimate the depth of a photo on its own (16-bit disparity PNG + JSON sidecar).
+    Depth(DepthArgs),
+    /// Fill the white pixels of a mask in a photo (PatchMatch), on its own.
+    Inpaint(InpaintArgs),
+    /// Score stages against ground truth.
+    #[command(subcommand)]
+    Eval(EvalCommand),
+    /// Measure speed (and quality) of the stages; prints markdown tables.
+    #[command(subcommand)]
+    Bench(BenchCommand),
+    /// Print what this machine offers: GPU adapter, ONNX Runtime, models, ffmpeg.
+    Doctor(DoctorArgs),
+}
+
+#[derive(Args, Debug)]
+struct DepthArgs {
+    /// The input photo.
+    image: PathBuf,
+    /// The 16-bit disparity PNG to write (normalised to the full range; the scale goes to
+    /// the .json beside it).
+    #[arg(long)]
+    out: PathBuf,
+    /// An ONNX depth model manifest (JSON); without it the classical estimator runs.
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Also write a colourised preview (near = red, far = dark blue).
+    #[arg(long)]
+    colour: Option<PathBuf>,
+    /// Horizontal field of view of the photo, degrees.
+    #[arg(long, default_value_t = 60.0)]
+    fov: f32,
+    /// Horizon row as a fraction of the height (0 = top); default: detected.
+    #[arg(long)]
+    horizon: Option<f32>,
+}
+
+#[derive(Args, Debug)]
+struct InpaintArgs {
+    /// The photo.
+    image: PathBuf,
+    /// The hole mask: same size as the photo, white (≥ 50 %) = fill.
+    #[arg(long)]
+    mask: PathBuf,
+    /// The filled PNG to write.
+    #[arg(long)]
+    out: PathBuf,
+    /// Quality: draft, preview or final.
+    #[arg(long, default_value = "preview")]
+    preset: String,
+    /// Seed for the random search (same seed, same bytes).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
+#[derive(Subcommand, Debug)]
+enum EvalCommand {
+    /// Depth accuracy against ground-truth disparity (scale-and-shift aligned, MiDaS protocol).
+    Depth(EvalDepthArgs),
+}
+
+#[derive(Args, Debug)]
+struct EvalDepthArgs {
+    /// The (left) image.
+    #[arg(long)]
+    image: PathBuf,
+    /// Ground-truth disparity of that image (8/16-bit PNG or .npy).
+    #[arg(long)]
+    gt_disparity: PathBuf,
+    /// Disparity value that marks unknown pixels.
+    #[arg(long, default_value_t = 0.0)]
+    invalid: f32,
+    /// Also score this ONNX depth model manifest.
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Print JSON instead of a markdown table.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Subcommand, Debug)]
+enum BenchCommand {
+    /// The classical depth estimator: median seconds over several runs.
+    Depth(BenchDepthArgs),
+    /// Inpainting presets against the harmonic baseline on holes cut from real photos.
+    Inpaint(BenchInpaintArgs),
+    /// Motion: flow solve, loop precompute, per-frame displacement and blend cost.
+    Motion(BenchMotionArgs),
+}
+
+#[derive(Args, Debug)]
+struct BenchInpaintArgs {
+    /// Photos (default: ../shared/data/photos/*.jpg when present, else tests/data).
+    photos: Vec<PathBuf>,
+    /// Timed repeats per case (the median is printed).
+    #[arg(long, default_value_t = 3)]
+    repeats: usize,
+}
+
+#[derive(Args, Debug)]
+struct BenchMotionArgs {
+    /// Canvas width.
+    #[arg(long, default_value_t = 1280)]
+    width: usize,
+    /// Canvas height.
+    #[arg(long, default_value_t = 800)]
+    height: usize,
+    /// Loop length N.
+    #[arg(long, default_value_t = 100)]
+    frames: u32,
+}
+
+#[derive(Args, Debug)]
+struct BenchDepthArgs {
+    /// Photo to estimate (default: assets/evening_glow.jpg, 1280×800).
+    #[arg(long, default_value = "assets/evening_glow.jpg")]
+    image: PathBuf,
+    /// Number of runs.
+    #[arg(long, default_value_t = 5)]
+    runs: usize,
+}
+
+#[derive(Args, Debug)]
+struct DoctorArgs {
+    /// Also list the models this project configures.
+    #[arg(long)]
+    project: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
 struct RenderArgs {
     /// The input photo (optional when --project names one).
     image: Option<PathBuf>,
-    /// Output folder for frame_0000.png, frame_0001.png, … (created if missing).
+    /// Output folder (created if missing). With several projects, each renders into
+    /// OUT/<project name>/.
     #[arg(long)]
     out: PathBuf,
-    /// A project file to render; command-line flags override its values.
+    /// A project file, or a folder of *.json project files, to render; repeat for a batch.
+    /// Command-line flags override the projects' values.
     #[arg(long)]
-    project: Option<PathBuf>,
+    project: Vec<PathBuf>,
     /// Write the effective project (after overrides) to this file before rendering.
     #[arg(long)]
     save_project: Option<PathBuf>,
@@ -69,6 +199,117 @@ struct RenderArgs {
     /// adapter, else the CPU; prints which and why).
     #[arg(long, default_value = "auto")]
     renderer: RendererChoice,
+    /// Frame file-name pattern with one %d or %0Nd.
+    #[arg(long, default_value = "frame_%04d.png")]
+    pattern: String,
+    /// Bits per channel of the colour PNGs.
+    #[arg(long, default_value_t = 8, value_parser = parse_bit_depth)]
+    bit_depth: u8,
+    /// Skip frames already complete in the output folder (they decode and have the right size).
+    #[arg(long)]
+    resume: bool,
+    /// Extra passes: depth (16-bit + depth.json scale), coverage (16-bit alpha). Repeatable.
+    #[arg(long = "pass", value_enum)]
+    passes: Vec<PassArg>,
+    /// Only frames START..END of the path (END exclusive), e.g. 10..20.
+    #[arg(long, value_parser = parse_range)]
+    range: Option<(usize, usize)>,
+    /// Also encode a video through ffmpeg (OUT/video.mp4 or OUT/video.webm).
+    #[arg(long, value_enum)]
+    video: Option<VideoArg>,
+    /// Video quality as a constant rate factor (lower is better; default 18 for mp4, 30 for webm).
+    #[arg(long)]
+    crf: Option<u8>,
+    /// Depth layers: a count (1–16), `auto` (as many as the depth has), or `off` (one layer).
+    #[arg(long, value_parser = parse_layers)]
+    layers: Option<LayersArg>,
+    /// Do not inpaint what each layer hides (the paper's ablation).
+    #[arg(long)]
+    no_layer_inpaint: bool,
+    /// Re-estimate each layer's depth on the inpainted overlay (paper eq. 4–5; off by default,
+    /// best with a learned depth model).
+    #[arg(long)]
+    layer_depth: bool,
+    /// Do not outpaint: the canvas is the photo.
+    #[arg(long)]
+    no_outpaint: bool,
+    /// Inpainting quality: draft, preview or final.
+    #[arg(long)]
+    inpaint_preset: Option<String>,
+    /// Seed for inpainting.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// An ONNX depth model manifest (falls back to the classical estimator, with a warning).
+    #[arg(long)]
+    depth_model: Option<PathBuf>,
+    /// A LaMa-style ONNX inpainting model manifest (falls back to PatchMatch, with a warning).
+    #[arg(long)]
+    inpaint_model: Option<PathBuf>,
+    /// Motion: `auto` applies the automatic sky/water suggestion; `off` removes the project's.
+    #[arg(long, value_enum)]
+    motion: Option<MotionArg>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum LayersArg {
+    Count(usize),
+    Auto,
+    Off,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum MotionArg {
+    Auto,
+    Off,
+}
+
+/// Parses `--layers`.
+fn parse_layers(s: &str) -> Result<LayersArg, String> {
+    match s.trim() {
+        "auto" => Ok(LayersArg::Auto),
+        "off" => Ok(LayersArg::Off),
+        n => match n.parse::<usize>() {
+            Ok(n) if (1..=16).contains(&n) => Ok(LayersArg::Count(n)),
+            _ => Err(format!("layers must be 1..=16, auto or off, got '{s}'")),
+        },
+    }
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum PassArg {
+    Depth,
+    Coverage,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum VideoArg {
+    Mp4,
+    Webm,
+}
+
+/// Parses a PNG bit depth: 8 or 16.
+fn parse_bit_depth(s: &str) -> Result<u8, String> {
+    match s.trim() {
+        "8" => Ok(8),
+        "16" => Ok(16),
+        _ => Err(format!("bit depth must be 8 or 16, got '{s}'")),
+    }
+}
+
+/// Parses `START..END`.
+fn parse_range(s: &str) -> Result<(usize, usize), String> {
+    let (a, b) = s
+        .split_once("..")
+        .ok_or_else(|| format!("expected START..END, got '{s}'"))?;
+    let a: usize = a
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad start in '{s}'"))?;
+    let b: usize = b.trim().parse().map_err(|_| format!("bad end in '{s}'"))?;
+    if a >= b {
+        return Err(format!("empty range '{s}'"));
+    }
+    Ok((a, b))
 }
 
 /// Parses `WIDTHxHEIGHT`.
@@ -92,6 +333,7 @@ fn parse_size(s: &str) -> Result<(usize, usize), String> {
 }
 
 fn main() -> ExitCode {
+    quiet_vulkan_device_select_layer();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) => {
@@ -118,7 +360,14 @@ fn main() -> ExitCode {
         });
     }
     let result = match cli.command {
-        Command::Render(args) => render(args, cancel),
+        Command::Render(args) => render(*args, cancel),
+        Command::Depth(args) => depth(args, cancel),
+        Command::Eval(EvalCommand::Depth(args)) => eval_depth(args, cancel),
+        Command::Bench(BenchCommand::Depth(args)) => bench_depth(args),
+        Command::Bench(BenchCommand::Inpaint(args)) => bench_inpaint(args, cancel),
+        Command::Bench(BenchCommand::Motion(args)) => bench_motion(args),
+        Command::Inpaint(args) => inpaint(args, cancel),
+        Command::Doctor(args) => doctor(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -129,6 +378,21 @@ fn main() -> ExitCode {
         Err(e) => {
             eprintln!("error: {}", format!("{e:#}").replace('\n', " "));
             ExitCode::from(EXIT_ERROR)
+        }
+    }
+}
+
+/// Mesa's implicit Vulkan device-select layer (it reorders GPUs for programs that take the first
+/// one) prints "XDG_RUNTIME_DIR is invalid" on headless machines whenever a Vulkan instance is
+/// created, which would add lines to our one-line errors. wgpu chooses its adapter itself, so the
+/// layer is switched off for this process unless the user configured it.
+fn quiet_vulkan_device_select_layer() {
+    if std::env::var_os("NODEVICE_SELECT").is_none() {
+        // SAFETY: called first thing in `main`, before any other thread exists, so nothing can
+        // read the environment concurrently.
+        #[allow(unsafe_code)]
+        unsafe {
+            std::env::set_var("NODEVICE_SELECT", "1");
         }
     }
 }
@@ -150,13 +414,87 @@ fn progress_bar(cancel: Arc<AtomicBool>) -> (ProgressBar, Progress) {
     (bar, progress)
 }
 
+/// Expands `--project` arguments: files as given, folders to their `*.json` files (sorted).
+fn project_files(args: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    for p in args {
+        if p.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
+                .with_context(|| format!("{}: cannot list folder", p.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|f| f.extension().is_some_and(|e| e == "json") && f.is_file())
+                .collect();
+            found.sort();
+            if found.is_empty() {
+                bail!("{}: folder holds no .json project files", p.display());
+            }
+            files.extend(found);
+        } else {
+            files.push(p.clone());
+        }
+    }
+    Ok(files)
+}
+
 fn render(args: RenderArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
-    let mut project = match (&args.project, &args.image) {
+    let projects = project_files(&args.project)?;
+    if projects.len() <= 1 {
+        return render_one(&args, projects.first(), &args.out, cancel);
+    }
+    if args.save_project.is_some() {
+        bail!("--save-project needs a single project");
+    }
+    // Batch: each project independently, one summary line each at the end.
+    let mut lines = Vec::new();
+    let mut failed = 0;
+    for p in &projects {
+        if cancel.load(std::sync::atomic::Ordering::Relaxed) {
+            lines.push(format!("{}: not started (cancelled)", p.display()));
+            failed += 1;
+            continue;
+        }
+        let name = p
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "project".into());
+        match render_one(&args, Some(p), &args.out.join(&name), cancel.clone()) {
+            Ok(()) => lines.push(format!("{}: ok", p.display())),
+            Err(e) => {
+                failed += 1;
+                lines.push(format!(
+                    "{}: failed: {}",
+                    p.display(),
+                    format!("{e:#}").replace('\n', " ")
+                ));
+            }
+        }
+    }
+    println!(
+        "batch: {} projects, {} ok, {failed} failed",
+        projects.len(),
+        projects.len() - failed
+    );
+    for l in &lines {
+        println!("  {l}");
+    }
+    if failed > 0 {
+        bail!("{failed} of {} projects failed", projects.len());
+    }
+    Ok(())
+}
+
+fn render_one(
+    args: &RenderArgs,
+    project_file: Option<&PathBuf>,
+    out: &std::path::Path,
+    cancel: Arc<AtomicBool>,
+) -> anyhow::Result<()> {
+    let mut project = match (project_file, &args.image) {
         (Some(p), _) => Project::load(p)?,
         (None, Some(image)) => Project::new(image),
         (None, None) => bail!("render needs an input image or --project"),
     };
-    if let (Some(_), Some(image)) = (&args.project, &args.image) {
+    if let (Some(_), Some(image)) = (project_file, &args.image) {
         project.input = image.clone();
     }
     if let Some(frames) = args.frames {
@@ -173,14 +511,49 @@ fn render(args: RenderArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
         project.camera.hfov_deg = fov;
     }
     if let Some(name) = &args.preset {
-        project.camera.path =
-            CameraPath::preset(name).ok_or_else(|| anyhow!("unknown preset '{name}'"))?;
+        let kind: PresetKind = name.parse()?;
+        project.camera.path = CameraPath::Preset(Preset::new(kind));
     }
+    apply_scene_flags(args, &mut project)?;
     project.validate()?;
+    let options = ExportOptions {
+        pattern: FramePattern::parse(&args.pattern)?,
+        sixteen_bit: args.bit_depth == 16,
+        resume: args.resume,
+        passes: Passes {
+            depth: args.passes.contains(&PassArg::Depth),
+            coverage: args.passes.contains(&PassArg::Coverage),
+        },
+        range: args.range,
+        video: args.video.map(|v| {
+            let mut o = VideoOptions::new(match v {
+                VideoArg::Mp4 => VideoFormat::Mp4,
+                VideoArg::Webm => VideoFormat::Webm,
+            });
+            if let Some(crf) = args.crf {
+                o.crf = crf;
+            }
+            o
+        }),
+    };
     // Decode and validate everything before anything is written.
     let (bar, progress) = progress_bar(cancel);
-    let scene = build_scene(&project, &progress.sub(0.0, 0.1))?;
-    makeit4d::image_io::prepare_output_dir(&args.out)?;
+    let mut builder = SceneBuilder::new();
+    let mut scene = builder.build(&project, &progress.sub(0.0, 0.1))?;
+    if args.motion == Some(MotionArg::Auto) {
+        // The suggestion lives in canvas pixels, so it is made on the built canvas; the second
+        // build re-uses every cached stage and runs only motion.
+        project.motion = makeit4d::stages::motion::suggest_motion(
+            &scene.canvas.image,
+            Some(&scene.canvas.sky),
+            None,
+        )?;
+        scene = builder.build(&project, &progress.sub(0.0, 0.1))?;
+    }
+    for w in &scene.warnings {
+        bar.suspend(|| eprintln!("warning: {w}"));
+    }
+    makeit4d::image_io::prepare_output_dir(out)?;
     if let Some(path) = &args.save_project {
         project
             .save(path)
@@ -189,15 +562,239 @@ fn render(args: RenderArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
     // Chosen once the inputs are known to be good: opening a GPU adapter can be slow and some
     // Vulkan layers print to stderr, which would spoil the one-line error of a bad input.
     let (mut renderer, why) = select_renderer(args.renderer, project.render)?;
-    bar.suspend(|| eprintln!("renderer: {why}"));
+    // Said on stdout, with the summary: stderr is kept for warnings and the one-line error.
+    bar.suspend(|| println!("renderer: {why}"));
     let summary = render_sequence(
         &project,
         &scene,
         renderer.as_mut(),
-        &args.out,
+        out,
+        &options,
         &progress.sub(0.1, 1.0),
     );
     bar.finish_and_clear();
-    println!("{}", summary?);
+    let summary = summary?;
+    for w in &summary.warnings {
+        eprintln!("warning: {w}");
+    }
+    println!("{summary}");
+    Ok(())
+}
+
+fn depth(args: DepthArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::stages::depth::{DepthMethod, DepthSettings, io, preview, run_depth_stage};
+    let input = makeit4d::image_io::load_image(&args.image)?;
+    let (w, h) = input.rgb.size();
+    let intrinsics = makeit4d::geometry::Intrinsics::from_hfov(w, h, args.fov);
+    let mut settings = DepthSettings::default();
+    settings.classical.horizon = args.horizon;
+    if let Some(model) = &args.model {
+        settings.method = DepthMethod::Onnx;
+        settings.model = Some(model.clone());
+    }
+    let (bar, progress) = progress_bar(cancel);
+    let stage = run_depth_stage(&settings, &input.rgb, &intrinsics, &progress);
+    bar.finish_and_clear();
+    let stage = stage?;
+    for w in &stage.warnings {
+        eprintln!("warning: {w}");
+    }
+    io::export_depth_png(&stage.estimate.depth, &args.out)?;
+    if let Some(path) = &args.colour {
+        let rgb = preview::depth_preview(&stage.estimate.depth, Some(&stage.estimate.sky));
+        makeit4d::image_io::save_rgb_png(path, &rgb, false)?;
+    }
+    println!(
+        "wrote {} ({}×{}, {} estimator; scale in {})",
+        args.out.display(),
+        w,
+        h,
+        stage.estimator,
+        io::sidecar_path(&args.out).display()
+    );
+    Ok(())
+}
+
+fn eval_depth(args: EvalDepthArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::stages::depth::{DepthEstimator, eval, onnx::OnnxDepth};
+    let image = makeit4d::image_io::load_image(&args.image)?;
+    let gt = eval::read_gt_disparity(&args.gt_disparity)?;
+    let (w, h) = image.rgb.size();
+    let intrinsics = makeit4d::geometry::Intrinsics::from_hfov(w, h, 60.0);
+    let model = match &args.model {
+        Some(m) => Some(OnnxDepth::from_manifest(m)?),
+        None => None,
+    };
+    let extra: Vec<&dyn DepthEstimator> = model.iter().map(|m| m as &dyn DepthEstimator).collect();
+    let (bar, progress) = progress_bar(cancel);
+    let table = eval::eval_depth(
+        &image.rgb,
+        &gt,
+        args.invalid,
+        &intrinsics,
+        &extra,
+        &progress,
+    );
+    bar.finish_and_clear();
+    let table = table?;
+    if args.json {
+        println!("{}", table.to_json()?);
+    } else {
+        print!("{}", table.to_markdown());
+    }
+    Ok(())
+}
+
+fn bench_depth(args: BenchDepthArgs) -> anyhow::Result<()> {
+    let image = makeit4d::image_io::load_image(&args.image)?;
+    let bench = makeit4d::stages::depth::eval::bench_classical_depth(&image.rgb, args.runs.max(1))?;
+    print!("{}", bench.to_markdown());
+    Ok(())
+}
+
+fn doctor(args: DoctorArgs) -> anyhow::Result<()> {
+    println!("makeit4d {}", env!("CARGO_PKG_VERSION"));
+    println!("{}", makeit4d::ml::ort_status());
+    match &args.project {
+        Some(p) => {
+            let project = Project::load(p)?;
+            match (&project.depth.method, &project.depth.model) {
+                (makeit4d::stages::depth::DepthMethod::Onnx, Some(m)) => {
+                    match makeit4d::ml::ModelManifest::load(m) {
+                        Ok(manifest) => {
+                            println!("depth model: {} ({})", manifest.display_name(), m.display())
+                        }
+                        Err(e) => println!("depth model: {} — {e:#}", m.display()),
+                    }
+                }
+                (method, _) => println!("depth: {method:?} (no learned model)"),
+            }
+        }
+        None => println!("models: none configured (pass --project to list a project's models)"),
+    }
+    let ffmpeg = VideoOptions::new(VideoFormat::Mp4).ffmpeg;
+    match std::process::Command::new(&ffmpeg).arg("-version").output() {
+        Ok(out) if out.status.success() => {
+            let text = String::from_utf8_lossy(&out.stdout);
+            println!("ffmpeg: {}", text.lines().next().unwrap_or("found"));
+        }
+        _ => println!(
+            "ffmpeg: not found ({}): video export is off; PNG sequences still work",
+            ffmpeg.display()
+        ),
+    }
+    Ok(())
+}
+
+/// Applies the scene flags of `render` to `project`.
+fn apply_scene_flags(args: &RenderArgs, project: &mut Project) -> anyhow::Result<()> {
+    use makeit4d::stages::depth::DepthMethod;
+    use makeit4d::stages::inpaint::InpaintPreset;
+    use makeit4d::stages::layers::LayerCount;
+    match args.layers {
+        Some(LayersArg::Off) => project.layers.enabled = false,
+        Some(LayersArg::Auto) => {
+            project.layers.enabled = true;
+            project.layers.params.mode = LayerCount::default();
+        }
+        Some(LayersArg::Count(n)) => {
+            project.layers.enabled = true;
+            project.layers.params.mode = LayerCount::Count(n);
+        }
+        None => {}
+    }
+    if args.no_layer_inpaint {
+        project.layers.inpaint = false;
+    }
+    if args.layer_depth {
+        project.layers.layer_depth = true;
+    }
+    if args.no_outpaint {
+        project.canvas.enabled = false;
+    }
+    if let Some(p) = &args.inpaint_preset {
+        project.inpaint.preset = match p.as_str() {
+            "draft" => InpaintPreset::Draft,
+            "preview" => InpaintPreset::Preview,
+            "final" => InpaintPreset::Final,
+            other => bail!("inpaint preset must be draft, preview or final, got '{other}'"),
+        };
+    }
+    if let Some(seed) = args.seed {
+        project.inpaint.seed = seed;
+    }
+    if let Some(m) = &args.depth_model {
+        project.depth.method = DepthMethod::Onnx;
+        project.depth.model = Some(m.clone());
+    }
+    if let Some(m) = &args.inpaint_model {
+        project.inpaint.model = Some(m.clone());
+    }
+    if args.motion == Some(MotionArg::Off) {
+        project.motion = Default::default();
+    }
+    Ok(())
+}
+
+fn inpaint(args: InpaintArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::stages::inpaint::{InpaintPreset, command};
+    let preset: InpaintPreset = args.preset.parse()?;
+    let image = makeit4d::image_io::load_image(&args.image)?;
+    let hole = command::read_hole_mask(&args.mask, image.rgb.size())?;
+    let (bar, progress) = progress_bar(cancel);
+    let start = std::time::Instant::now();
+    let filled = command::inpaint_command(&image.rgb, &hole, preset, args.seed, &progress);
+    bar.finish_and_clear();
+    let filled = filled?;
+    makeit4d::image_io::save_rgb_png(&args.out, &filled, false)?;
+    println!(
+        "{}; wrote {}",
+        command::format_inpaint_summary(&hole, preset, start.elapsed().as_secs_f64()),
+        args.out.display()
+    );
+    Ok(())
+}
+
+fn bench_inpaint(args: BenchInpaintArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::stages::inpaint::{BenchOptions, bench_inpaint, format_bench_table};
+    let photos = if args.photos.is_empty() {
+        makeit4d::stages::inpaint::bench::default_bench_photos()
+    } else {
+        args.photos.clone()
+    };
+    let options = BenchOptions {
+        repeats: args.repeats.max(1),
+        ..BenchOptions::default()
+    };
+    let (bar, progress) = progress_bar(cancel);
+    let rows = bench_inpaint(&photos, &options, &progress);
+    bar.finish_and_clear();
+    print!("{}", format_bench_table(&rows?));
+    Ok(())
+}
+
+fn bench_motion(args: BenchMotionArgs) -> anyhow::Result<()> {
+    let t = makeit4d::stages::motion::bench_motion(args.width, args.height, args.frames, 3)?;
+    let blend = makeit4d::render::blend::bench_blend(args.width, args.height, 10)?;
+    println!("| step | seconds |");
+    println!("|---|---:|");
+    println!(
+        "| flow solve ({}×{}) | {:.3} |",
+        t.width, t.height, t.field_secs
+    );
+    println!(
+        "| spread flow into hidden layer pixels | {:.3} |",
+        t.layers_secs
+    );
+    println!(
+        "| precompute {}-frame loop (forward + backward) | {:.3} |",
+        t.loop_frames, t.integrate_secs
+    );
+    println!("| one frame's displacements | {:.4} |", t.frame_secs);
+    println!("| symmetric blend, one frame | {blend:.4} |");
+    println!(
+        "\nloop memory: {:.1} MB",
+        t.memory_bytes as f64 / (1024.0 * 1024.0)
+    );
     Ok(())
 }

@@ -27,13 +27,17 @@ fn renderer_choice_is_honoured_and_said() {
     let cpu_out = dir.path().join("cpu");
     let o = render(&cpu_out, "cpu");
     let stderr = String::from_utf8_lossy(&o.stderr);
+    let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{stderr}");
-    assert!(stderr.contains("renderer: cpu renderer"), "{stderr}");
+    assert!(stdout.contains("renderer: cpu renderer"), "{stdout}");
+    assert!(stderr.trim().is_empty(), "{stderr}");
 
     let o = render(&dir.path().join("auto"), "auto");
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{stderr}");
-    assert!(stderr.contains("renderer: "), "{stderr}");
+    assert!(String::from_utf8_lossy(&o.stdout).contains("renderer: "));
+    // Nothing on stderr, not even from Vulkan layers, when all goes well.
+    assert!(stderr.trim().is_empty(), "{stderr}");
 
     let o = render(&dir.path().join("bad"), "vulkan");
     assert_eq!(o.status.code(), Some(2));
@@ -43,7 +47,8 @@ fn renderer_choice_is_honoured_and_said() {
     let o = render(&gpu_out, "gpu");
     let stderr = String::from_utf8_lossy(&o.stderr);
     if o.status.success() {
-        assert!(stderr.contains("renderer: gpu renderer on"), "{stderr}");
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        assert!(stdout.contains("renderer: gpu renderer on"), "{stdout}");
         // Same frames as the CPU renderer (lavapipe is bit-exact; hardware may differ in the
         // last bit of a few pixels, which 8-bit PNGs almost always hide).
         for i in 0..3 {
@@ -98,11 +103,18 @@ fn forced_gpu_without_an_adapter_is_a_clean_error_and_auto_falls_back() {
     let frames = std::fs::read_dir(&out).map(|d| d.count()).unwrap_or(0);
     assert_eq!(frames, 0, "frames written without a renderer");
 
+    assert_eq!(
+        stderr.trim_end().lines().count(),
+        1,
+        "not one line: {stderr}"
+    );
+
     let o = render_without_adapter(&dir.path().join("auto"), "auto");
     let stderr = String::from_utf8_lossy(&o.stderr);
+    let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{stderr}");
     assert!(
-        stderr.contains("renderer: cpu renderer: GPU: no GPU adapter"),
-        "{stderr}"
+        stdout.contains("renderer: cpu renderer: GPU: no GPU adapter"),
+        "{stdout}"
     );
 }

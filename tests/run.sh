@@ -2,7 +2,8 @@
 # Installs what the tests need on a fresh machine, then runs the whole test suite.
 #
 #   - Debian packages (as root, through apt-get, only when missing): mesa-vulkan-drivers
-#     (lavapipe, the CPU Vulkan adapter the GPU tests run on), xvfb (the editor's window tests).
+#     (lavapipe, the CPU Vulkan adapter the GPU tests run on), xvfb (the editor's window tests),
+#     ffmpeg (video export tests).
 #   - The ONNX Runtime 1.31 shared library from PyPI's onnxruntime wheel, into
 #     ${XDG_DATA_HOME:-~/.local/share}/makeit4d/ort (where makeit4d looks for it).
 #   - Rust crates through cargo (Cargo.lock pins them).
@@ -15,7 +16,7 @@ as_root() {
 }
 
 missing=()
-for pkg in mesa-vulkan-drivers libvulkan1 xvfb; do
+for pkg in mesa-vulkan-drivers libvulkan1 xvfb ffmpeg; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
 done
 if [ ${#missing[@]} -gt 0 ]; then

@@ -66,12 +66,18 @@ impl Entry {
 }
 
 /// Splat radius in pixels for a camera-space point with camera-space tangents (see module docs).
+///
+/// `source_pixel_size` is the world size of one source pixel at the point (the paper's
+/// fronto-parallel footprint, `z_src/f_src`): the radius is capped at `max_stretch` times the
+/// paper's rule `r0·f_tgt·(z_src/f_src)/z_tgt`, so a depth edge that the estimator smoothed into
+/// a steep ramp cannot splat as a huge disc once the camera moves.
 #[inline]
 pub fn splat_radius_px(
     intrinsics: &crate::geometry::Intrinsics,
     point_in_camera: Vec3,
     tangent_u_in_camera: Vec3,
     tangent_v_in_camera: Vec3,
+    source_pixel_size: f32,
     settings: &SplatSettings,
 ) -> f32 {
     let Some(j) = intrinsics.projection_jacobian(point_in_camera) else {
@@ -79,12 +85,22 @@ pub fn splat_radius_px(
     };
     let a = glam::Vec2::new(j[0].dot(tangent_u_in_camera), j[1].dot(tangent_u_in_camera));
     let b = glam::Vec2::new(j[0].dot(tangent_v_in_camera), j[1].dot(tangent_v_in_camera));
+    let fronto = settings.radius_scale * intrinsics.fx * source_pixel_size / point_in_camera.z;
+    let cap = (settings.max_stretch * fronto).min(settings.max_radius_px);
     let r = settings.radius_scale * a.length().max(b.length());
-    if r.is_finite() {
-        r.clamp(settings.min_radius_px, settings.max_radius_px)
+    if r.is_finite() && cap.is_finite() {
+        r.min(cap).max(settings.min_radius_px)
     } else {
         settings.max_radius_px
     }
+}
+
+/// World size of one source pixel at a point: the component of its (one-source-pixel)
+/// tangent perpendicular to the source camera's ray (the source camera sits at the origin).
+#[inline]
+pub fn source_pixel_size(point_in_world: Vec3, tangent_u: Vec3) -> f32 {
+    let ray = point_in_world.normalize_or_zero();
+    (tangent_u - ray * tangent_u.dot(ray)).length()
 }
 
 /// What projecting a point needs, computed once per render.
@@ -130,7 +146,8 @@ impl<'a> Projector<'a> {
         let (u, v, z) = k.project(p)?;
         let tu = self.w2c.rotation * self.cloud.tangent_u[i];
         let tv = self.w2c.rotation * self.cloud.tangent_v[i];
-        let radius = splat_radius_px(k, p, tu, tv, self.settings);
+        let pixel = source_pixel_size(self.cloud.positions[i], self.cloud.tangent_u[i]);
+        let radius = splat_radius_px(k, p, tu, tv, pixel, self.settings);
         if radius <= 0.0
             || u + radius < -0.5
             || v + radius < -0.5

@@ -4,7 +4,8 @@
 //! (`shaders/splat.wgsl`):
 //!
 //! 1. `project` — one invocation per point: camera transform, the footprint radius rule
-//!    `r = r0·max(|J·t_u|, |J·t_v|)` clamped to `[min, max]`, culling; writes `(u, v, z, r)` and
+//!    `r = r0·max(|J·t_u|, |J·t_v|)` capped at `max_stretch` times the paper's fronto-parallel
+//!    radius and clamped to `[min, max]` (as `cpu::splat_radius_px`), culling; writes `(u, v, z, r)` and
 //!    counts the point into every 16×16 tile its disc reaches (atomic add on a per-tile counter).
 //! 2. `scan` — one workgroup turns the tile counts into list offsets (exclusive prefix sum).
 //! 3. `scatter` — one invocation per point appends its index to each of its tile lists.
@@ -39,7 +40,8 @@
 //! renderer in every test (PSNR ∞); the time blend differs by ≤ 1e-6 (`exp`/`log`). The tests
 //! assert PSNR ≥ 40 dB and coverage/depth agreement, and the bench prints the PSNR per cell.
 //!
-//! **Buffers.** Point data (positions, tangents, alphas, colours) is uploaded once per
+//! **Buffers.** Point data (positions, tangents, alphas, colours, and each point's source pixel
+//! size from `cpu::source_pixel_size`, which does not depend on the view) is uploaded once per
 //! [`GpuSplatter::set_cloud`]; a frame writes one camera uniform and, for animation, a position
 //! buffer ([`GpuSplatter::upload_positions`]). Scratch (projected discs, tile counters and lists)
 //! is shared by all renders and grows on demand: the tile-list capacity is a guess that the scan
@@ -61,10 +63,11 @@
 use crate::error::{Error, Result};
 use crate::geometry::{View, WorldToCamera};
 use crate::raster::Raster;
-use crate::render::cpu::CpuRenderer;
+use crate::render::cpu::{CpuRenderer, source_pixel_size};
 use crate::render::{Frame, FrameRenderer, SplatSettings};
 use crate::stages::points::PointCloud;
 use glam::Vec3;
+use rayon::prelude::*;
 use std::sync::Arc;
 use std::sync::mpsc;
 
@@ -176,8 +179,10 @@ struct CameraUniform {
     entry_capacity: u32,
     threads_per_row: u32,
     slot: u32,
+    max_stretch: f32,
+    pad: [f32; 3],
 }
-const _: () = assert!(std::mem::size_of::<CameraUniform>() == 128);
+const _: () = assert!(std::mem::size_of::<CameraUniform>() == 144);
 
 /// Parameters of the time blend.
 // Keep in sync with `Params` in shaders/blend.wgsl.
@@ -188,8 +193,10 @@ struct BlendUniform {
     sharpness: f32,
     pixel_count: u32,
     threads_per_row: u32,
+    log_time_ratio: f32,
+    pad: [f32; 3],
 }
-const _: () = assert!(std::mem::size_of::<BlendUniform>() == 16);
+const _: () = assert!(std::mem::size_of::<BlendUniform>() == 32);
 
 /// Parameters of the present pass.
 // Keep in sync with `Params` in shaders/present.wgsl.
@@ -244,6 +251,8 @@ struct CloudBuffers {
     tangent_v: wgpu::Buffer,
     alphas: wgpu::Buffer,
     colours: wgpu::Buffer,
+    /// `cpu::source_pixel_size` of each point (view-independent, computed on upload).
+    source_pixel_size: wgpu::Buffer,
 }
 
 /// Per-slot buffers.
@@ -402,6 +411,13 @@ impl GpuSplatter {
             )));
         }
         self.check_binding("point positions", (n * 12) as u64)?;
+        // The same function the CPU renderer calls, so the radius rule matches bit for bit.
+        let pixel_sizes: Vec<f32> = cloud
+            .positions
+            .par_iter()
+            .zip(&cloud.tangent_u)
+            .map(|(&p, &t)| source_pixel_size(p, t))
+            .collect();
         let device = self.context.device.clone();
         let queue = self.context.queue.clone();
         let cloud_buffers = scoped(&device, "uploading the point cloud", || {
@@ -417,6 +433,7 @@ impl GpuSplatter {
                 tangent_v: upload("tangent v", bytemuck::cast_slice(&cloud.tangent_v)),
                 alphas: upload("alphas", bytemuck::cast_slice(&cloud.alphas)),
                 colours: upload("colours", bytemuck::cast_slice(&cloud.colours)),
+                source_pixel_size: upload("source pixel size", bytemuck::cast_slice(&pixel_sizes)),
             })
         })?;
         self.cloud = Some(cloud_buffers);
@@ -543,6 +560,8 @@ impl GpuSplatter {
             entry_capacity: self.entry_capacity().min(u32::MAX as usize) as u32,
             threads_per_row,
             slot: slot.index() as u32,
+            max_stretch: self.settings.max_stretch,
+            pad: [0.0; 3],
         };
         let queue = &self.context.queue;
         let s = &self.slots[slot.index()];
@@ -574,6 +593,7 @@ impl GpuSplatter {
                 (4, &cloud.alphas),
                 (6, &self.splats.buffer),
                 (7, &self.tile_counts.buffer),
+                (12, &cloud.source_pixel_size),
             ],
         );
         let scan = group(
@@ -632,7 +652,8 @@ impl GpuSplatter {
 
     /// Records the time blend of the `Forward` and `Backward` frames (rendered or uploaded at
     /// the same size) into the `Blended` slot: `w_f = (1 − t)·exp(a·disp_f)·A_f`,
-    /// `w_b = t·exp(a·disp_b)·A_b` (algorithms.md §5; `t` is clamped to `[0, 1]`).
+    /// `w_b = t·exp(a·disp_b)·A_b` (algorithms.md §5; `t` is clamped to `[0, 1]`), with the
+    /// semantics of [`crate::render::blend::symmetric_blend`].
     pub fn encode_blend(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
@@ -664,11 +685,15 @@ impl GpuSplatter {
         );
         self.slots[2].size = size;
         let (groups_x, groups_y, threads_per_row) = self.point_dispatch(pixels);
+        let t = t.clamp(0.0, 1.0);
         let params = BlendUniform {
-            t: t.clamp(0.0, 1.0),
+            t,
             sharpness,
             pixel_count: pixels as u32,
             threads_per_row,
+            // As `render::blend::symmetric_blend` computes it (only used where 0 < t < 1).
+            log_time_ratio: (t / (1.0 - t)).ln(),
+            pad: [0.0; 3],
         };
         let queue = &self.context.queue;
         queue.write_buffer(&self.blend_uniform, 0, bytemuck::bytes_of(&params));
@@ -1696,83 +1721,9 @@ mod tests {
         }
     }
 
-    /// The symmetric-animation blend (algorithms.md §5), written out on the CPU as the GPU's
-    /// reference (same semantics as `render::blend::symmetric_blend`).
+    /// The CPU time blend the GPU pass mirrors.
     fn cpu_blend(forward: &Frame, backward: &Frame, t: f32, a: f32) -> Frame {
-        let t = t.clamp(0.0, 1.0);
-        let near = |f: &Frame| {
-            f.depth
-                .data()
-                .iter()
-                .zip(f.coverage.data())
-                .filter(|(z, c)| **c > 0.0 && z.is_finite() && **z > 0.0)
-                .map(|(z, _)| *z)
-                .fold(f32::INFINITY, f32::min)
-        };
-        let z_near = near(forward).min(near(backward));
-        let disparity = |z: f32| {
-            if z_near.is_finite() && z.is_finite() && z > 0.0 {
-                (z_near / z).clamp(0.0, 1.0)
-            } else {
-                0.0
-            }
-        };
-        let cover = |c: f32| {
-            if c.is_finite() {
-                c.clamp(0.0, 1.0)
-            } else {
-                0.0
-            }
-        };
-        let (w, h) = forward.colour.size();
-        let mut out = forward.clone();
-        for i in 0..w * h {
-            let f = (
-                forward.colour.data()[i],
-                forward.coverage.data()[i],
-                forward.depth.data()[i],
-            );
-            let b = (
-                backward.colour.data()[i],
-                backward.coverage.data()[i],
-                backward.depth.data()[i],
-            );
-            let log_weight = |time: f32, z: f32, c: f32| {
-                let c = cover(c);
-                (time > 0.0 && c > 0.0).then(|| time.ln() + a * disparity(z) + c.ln())
-            };
-            let px = if f.0.map(f32::to_bits) == b.0.map(f32::to_bits)
-                && f.1.to_bits() == b.1.to_bits()
-                && f.2.to_bits() == b.2.to_bits()
-            {
-                f
-            } else {
-                match (log_weight(1.0 - t, f.2, f.1), log_weight(t, b.2, b.1)) {
-                    (Some(_), None) => f,
-                    (None, Some(_)) => b,
-                    (None, None) => {
-                        if t < 0.5 {
-                            f
-                        } else {
-                            b
-                        }
-                    }
-                    (Some(lf), Some(lb)) => {
-                        let pf = 1.0 / (1.0 + (lb - lf).exp());
-                        let pb = 1.0 / (1.0 + (lf - lb).exp());
-                        (
-                            [0, 1, 2].map(|c| pf * f.0[c] + pb * b.0[c]),
-                            pf * f.1 + pb * b.1,
-                            pf * f.2 + pb * b.2,
-                        )
-                    }
-                }
-            };
-            out.colour.data_mut()[i] = px.0;
-            out.coverage.data_mut()[i] = px.1;
-            out.depth.data_mut()[i] = px.2;
-        }
-        out
+        crate::render::blend::symmetric_blend(forward, backward, t, a).expect("cpu blend")
     }
 
     fn max_abs_diff(a: &Frame, b: &Frame) -> f32 {

@@ -1,6 +1,7 @@
 //! Rendering the point cloud into frames (algorithms.md §7).
 
 pub mod bench;
+pub mod blend;
 pub mod cpu;
 pub mod gpu;
 
@@ -55,6 +56,9 @@ pub struct SplatSettings {
     pub min_radius_px: f32,
     /// Largest disc radius, pixels (bounds the cost of points that come very close).
     pub max_radius_px: f32,
+    /// A disc is at most this many times the paper's fronto-parallel radius
+    /// `r0·z_src/z_tgt` (see [`cpu::splat_radius_px`]).
+    pub max_stretch: f32,
 }
 
 impl Default for SplatSettings {
@@ -64,6 +68,7 @@ impl Default for SplatSettings {
             k: 8,
             min_radius_px: 0.5,
             max_radius_px: 32.0,
+            max_stretch: 3.0,
         }
     }
 }
@@ -79,14 +84,16 @@ impl SplatSettings {
             )));
         }
         let finite_positive = |v: f32| v.is_finite() && v > 0.0;
-        if !finite_positive(self.radius_scale)
-            || !finite_positive(self.min_radius_px)
-            || !finite_positive(self.max_radius_px)
-            || self.min_radius_px > self.max_radius_px
-        {
+        let in_range = finite_positive(self.radius_scale)
+            && finite_positive(self.min_radius_px)
+            && finite_positive(self.max_radius_px)
+            && self.max_stretch.is_finite()
+            && self.max_stretch >= 1.0
+            && self.min_radius_px <= self.max_radius_px;
+        if !in_range {
             return Err(Error::invalid(format!(
-                "splat radius settings are out of range: scale {}, min {} px, max {} px",
-                self.radius_scale, self.min_radius_px, self.max_radius_px
+                "splat radius settings are out of range: scale {}, min {} px, max {} px, stretch {}",
+                self.radius_scale, self.min_radius_px, self.max_radius_px, self.max_stretch
             )));
         }
         Ok(())

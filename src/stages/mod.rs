@@ -3,4 +3,7 @@
 
 pub mod depth;
 pub mod inpaint;
+pub mod layers;
+pub mod motion;
+pub mod outpaint;
 pub mod points;

@@ -16,7 +16,8 @@ use glam::Vec3;
 /// footprint falls back to a fronto-parallel pixel there (no rubber sheets across depth edges).
 pub const SAME_SURFACE_RELATIVE_DEPTH: f32 = 0.1;
 
-/// A footprint vector is at most this many fronto-parallel pixel sizes long (grazing surfaces).
+/// Bound on a footprint vector's length in fronto-parallel pixel sizes, for code that stretches
+/// footprints itself (motion's displaced footprints).
 pub const MAX_FOOTPRINT_STRETCH: f32 = 8.0;
 
 /// Points as a structure of arrays. Every vector has the same length.
@@ -137,6 +138,19 @@ impl PointCloud {
                 }
                 let z = depth.at(x, y);
                 let p = intrinsics.unproject(x as f32, y as f32, z);
+                // Normalise so each tangent projects to exactly one pixel in the input view
+                // (the central difference is only first-order accurate on slanted surfaces).
+                let unit_in_source = |t: Vec3| -> Vec3 {
+                    let Some(j) = intrinsics.projection_jacobian(p) else {
+                        return t;
+                    };
+                    let len = glam::Vec2::new(j[0].dot(t), j[1].dot(t)).length();
+                    if len.is_finite() && len > 1e-12 {
+                        t / len
+                    } else {
+                        t
+                    }
+                };
                 let along = |dx: isize, dy: isize, fronto: Vec3| -> Vec3 {
                     let neighbour = |s: isize| -> Option<Vec3> {
                         let nx = x as isize + dx * s;
@@ -158,28 +172,14 @@ impl PointCloud {
                         (None, Some(b)) => p - b,
                         (None, None) => fronto,
                     };
-                    let limit = MAX_FOOTPRINT_STRETCH * fronto.length();
-                    if t.is_finite() && t.length() <= limit {
-                        t
-                    } else {
-                        t.clamp_length_max(limit)
-                    }
+                    // Long tangents (grazing surfaces, or depth edges smoothed into ramps)
+                    // are kept: the renderer caps the disc relative to the paper's
+                    // fronto-parallel radius in each target view.
+                    let t = unit_in_source(t);
+                    if t.is_finite() { t } else { fronto }
                 };
-                // Normalise so each tangent projects to exactly one pixel in the input view
-                // (the central difference is only first-order accurate on slanted surfaces).
-                let unit_in_source = |t: Vec3| -> Vec3 {
-                    let Some(j) = intrinsics.projection_jacobian(p) else {
-                        return t;
-                    };
-                    let len = glam::Vec2::new(j[0].dot(t), j[1].dot(t)).length();
-                    if len.is_finite() && len > 1e-12 {
-                        t / len
-                    } else {
-                        t
-                    }
-                };
-                let tu = unit_in_source(along(1, 0, Vec3::new(z / intrinsics.fx, 0.0, 0.0)));
-                let tv = unit_in_source(along(0, 1, Vec3::new(0.0, z / intrinsics.fy, 0.0)));
+                let tu = along(1, 0, Vec3::new(z / intrinsics.fx, 0.0, 0.0));
+                let tv = along(0, 1, Vec3::new(0.0, z / intrinsics.fy, 0.0));
                 cloud.positions.push(p);
                 cloud.colours.push(image.at(x, y));
                 cloud

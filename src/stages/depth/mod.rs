@@ -1,6 +1,13 @@
 //! Depth estimation: the [`DepthEstimator`] trait and its implementations.
 
+pub mod classical;
+pub mod eval;
+pub mod filter;
 pub mod horizon;
+pub mod io;
+pub mod onnx;
+pub mod paint;
+pub mod preview;
 
 use crate::error::Result;
 use crate::geometry::Intrinsics;
@@ -31,4 +38,139 @@ pub trait DepthEstimator: Send + Sync {
         intrinsics: &Intrinsics,
         progress: &Progress,
     ) -> Result<DepthEstimate>;
+}
+
+/// Which estimator produces the depth.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DepthMethod {
+    /// The classical no-weights estimator ([`classical::ClassicalDepth`]).
+    #[default]
+    Classical,
+    /// The plain ground-plane / horizon prior ([`horizon::HorizonPrior`]).
+    Horizon,
+    /// A learned ONNX model given by `model` (falls back to classical, with a warning, when it
+    /// cannot run).
+    Onnx,
+}
+
+/// A depth file to use instead of estimating.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DepthImport {
+    /// 8/16-bit PNG or float `.npy`; relative to the project file.
+    pub path: std::path::PathBuf,
+    /// What its values mean.
+    pub kind: io::DepthFileKind,
+}
+
+/// Everything the depth stage needs; stored in the project file.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DepthSettings {
+    /// The estimator.
+    pub method: DepthMethod,
+    /// Model manifest for [`DepthMethod::Onnx`]; relative to the project file.
+    pub model: Option<std::path::PathBuf>,
+    /// Parameters of the classical estimator.
+    pub classical: classical::ClassicalDepthParams,
+    /// Parameters of the horizon prior.
+    pub horizon: horizon::HorizonParams,
+    /// Use this file instead of any estimator.
+    pub import: Option<DepthImport>,
+    /// Painted corrections, applied in order on top of the estimate.
+    pub strokes: Vec<paint::DepthStroke>,
+}
+
+/// The depth stage's output plus what the user should be told about it.
+#[derive(Clone, Debug)]
+pub struct DepthStageOutput {
+    /// The estimate (after import and strokes).
+    pub estimate: DepthEstimate,
+    /// Which estimator ran, e.g. "classical".
+    pub estimator: String,
+    /// Fallbacks and adjustments worth a message (each one line).
+    pub warnings: Vec<String>,
+}
+
+/// Runs the depth stage: import or estimate, then apply the painted strokes.
+pub fn run_depth_stage(
+    settings: &DepthSettings,
+    image: &RgbRaster,
+    intrinsics: &Intrinsics,
+    progress: &Progress,
+) -> Result<DepthStageOutput> {
+    let (w, h) = image.size();
+    let mut warnings = Vec::new();
+    let classical = || classical::ClassicalDepth::new(settings.classical.clone());
+    let (mut estimate, estimator) = if let Some(import) = &settings.import {
+        let imported = io::import_depth(&import.path, import.kind, w, h)?;
+        warnings.extend(imported.warnings);
+        let far = imported.depth.data().iter().copied().fold(0.0f32, f32::max);
+        let sky = imported
+            .depth
+            .map(|z| if z >= 0.99 * far { 1.0 } else { 0.0 });
+        let estimate = DepthEstimate {
+            confidence: GrayRaster::new(w, h, 1.0),
+            sky,
+            depth: imported.depth,
+        };
+        (estimate, format!("imported {}", import.path.display()))
+    } else {
+        match settings.method {
+            DepthMethod::Classical => (
+                classical().estimate(image, intrinsics, progress)?,
+                "classical".into(),
+            ),
+            DepthMethod::Horizon => {
+                let prior = horizon::HorizonPrior {
+                    params: settings.horizon,
+                };
+                (
+                    prior.estimate(image, intrinsics, progress)?,
+                    prior.name().into(),
+                )
+            }
+            DepthMethod::Onnx => {
+                let learned = settings
+                    .model
+                    .as_ref()
+                    .ok_or_else(|| {
+                        crate::Error::invalid("depth method onnx needs a model manifest")
+                    })
+                    .and_then(|m| onnx::OnnxDepth::from_manifest(m))
+                    .and_then(|model| {
+                        let name = model.manifest().display_name();
+                        model
+                            .estimate(image, intrinsics, progress)
+                            .map(|e| (e, format!("onnx {name}")))
+                    });
+                match learned {
+                    Ok(result) => result,
+                    Err(crate::Error::Cancelled) => return Err(crate::Error::Cancelled),
+                    Err(e) => {
+                        if let Some(notice) = crate::ml::fallback_notice(
+                            "depth",
+                            &format!("{e:#}"),
+                            "the classical estimator",
+                        ) {
+                            warnings.push(notice);
+                        }
+                        (
+                            classical().estimate(image, intrinsics, progress)?,
+                            "classical (fallback)".into(),
+                        )
+                    }
+                }
+            }
+        }
+    };
+    if !settings.strokes.is_empty() {
+        estimate.depth = paint::apply_strokes(&estimate.depth, &settings.strokes)?;
+    }
+    Ok(DepthStageOutput {
+        estimate,
+        estimator,
+        warnings,
+    })
 }

@@ -1,4 +1,23 @@
 //! Image completion: the [`Inpainter`] trait and its implementations.
+//!
+//! - [`PatchMatchInpainter`] (`patchmatch`): example-based completion, presets `draft`,
+//!   `preview`, `final`; honours `allowed_source` and completes a guide channel.
+//! - [`HarmonicInpainter`] (`harmonic`): the membrane fill, the smooth baseline.
+//! - `command`: the `makeit4d inpaint` command as functions (mask decoding, checks).
+//! - `bench`: holes cut out of real photos, scored against them (PSNR, SSIM) and timed.
+
+pub mod bench;
+pub mod command;
+mod common;
+pub mod harmonic;
+mod metrics;
+pub mod onnx;
+pub mod patchmatch;
+
+pub use bench::{BenchOptions, BenchRow, bench_inpaint, format_bench_table};
+pub use command::{inpaint_command, read_hole_mask};
+pub use harmonic::HarmonicInpainter;
+pub use patchmatch::{InpaintPreset, PatchMatchInpainter, PatchMatchParams};
 
 use crate::error::Result;
 use crate::progress::Progress;
@@ -36,4 +55,17 @@ pub trait Inpainter: Send + Sync {
 
     /// Fills `request.hole`. Deterministic for a given seed.
     fn inpaint(&self, request: &InpaintRequest<'_>, progress: &Progress) -> Result<InpaintResult>;
+}
+
+/// The project's inpainting settings (canvas and layers share one inpainter).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct InpaintSettings {
+    /// PatchMatch quality preset.
+    pub preset: InpaintPreset,
+    /// Seed for every random choice.
+    pub seed: u64,
+    /// A LaMa-style ONNX inpainting model manifest; relative to the project file. Falls back to
+    /// PatchMatch, with a warning, when it cannot run.
+    pub model: Option<std::path::PathBuf>,
 }

@@ -1,0 +1,1131 @@
+//! A classical monocular depth estimator: no learned weights, only image cues
+//! (`../docs/algorithms.md` §3).
+//!
+//! All cues are computed in *nearness* (relative disparity, 0 = far, 1 = near) on a copy of the
+//! image reduced to [`ClassicalDepthParams::work_size_px`], fused, refined at full resolution by
+//! a fast guided filter so depth edges sit on image edges, and converted to depth `Z`:
+//!
+//! 1. **Sky**: bright, low-texture pixels connected to the top border (flood fill).
+//! 2. **Horizon**: the user's override, else the median lower edge of the sky, else a default.
+//! 3. **Position / ground plane** ("tour into the picture"): below the horizon a ground plane
+//!    seen from camera height `h` has `Z = h·fy/(v − v_h)`, i.e. disparity linear in `v`.
+//! 4. **Pop-up** (Hoiem et al. 2005): walking up a column, a coherent region (no horizontal
+//!    image edge) keeps the nearness of the point where it meets the ground.
+//! 5. **Object / figure-ground**: the image border (top, left, right) is mostly background;
+//!    pixels whose colour and texture are unlike anything on the border are objects in front.
+//! 6. **Haze** (He et al. 2009): in hazy images the dark channel gives the transmission
+//!    `t = e^(−βZ)`, so `−ln t` is relative depth; weighted by how hazy the image is.
+//!
+//! Sky is clamped to a finite far plane (`far_plane_factor` × median scene depth).
+
+use super::filter::{box_mean, gaussian_blur, guided_upsample, min_filter};
+use super::{DepthEstimate, DepthEstimator};
+use crate::error::{Error, Result};
+use crate::geometry::Intrinsics;
+use crate::progress::Progress;
+use crate::raster::{GrayRaster, Raster, Rgb, RgbRaster, luma, quantile};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::collections::VecDeque;
+
+/// Parameters of [`ClassicalDepth`]. Every field has a documented default
+/// (`ClassicalDepthParams::default()`); the project file stores them with `#[serde(default)]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct ClassicalDepthParams {
+    /// User override of the horizon line, as a fraction of the image height from the top
+    /// (0 = top row, 1 = bottom row). `None` (default): detected automatically.
+    pub horizon: Option<f32>,
+    /// Horizon used when it is not overridden and no sky is found, fraction of height from the
+    /// top. Default 0.5 (a level camera).
+    pub default_horizon: f32,
+    /// Camera height above the ground plane, metres; sets the metric scale of the depth
+    /// (`Z = h·fy/(v − v_h)` on the ground). Default 1.6.
+    pub camera_height_m: f32,
+    /// The cues are computed on a copy whose longer side is at most this many pixels.
+    /// Default 384.
+    pub work_size_px: usize,
+    /// Sky candidates have a luma at least this (sRGB-encoded, `[0, 1]`). Default 0.18.
+    pub sky_min_luma: f32,
+    /// Sky candidates have a local texture (blurred luma gradient magnitude per working pixel)
+    /// at most this. Default 0.03.
+    pub sky_max_texture: f32,
+    /// Pixels brighter than this × the median luma are sky candidates whatever their texture.
+    /// Default 2.0.
+    pub sky_bright_factor: f32,
+    /// Sky is cut off this far below the detected horizon, fraction of the height (water and
+    /// fog below the horizon are not sky). Default 0.05.
+    pub sky_below_horizon: f32,
+    /// Weight of the position (ground plane + pop-up) cue in the fusion. Default 0.5.
+    pub ground_weight: f32,
+    /// Share of a plain top-to-bottom disparity ramp mixed into the ground prior, so that
+    /// structures above the horizon are not all at the same depth. Default 0.3.
+    pub background_ramp: f32,
+    /// Colour step (sum of absolute RGB differences between vertically adjacent working
+    /// pixels) at which the pop-up carry is halved. Default 0.1.
+    pub popup_edge: f32,
+    /// How far a vertical structure carries its ground-contact nearness upward before it
+    /// fades, fraction of the image height. Default 1.0.
+    pub popup_carry: f32,
+    /// Weight of the object (figure-ground against the border) cue, scaled down by the
+    /// border's incoherence and by haziness. Default 1.0.
+    pub object_weight: f32,
+    /// Colour difference (RGB Euclidean, `[0, 1]` units) of one standard deviation in the
+    /// object cue's similarity kernel. Default 0.4.
+    pub object_colour_scale: f32,
+    /// Texture difference of one standard deviation in the object cue's kernel. Default 0.01.
+    pub object_texture_scale: f32,
+    /// Border coherence (mean similarity of two border samples) below which the object cue
+    /// is off: a border of many different things is not one background. Default 0.2.
+    pub object_coherence_onset: f32,
+    /// Border coherence at which the object cue has its full weight. Default 0.4.
+    pub object_coherence_full: f32,
+    /// Width of the border band sampled as "background", fraction of the shorter side.
+    /// Default 0.05.
+    pub border_band: f32,
+    /// Weight of the haze cue when the image is fully hazy. Default 0.5.
+    pub haze_weight: f32,
+    /// Median normalised dark channel at which the haze cue starts to count. Default 0.5.
+    pub haze_onset: f32,
+    /// Median normalised dark channel at which the haze cue counts fully. Default 0.75.
+    pub haze_full: f32,
+    /// Ratio of the farthest to the nearest non-sky depth. Default 100 (the released
+    /// Make-It-4D code's `ε = 0.01`).
+    pub max_depth_ratio: f32,
+    /// Sky depth = this × the median non-sky depth (at least the farthest non-sky depth).
+    /// Default 100.
+    pub far_plane_factor: f32,
+    /// Radius of the edge-aware refinement, fraction of the longer image side. Default 0.0125.
+    pub refine_radius: f32,
+    /// Regulariser of the guided filter (squared luma units). Default 0.01.
+    pub refine_epsilon: f32,
+}
+
+impl Default for ClassicalDepthParams {
+    fn default() -> Self {
+        Self {
+            horizon: None,
+            default_horizon: 0.5,
+            camera_height_m: 1.6,
+            work_size_px: 384,
+            sky_min_luma: 0.18,
+            sky_max_texture: 0.03,
+            sky_bright_factor: 2.0,
+            sky_below_horizon: 0.05,
+            ground_weight: 0.5,
+            background_ramp: 0.3,
+            popup_edge: 0.1,
+            popup_carry: 1.0,
+            object_weight: 1.0,
+            object_colour_scale: 0.4,
+            object_texture_scale: 0.01,
+            object_coherence_onset: 0.2,
+            object_coherence_full: 0.4,
+            border_band: 0.05,
+            haze_weight: 0.5,
+            haze_onset: 0.5,
+            haze_full: 0.75,
+            max_depth_ratio: 100.0,
+            far_plane_factor: 100.0,
+            refine_radius: 0.0125,
+            refine_epsilon: 0.01,
+        }
+    }
+}
+
+impl ClassicalDepthParams {
+    /// Checks every field; the message names the first bad one.
+    pub fn validate(&self) -> Result<()> {
+        if let Some(h) = self.horizon
+            && !(h.is_finite() && (-1.0..=2.0).contains(&h))
+        {
+            return Err(Error::invalid(format!(
+                "horizon {h} must be a finite fraction of the image height in [-1, 2]"
+            )));
+        }
+        let positive = [
+            ("camera_height_m", self.camera_height_m),
+            ("popup_edge", self.popup_edge),
+            ("popup_carry", self.popup_carry),
+            ("object_colour_scale", self.object_colour_scale),
+            ("object_texture_scale", self.object_texture_scale),
+            ("refine_epsilon", self.refine_epsilon),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(Error::invalid(format!("{name} must be > 0 (got {v})")));
+            }
+        }
+        let non_negative = [
+            ("ground_weight", self.ground_weight),
+            ("object_weight", self.object_weight),
+            ("haze_weight", self.haze_weight),
+            ("background_ramp", self.background_ramp),
+            ("border_band", self.border_band),
+            ("refine_radius", self.refine_radius),
+            ("sky_min_luma", self.sky_min_luma),
+            ("sky_max_texture", self.sky_max_texture),
+            ("sky_bright_factor", self.sky_bright_factor),
+            ("sky_below_horizon", self.sky_below_horizon),
+            ("haze_onset", self.haze_onset),
+        ];
+        for (name, v) in non_negative {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(Error::invalid(format!("{name} must be ≥ 0 (got {v})")));
+            }
+        }
+        if !(self.default_horizon.is_finite()) {
+            return Err(Error::invalid("default_horizon must be finite"));
+        }
+        if !(self.object_coherence_full.is_finite()
+            && self.object_coherence_onset.is_finite()
+            && self.object_coherence_full > self.object_coherence_onset)
+        {
+            return Err(Error::invalid(
+                "object_coherence_full must be greater than object_coherence_onset",
+            ));
+        }
+        if !(self.haze_full.is_finite() && self.haze_full > self.haze_onset) {
+            return Err(Error::invalid("haze_full must be greater than haze_onset"));
+        }
+        if !(self.max_depth_ratio.is_finite() && self.max_depth_ratio > 1.0) {
+            return Err(Error::invalid("max_depth_ratio must be > 1"));
+        }
+        if !(self.far_plane_factor.is_finite() && self.far_plane_factor >= 1.0) {
+            return Err(Error::invalid("far_plane_factor must be ≥ 1"));
+        }
+        if self.work_size_px < 8 {
+            return Err(Error::invalid("work_size_px must be ≥ 8"));
+        }
+        if self.ground_weight + self.object_weight + self.haze_weight <= 0.0 {
+            return Err(Error::invalid("at least one cue weight must be > 0"));
+        }
+        Ok(())
+    }
+}
+
+/// The classical estimator (see the module documentation).
+#[derive(Clone, Debug, Default)]
+pub struct ClassicalDepth {
+    /// Its parameters.
+    pub params: ClassicalDepthParams,
+}
+
+/// The intermediate cues of one classical estimate, at the *working* resolution (except
+/// `estimate`, at the image's size), for diagnostics and the editor.
+#[derive(Clone, Debug)]
+pub struct ClassicalAnalysis {
+    /// The final estimate.
+    pub estimate: DepthEstimate,
+    /// Horizon row as a fraction of the image height from the top.
+    pub horizon: f32,
+    /// Whether the horizon came from the sky (`true`), or from the override or default.
+    pub horizon_detected: bool,
+    /// How hazy the image is, `[0, 1]` (the haze cue's weight factor).
+    pub haziness: f32,
+    /// Mean similarity of two border samples in the object cue's kernel, `[0, 1]`.
+    pub border_coherence: f32,
+    /// Hard sky mask at working resolution, as 0/1.
+    pub sky_work: GrayRaster,
+    /// Position cue (ground plane + pop-up), nearness `[0, 1]`.
+    pub position_work: GrayRaster,
+    /// Object cue, nearness `[0, 1]`.
+    pub object_work: GrayRaster,
+    /// Haze cue, nearness `[0, 1]`.
+    pub haze_work: GrayRaster,
+}
+
+impl ClassicalDepth {
+    /// An estimator with `params`.
+    pub fn new(params: ClassicalDepthParams) -> Self {
+        Self { params }
+    }
+
+    /// Runs the estimator and returns its intermediate cues too.
+    pub fn analyse(
+        &self,
+        image: &RgbRaster,
+        intrinsics: &Intrinsics,
+        progress: &Progress,
+    ) -> Result<ClassicalAnalysis> {
+        let p = &self.params;
+        p.validate()?;
+        if image.is_empty() {
+            return Err(Error::invalid("depth: the image has no pixels"));
+        }
+        let (width, height) = image.size();
+        let fy = if intrinsics.is_valid() {
+            intrinsics.fy
+        } else {
+            Intrinsics::from_hfov(width, height, 60.0).fy
+        };
+        let image = sanitised(image);
+        progress.report(0.0, "depth: cues");
+        progress.check()?;
+
+        // Working copy.
+        let long = width.max(height);
+        let scale = (p.work_size_px as f32 / long as f32).min(1.0);
+        let (ww, wh) = (
+            ((width as f32 * scale).round() as usize).max(1),
+            ((height as f32 * scale).round() as usize).max(1),
+        );
+        let work = image.resized(ww, wh);
+        let work_luma = work.map(luma);
+        let texture = texture_energy(&work_luma);
+
+        // Sky and horizon.
+        let mut sky_work = sky_mask(&work, &work_luma, &texture, p);
+        let (horizon, horizon_detected) = match p.horizon {
+            Some(h) => (h, false),
+            None => match horizon_from_sky(&sky_work) {
+                Some(h) => (h, true),
+                None => (p.default_horizon, false),
+            },
+        };
+        if horizon_detected || p.horizon.is_some() {
+            let cut = (horizon + p.sky_below_horizon) * (wh as f32 - 1.0);
+            for y in 0..wh {
+                if y as f32 > cut {
+                    sky_work.row_mut(y).fill(0.0);
+                }
+            }
+        }
+        progress.report(0.2, "depth: cues");
+        progress.check()?;
+
+        // Position prior and pop-up.
+        let v_horizon_work = horizon * (wh as f32 - 1.0).max(0.0);
+        let prior = position_prior(ww, wh, v_horizon_work, p.background_ramp);
+        let position_work = popup(&work, &prior, p.popup_edge, p.popup_carry);
+        progress.report(0.35, "depth: cues");
+        progress.check()?;
+
+        // Object cue.
+        let (mut object_work, border_coherence) = object_cue(&work, &texture, p);
+        // Much brighter than the image (sky through branches, bright clouds): not an object.
+        let median_luma = quantile(work_luma.data(), 0.5).unwrap_or(0.0);
+        if median_luma > 0.0 {
+            let f = p.sky_bright_factor;
+            for (o, l) in object_work.data_mut().iter_mut().zip(work_luma.data()) {
+                let sky_like = ((l / median_luma - 0.75 * f) / (0.5 * f)).clamp(0.0, 1.0);
+                *o *= 1.0 - sky_like;
+            }
+        }
+        let object_share = ((border_coherence - p.object_coherence_onset)
+            / (p.object_coherence_full - p.object_coherence_onset))
+            .clamp(0.0, 1.0);
+        progress.report(0.6, "depth: cues");
+        progress.check()?;
+
+        // Haze cue.
+        let (haze_work, haziness) = haze_cue(&work, p);
+
+        // Fusion in nearness.
+        let wg = p.ground_weight;
+        // In haze the haze cue already separates figure from ground; counting the object cue
+        // too would flatten the ground-plane gradient of everything in front of the fog.
+        let wo = p.object_weight * object_share * (1.0 - haziness);
+        let wz = p.haze_weight * haziness;
+        let total = (wg + wo + wz).max(1e-6);
+        let mut fused = Raster::from_fn(ww, wh, |x, y| {
+            (wg * position_work.at(x, y) + wo * object_work.at(x, y) + wz * haze_work.at(x, y))
+                / total
+        });
+        normalise_robust(&mut fused, Some(&sky_work));
+        for (n, s) in fused.data_mut().iter_mut().zip(sky_work.data()) {
+            if *s > 0.5 {
+                *n = 0.0;
+            }
+        }
+        progress.report(0.7, "depth: refine");
+        progress.check()?;
+
+        // Full-resolution edge-aware refinement: guided upsampling of the working-size maps.
+        let full_luma = image.map(luma);
+        let radius_work = ((p.refine_radius * ww.max(wh) as f32).round() as usize).max(1);
+        let refined = guided_upsample(
+            &full_luma,
+            &[&fused, &sky_work],
+            radius_work,
+            p.refine_epsilon,
+        );
+        let [nearness, sky] = <[GrayRaster; 2]>::try_from(refined)
+            .map_err(|_| Error::invalid("depth: refinement lost a map"))?;
+        let nearness = nearness.map(|v| {
+            if v.is_finite() {
+                v.clamp(0.0, 1.0)
+            } else {
+                0.0
+            }
+        });
+        let sky = sky.map(|v| {
+            if v.is_finite() {
+                v.clamp(0.0, 1.0)
+            } else {
+                0.0
+            }
+        });
+        progress.report(0.9, "depth: refine");
+        progress.check()?;
+
+        // Nearness → depth.
+        let v_horizon = horizon * (height as f32 - 1.0).max(0.0);
+        let z_near = nearest_ground_depth(height, v_horizon, p.camera_height_m, fy);
+        let depth = nearness_to_depth(&nearness, &sky, z_near, p);
+
+        // Confidence: cue agreement, lowered at depth edges; sky by its certainty.
+        let agreement = Raster::from_fn(ww, wh, |x, y| {
+            1.0 - (position_work.at(x, y) - object_work.at(x, y)).abs()
+        });
+        let (sx, sy) = (ww as f32 / width as f32, wh as f32 / height as f32);
+        let agreement = par_from_fn(width, height, |x, y| {
+            agreement.sample_bilinear((x as f32 + 0.5) * sx - 0.5, (y as f32 + 0.5) * sy - 0.5)
+        });
+        let edges = depth_edge_strength(&nearness);
+        let confidence = par_from_fn(width, height, |x, y| {
+            let s = sky.at(x, y);
+            let sky_certainty = (2.0 * s - 1.0).abs();
+            let ground = agreement.at(x, y) * (1.0 - edges.at(x, y));
+            (s * sky_certainty + (1.0 - s) * ground).clamp(0.0, 1.0)
+        });
+        progress.report(1.0, "depth: done");
+        Ok(ClassicalAnalysis {
+            estimate: DepthEstimate {
+                depth,
+                sky,
+                confidence,
+            },
+            horizon,
+            horizon_detected,
+            haziness,
+            border_coherence,
+            sky_work,
+            position_work,
+            object_work,
+            haze_work,
+        })
+    }
+}
+
+impl DepthEstimator for ClassicalDepth {
+    fn name(&self) -> &str {
+        "classical"
+    }
+
+    fn estimate(
+        &self,
+        image: &RgbRaster,
+        intrinsics: &Intrinsics,
+        progress: &Progress,
+    ) -> Result<DepthEstimate> {
+        Ok(self.analyse(image, intrinsics, progress)?.estimate)
+    }
+}
+
+/// [`Raster::from_fn`] with the rows computed in parallel.
+fn par_from_fn(width: usize, height: usize, f: impl Fn(usize, usize) -> f32 + Sync) -> GrayRaster {
+    let mut data = vec![0.0f32; width * height];
+    if width > 0 {
+        data.par_chunks_mut(width).enumerate().for_each(|(y, row)| {
+            for (x, v) in row.iter_mut().enumerate() {
+                *v = f(x, y);
+            }
+        });
+    }
+    Raster::from_vec(width, height, data).unwrap_or_else(|| Raster::new(width, height, 0.0))
+}
+
+/// The image with every channel finite and in `[0, 1]` (NaN → 0).
+fn sanitised(image: &RgbRaster) -> RgbRaster {
+    let clean = |v: f32| {
+        if v.is_finite() {
+            v.clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    };
+    image.map(|c| [clean(c[0]), clean(c[1]), clean(c[2])])
+}
+
+/// Local texture: the luma gradient magnitude (central differences, per pixel), blurred with
+/// σ = 1.5 px.
+pub fn texture_energy(luma: &GrayRaster) -> GrayRaster {
+    let (w, h) = luma.size();
+    let grad = Raster::from_fn(w, h, |x, y| {
+        let (xi, yi) = (x as isize, y as isize);
+        let gx = 0.5 * (luma.at_clamped(xi + 1, yi) - luma.at_clamped(xi - 1, yi));
+        let gy = 0.5 * (luma.at_clamped(xi, yi + 1) - luma.at_clamped(xi, yi - 1));
+        (gx * gx + gy * gy).sqrt()
+    });
+    gaussian_blur(&grad, 1.5)
+}
+
+/// Hard sky mask (1 = sky): candidates 4-connected to a candidate in the top row. A candidate
+/// is not vegetation-green and is either light and smooth (luma ≥ `sky_min_luma`, texture ≤
+/// `sky_max_texture`) or much brighter than the image (luma ≥ `sky_bright_factor` × median
+/// luma: sky seen through branches, bright clouds).
+fn sky_mask(
+    work: &RgbRaster,
+    work_luma: &GrayRaster,
+    texture: &GrayRaster,
+    p: &ClassicalDepthParams,
+) -> GrayRaster {
+    let (w, h) = work.size();
+    let median_luma = quantile(work_luma.data(), 0.5).unwrap_or(0.0);
+    let bright = (p.sky_bright_factor * median_luma).max(p.sky_min_luma);
+    let candidate = Raster::from_fn(w, h, |x, y| {
+        let c = work.at(x, y);
+        let l = work_luma.at(x, y);
+        let vegetation = c[1] > c[0] + 0.03 && c[1] > c[2] + 0.03;
+        let smooth_and_light = l >= p.sky_min_luma && texture.at(x, y) <= p.sky_max_texture;
+        !vegetation && (smooth_and_light || l >= bright)
+    });
+    let mut sky = Raster::new(w, h, 0.0f32);
+    let mut queue = VecDeque::new();
+    for x in 0..w {
+        if candidate.at(x, 0) {
+            sky.set(x, 0, 1.0);
+            queue.push_back((x, 0usize));
+        }
+    }
+    flood(&mut sky, &mut queue, |_, _, nx, ny| candidate.at(nx, ny));
+    // The texture blur makes the last rows above a skyline look textured: grow the sky by up
+    // to 3 px into bright neighbours of nearly the same colour.
+    let similar = |x: usize, y: usize, nx: usize, ny: usize| {
+        let a = work.at(x, y);
+        let b = work.at(nx, ny);
+        let step = (a[0] - b[0]).abs() + (a[1] - b[1]).abs() + (a[2] - b[2]).abs();
+        work_luma.at(nx, ny) >= p.sky_min_luma && step < 0.05
+    };
+    for _ in 0..3 {
+        let border: Vec<(usize, usize)> = (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .filter(|&(x, y)| sky.at(x, y) > 0.5)
+            .collect();
+        let mut grown = sky.clone();
+        for (x, y) in border {
+            for (nx, ny) in neighbours(x, y, w, h) {
+                if grown.at(nx, ny) == 0.0 && similar(x, y, nx, ny) {
+                    grown.set(nx, ny, 1.0);
+                }
+            }
+        }
+        sky = grown;
+    }
+    sky
+}
+
+/// The 4-neighbours of `(x, y)` inside a `w × h` grid.
+fn neighbours(x: usize, y: usize, w: usize, h: usize) -> impl Iterator<Item = (usize, usize)> {
+    let left = (x > 0).then(|| (x.wrapping_sub(1), y));
+    let right = (x + 1 < w).then_some((x + 1, y));
+    let up = (y > 0).then(|| (x, y.wrapping_sub(1)));
+    let down = (y + 1 < h).then_some((x, y + 1));
+    [left, right, up, down].into_iter().flatten()
+}
+
+/// Breadth-first flood fill of `mask` (1 = filled) from the seeds in `queue`, entering a
+/// neighbour `(nx, ny)` of `(x, y)` when `accept(x, y, nx, ny)`.
+fn flood(
+    mask: &mut GrayRaster,
+    queue: &mut VecDeque<(usize, usize)>,
+    accept: impl Fn(usize, usize, usize, usize) -> bool,
+) {
+    let (w, h) = mask.size();
+    while let Some((x, y)) = queue.pop_front() {
+        for (nx, ny) in neighbours(x, y, w, h) {
+            if mask.at(nx, ny) == 0.0 && accept(x, y, nx, ny) {
+                mask.set(nx, ny, 1.0);
+                queue.push_back((nx, ny));
+            }
+        }
+    }
+}
+
+/// Horizon from a sky mask: the median over columns of the lower edge of each column's lowest
+/// sky pixel, as a fraction of the height; `None` when fewer than half of the columns have sky
+/// or the sky covers (almost) everything.
+pub fn horizon_from_sky(sky: &GrayRaster) -> Option<f32> {
+    let (w, h) = sky.size();
+    if h < 2 || w == 0 {
+        return None;
+    }
+    let mut bottoms = Vec::new();
+    for x in 0..w {
+        if let Some(y) = (0..h).rev().find(|&y| sky.at(x, y) > 0.5) {
+            bottoms.push(y as f32 + 0.5);
+        }
+    }
+    if bottoms.len() * 2 < w {
+        return None;
+    }
+    let median = quantile(&bottoms, 0.5)?;
+    let fraction = median / (h - 1) as f32;
+    (fraction < 0.95).then_some(fraction.clamp(0.05, 0.95))
+}
+
+/// Ground-plane depth at image row `v_px` (pixel centres at integers) for a horizon at row
+/// `v_horizon_px`, camera height `camera_height_m` and focal length `fy_px`:
+/// `Z = h·fy/(v − v_h)`. `None` at or above the horizon (the ray never meets the ground).
+pub fn ground_plane_depth(
+    v_px: f32,
+    v_horizon_px: f32,
+    camera_height_m: f32,
+    fy_px: f32,
+) -> Option<f32> {
+    let dv = v_px - v_horizon_px;
+    (dv > 0.0).then(|| camera_height_m * fy_px / dv)
+}
+
+/// Depth of the ground at the bottom row, the nearest ground the image sees; the horizon is
+/// kept at least 5 % of the height above the bottom so the depth stays finite.
+fn nearest_ground_depth(height: usize, v_horizon_px: f32, camera_height_m: f32, fy: f32) -> f32 {
+    let bottom = (height as f32 - 1.0).max(0.0);
+    let min_gap = (0.05 * height as f32).max(1.0);
+    let v_h = v_horizon_px.min(bottom - min_gap);
+    ground_plane_depth(bottom, v_h, camera_height_m, fy).unwrap_or(camera_height_m)
+}
+
+/// Position prior in nearness (∝ disparity): below the horizon the ground plane's disparity
+/// `(v − v_h)/(v_bottom − v_h)` (1 at the bottom row, 0 at the horizon), mixed with a share
+/// `ramp` of the plain top-to-bottom ramp `v/v_bottom`.
+pub fn position_prior(width: usize, height: usize, v_horizon_px: f32, ramp: f32) -> GrayRaster {
+    let bottom = (height as f32 - 1.0).max(1.0);
+    let v_h = v_horizon_px.min(bottom - 1.0);
+    let ramp = ramp.clamp(0.0, 1.0);
+    Raster::from_fn(width, height, |_, y| {
+        let v = y as f32;
+        let ground = ((v - v_h) / (bottom - v_h)).clamp(0.0, 1.0);
+        let plain = (v / bottom).clamp(0.0, 1.0);
+        (1.0 - ramp) * ground + ramp * plain
+    })
+}
+
+/// Column-wise pop-up: walking up each column from the bottom row,
+/// `n(v) = a·n(v + 1) + (1 − a)·prior(v)` with `a = decay / (1 + (Δ/edge)⁴)`, where `Δ` is the
+/// colour step between rows `v` and `v + 1` and `decay = e^(−1/(carry·H))`. A region without
+/// horizontal edges keeps the nearness where it meets the ground; an edge resets to the prior.
+pub fn popup(work: &RgbRaster, prior: &GrayRaster, edge: f32, carry: f32) -> GrayRaster {
+    let (w, h) = work.size();
+    let mut out = prior.clone();
+    if h < 2 {
+        return out;
+    }
+    let decay = (-1.0 / (carry * h as f32).max(1e-3)).exp();
+    for y in (0..h - 1).rev() {
+        for x in 0..w {
+            let a = work.at(x, y);
+            let b = work.at(x, y + 1);
+            let step = (a[0] - b[0]).abs() + (a[1] - b[1]).abs() + (a[2] - b[2]).abs();
+            let r = step / edge;
+            let keep = decay / (1.0 + r * r * r * r);
+            let below = out.at(x, y + 1);
+            let v = keep * below + (1.0 - keep) * prior.at(x, y);
+            out.set(x, y, v);
+        }
+    }
+    out
+}
+
+/// Object (figure-ground) cue: `1 − L/max L`, where `L(x)` is the mean Gaussian similarity of
+/// pixel `x`'s features (blurred colour / `object_colour_scale`, texture /
+/// `object_texture_scale`) to samples from the top, left and right border bands. Also returns
+/// the border's coherence, the mean similarity between two border samples (1 = a uniform
+/// border): the cue is only meaningful when the border is one background.
+fn object_cue(
+    work: &RgbRaster,
+    texture: &GrayRaster,
+    p: &ClassicalDepthParams,
+) -> (GrayRaster, f32) {
+    let (w, h) = work.size();
+    let blurred: Vec<GrayRaster> = (0..3)
+        .map(|c| gaussian_blur(&work.map(|v| v[c]), 1.5))
+        .collect();
+    let sc = 1.0 / p.object_colour_scale;
+    let st = 1.0 / p.object_texture_scale;
+    let feature = |x: usize, y: usize| -> [f32; 4] {
+        [
+            blurred[0].at(x, y) * sc,
+            blurred[1].at(x, y) * sc,
+            blurred[2].at(x, y) * sc,
+            texture.at(x, y) * st,
+        ]
+    };
+    let band = ((p.border_band * w.min(h) as f32).round() as usize).max(1);
+    let mut samples = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            if y < band || x < band || x + band >= w {
+                samples.push(feature(x, y));
+            }
+        }
+    }
+    let max_samples = 320;
+    let stride = samples.len().div_ceil(max_samples).max(1);
+    let samples: Vec<[f32; 4]> = samples.into_iter().step_by(stride).collect();
+    if samples.len() < 2 || p.object_weight == 0.0 {
+        return (Raster::new(w, h, 0.0), 0.0);
+    }
+    let kernel = |f: &[f32; 4], b: &[f32; 4]| {
+        let d2 = (f[0] - b[0]).powi(2)
+            + (f[1] - b[1]).powi(2)
+            + (f[2] - b[2]).powi(2)
+            + (f[3] - b[3]).powi(2);
+        (-0.5 * d2).exp()
+    };
+    // Border coherence: the mean similarity between two different border samples.
+    let mut coherence = 0.0f32;
+    for (i, a) in samples.iter().enumerate() {
+        for b in &samples[i + 1..] {
+            coherence += kernel(a, b);
+        }
+    }
+    let pairs = samples.len() * (samples.len() - 1) / 2;
+    coherence /= pairs as f32;
+    let inv_n = 1.0 / samples.len() as f32;
+    // The features are blurred: evaluating on every second pixel and interpolating loses
+    // little and saves three quarters of the work.
+    let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
+    let mut likelihood = vec![0.0f32; cw * ch];
+    likelihood
+        .par_chunks_mut(cw)
+        .enumerate()
+        .for_each(|(cy, row)| {
+            for (cx, l) in row.iter_mut().enumerate() {
+                let f = feature((2 * cx).min(w - 1), (2 * cy).min(h - 1));
+                let mut s = 0.0;
+                for b in &samples {
+                    s += kernel(&f, b);
+                }
+                *l = s * inv_n;
+            }
+        });
+    let max = likelihood.iter().copied().fold(0.0f32, f32::max);
+    let data = likelihood
+        .iter()
+        .map(|l| if max > 0.0 { 1.0 - l / max } else { 0.0 })
+        .collect();
+    let coarse = Raster::from_vec(cw, ch, data).unwrap_or_else(|| Raster::new(cw, ch, 0.0));
+    // Coarse pixel c sits on fine pixel 2c.
+    let cue = Raster::from_fn(w, h, |x, y| {
+        coarse.sample_bilinear(x as f32 / 2.0, y as f32 / 2.0)
+    });
+    (cue, coherence)
+}
+
+/// Atmospheric light `A` of the dark channel prior: the mean colour of the brightest 0.1 %
+/// (at least one) of the dark-channel pixels.
+pub fn atmospheric_light(image: &RgbRaster, dark: &GrayRaster) -> Rgb {
+    let n = dark.len();
+    if n == 0 {
+        return [1.0; 3];
+    }
+    let k = (n / 1000).max(1);
+    let mut order: Vec<usize> = (0..n).collect();
+    order.select_nth_unstable_by(n - k, |&a, &b| dark.data()[a].total_cmp(&dark.data()[b]));
+    let mut sum = [0.0f32; 3];
+    for &i in &order[n - k..] {
+        let c = image.data()[i];
+        sum[0] += c[0];
+        sum[1] += c[1];
+        sum[2] += c[2];
+    }
+    [sum[0] / k as f32, sum[1] / k as f32, sum[2] / k as f32]
+}
+
+/// Dark-channel transmission (He et al. 2009, eq. 12): `t = 1 − ω·min_patch(min_c I_c/A_c)`,
+/// with `ω` the amount of haze removed (0.95 in the paper), clamped to `[0.05, 1]`.
+pub fn transmission(normalised_dark: f32, omega: f32) -> f32 {
+    (1.0 - omega * normalised_dark).clamp(0.05, 1.0)
+}
+
+/// Haze cue and haziness. Nearness `1 − (−ln t)/max(−ln t)` (since `t = e^(−βZ)`); haziness
+/// `clamp((median(dark/A) − onset)/(full − onset), 0, 1)`.
+fn haze_cue(work: &RgbRaster, p: &ClassicalDepthParams) -> (GrayRaster, f32) {
+    let (w, h) = work.size();
+    let radius = ((w.max(h) as f32 * 7.0 / 384.0).round() as usize).max(1);
+    let min_rgb = work.map(|c| c[0].min(c[1]).min(c[2]));
+    let dark = min_filter(&min_rgb, radius);
+    let a = atmospheric_light(work, &dark);
+    let a = [a[0].max(1e-3), a[1].max(1e-3), a[2].max(1e-3)];
+    let normalised = min_filter(
+        &work.map(|c| (c[0] / a[0]).min(c[1] / a[1]).min(c[2] / a[2])),
+        radius,
+    );
+    let median = quantile(normalised.data(), 0.5).unwrap_or(0.0);
+    let haziness = ((median - p.haze_onset) / (p.haze_full - p.haze_onset)).clamp(0.0, 1.0);
+    let depth = normalised.map(|d| -transmission(d, 0.95).ln());
+    let max = depth.data().iter().copied().fold(0.0f32, f32::max);
+    let nearness = if max > 0.0 {
+        box_mean(&depth.map(|d| 1.0 - d / max), 1)
+    } else {
+        Raster::new(w, h, 1.0)
+    };
+    (nearness, haziness)
+}
+
+/// Maps the values outside `exclude` (where it is > 0.5) linearly so their 1st percentile
+/// goes to 0 and their 99th to 1, clamped; a constant map becomes 0.5.
+fn normalise_robust(values: &mut GrayRaster, exclude: Option<&GrayRaster>) {
+    let kept: Vec<f32> = match exclude {
+        Some(m) => values
+            .data()
+            .iter()
+            .zip(m.data())
+            .filter(|(_, m)| **m <= 0.5)
+            .map(|(v, _)| *v)
+            .collect(),
+        None => values.data().to_vec(),
+    };
+    let (Some(lo), Some(hi)) = (quantile(&kept, 0.01), quantile(&kept, 0.99)) else {
+        return;
+    };
+    let span = hi - lo;
+    for v in values.data_mut() {
+        *v = if span > 1e-6 {
+            ((*v - lo) / span).clamp(0.0, 1.0)
+        } else {
+            0.5
+        };
+    }
+}
+
+/// Local depth-edge strength in `[0, 1]`: the nearness gradient magnitude × 10 (one tenth of
+/// the nearness range per pixel counts as a full edge), clamped.
+fn depth_edge_strength(nearness: &GrayRaster) -> GrayRaster {
+    let (w, h) = nearness.size();
+    par_from_fn(w, h, |x, y| {
+        let (xi, yi) = (x as isize, y as isize);
+        let gx = nearness.at_clamped(xi + 1, yi) - nearness.at_clamped(xi - 1, yi);
+        let gy = nearness.at_clamped(xi, yi + 1) - nearness.at_clamped(xi, yi - 1);
+        (5.0 * (gx * gx + gy * gy).sqrt()).clamp(0.0, 1.0)
+    })
+}
+
+/// Nearness `n ∈ [0, 1]` → depth. Non-sky: disparity `(1/Z_near)·(1/R + (1 − 1/R)·n)`, so
+/// `n = 1` is the nearest ground depth and `n = 0` is `R·Z_near` (`R = max_depth_ratio`).
+/// Sky (soft mask `s`) blends in disparity toward the far plane
+/// `Z_far = max(far_plane_factor·median(Z), max(Z))` over non-sky pixels.
+fn nearness_to_depth(
+    nearness: &GrayRaster,
+    sky: &GrayRaster,
+    z_near: f32,
+    p: &ClassicalDepthParams,
+) -> GrayRaster {
+    let inv_ratio = 1.0 / p.max_depth_ratio;
+    let z_near = if z_near.is_finite() && z_near > 0.0 {
+        z_near
+    } else {
+        1.0
+    };
+    let disparity = nearness.map(|n| (inv_ratio + (1.0 - inv_ratio) * n.clamp(0.0, 1.0)) / z_near);
+    let ground_depths: Vec<f32> = disparity
+        .data()
+        .iter()
+        .zip(sky.data())
+        .filter(|(_, s)| **s < 0.5)
+        .map(|(d, _)| 1.0 / d)
+        .collect();
+    let median = quantile(&ground_depths, 0.5).unwrap_or(z_near);
+    let max = quantile(&ground_depths, 1.0).unwrap_or(z_near);
+    let z_far = (p.far_plane_factor * median).max(max);
+    let d_far = 1.0 / z_far;
+    let data = disparity
+        .data()
+        .iter()
+        .zip(sky.data())
+        .map(|(d, s)| {
+            let blended = (1.0 - s) * d + s * d_far;
+            let z = 1.0 / blended.max(d_far);
+            if z.is_finite() && z > 0.0 { z } else { z_far }
+        })
+        .collect();
+    Raster::from_vec(nearness.width(), nearness.height(), data)
+        .unwrap_or_else(|| Raster::new(nearness.width(), nearness.height(), z_far))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn estimator() -> ClassicalDepth {
+        ClassicalDepth::default()
+    }
+
+    fn intrinsics(w: usize, h: usize) -> Intrinsics {
+        Intrinsics::from_hfov(w, h, 60.0)
+    }
+
+    fn check_sane(e: &DepthEstimate, w: usize, h: usize) {
+        assert_eq!(e.depth.size(), (w, h));
+        assert_eq!(e.sky.size(), (w, h));
+        assert_eq!(e.confidence.size(), (w, h));
+        assert!(e.depth.data().iter().all(|z| z.is_finite() && *z > 0.0));
+        assert!(e.sky.data().iter().all(|s| (0.0..=1.0).contains(s)));
+        assert!(e.confidence.data().iter().all(|c| (0.0..=1.0).contains(c)));
+    }
+
+    /// Cheap deterministic noise in `[0, 1)`.
+    fn hash(x: usize, y: usize) -> f32 {
+        let mut v = (x as u32).wrapping_mul(0x9E37_79B9) ^ (y as u32).wrapping_mul(0x85EB_CA6B);
+        v ^= v >> 15;
+        v = v.wrapping_mul(0x2C1B_3C6D);
+        v ^= v >> 12;
+        (v & 0xFFFF) as f32 / 65536.0
+    }
+
+    /// Smooth blue sky above row `sky_rows`, noisy brown ground below.
+    fn landscape(w: usize, h: usize, sky_rows: usize) -> RgbRaster {
+        Raster::from_fn(w, h, |x, y| {
+            if y < sky_rows {
+                [0.5, 0.7, 0.95 - 0.1 * y as f32 / h as f32]
+            } else {
+                let n = hash(x, y) * 0.5;
+                [0.3 + n, 0.25 + n, 0.1 + n * 0.5]
+            }
+        })
+    }
+
+    #[test]
+    fn ground_plane_depth_known_answer() {
+        // h = 1.5 m, fy = 1000 px, 100 rows below the horizon → Z = 15 m.
+        assert_eq!(ground_plane_depth(300.0, 200.0, 1.5, 1000.0), Some(15.0));
+        assert_eq!(ground_plane_depth(200.0, 200.0, 1.5, 1000.0), None);
+        assert_eq!(ground_plane_depth(100.0, 200.0, 1.5, 1000.0), None);
+    }
+
+    #[test]
+    fn position_prior_is_linear_disparity_below_the_horizon() {
+        // 11 rows, horizon at row 5, no ramp: 0 above, (v − 5)/5 below.
+        let p = position_prior(1, 11, 5.0, 0.0);
+        assert_eq!(p.at(0, 0), 0.0);
+        assert_eq!(p.at(0, 5), 0.0);
+        assert!((p.at(0, 8) - 0.6).abs() < 1e-6);
+        assert_eq!(p.at(0, 10), 1.0);
+        // With a full ramp it is v/10.
+        let r = position_prior(1, 11, 5.0, 1.0);
+        assert!((r.at(0, 3) - 0.3).abs() < 1e-6);
+    }
+
+    #[test]
+    fn popup_carries_contact_nearness_up_a_uniform_pole() {
+        // 3 columns × 40 rows. Columns 0 and 2: noisy ground (the prior wins). Column 1: a
+        // uniform pole from row 0 to row 29 standing on noisy ground.
+        let img = Raster::from_fn(3, 40, |x, y| {
+            if x == 1 && y < 30 {
+                [0.9, 0.1, 0.1]
+            } else {
+                let n: f32 = if (x + y) % 2 == 0 { 0.0 } else { 0.8 };
+                [n, n, n]
+            }
+        });
+        let prior = position_prior(3, 40, 10.0, 0.0);
+        let out = popup(&img, &prior, 0.1, 100.0);
+        // The pole's top keeps the nearness at its contact row (29/30), not the prior (0).
+        let contact = prior.at(1, 30);
+        assert!(
+            (out.at(1, 0) - contact).abs() < 0.05,
+            "{} vs {contact}",
+            out.at(1, 0)
+        );
+        // Textured ground follows the prior.
+        assert!((out.at(0, 5) - prior.at(0, 5)).abs() < 1e-3);
+    }
+
+    #[test]
+    fn transmission_known_answers() {
+        assert!((transmission(0.0, 0.95) - 1.0).abs() < 1e-6);
+        assert!((transmission(0.5, 0.95) - 0.525).abs() < 1e-6);
+        assert_eq!(transmission(1.0, 1.0), 0.05);
+        let img = Raster::new(10, 10, [0.2f32, 0.4, 0.6]);
+        let dark = img.map(|c| c[0].min(c[1]).min(c[2]));
+        assert_eq!(atmospheric_light(&img, &dark), [0.2, 0.4, 0.6]);
+    }
+
+    #[test]
+    fn horizon_from_sky_known_answer() {
+        // Sky in the top 4 rows of 9 (boundary between rows 3 and 4 → 3.5 / 8).
+        let sky = Raster::from_fn(10, 9, |_, y| if y < 4 { 1.0 } else { 0.0 });
+        let h = horizon_from_sky(&sky).unwrap();
+        assert!((h - 3.5 / 8.0).abs() < 1e-6);
+        assert_eq!(horizon_from_sky(&Raster::new(10, 9, 0.0)), None);
+        assert_eq!(horizon_from_sky(&Raster::new(10, 9, 1.0)), None);
+    }
+
+    #[test]
+    fn synthetic_landscape_sky_far_ground_receding() {
+        let (w, h) = (96, 64);
+        let img = landscape(w, h, 24);
+        let a = estimator()
+            .analyse(&img, &intrinsics(w, h), &Progress::none())
+            .unwrap();
+        check_sane(&a.estimate, w, h);
+        assert!(a.horizon_detected);
+        assert!((a.horizon - 23.5 / 63.0).abs() < 0.03, "{}", a.horizon);
+        let d = &a.estimate.depth;
+        // Sky is at the far plane, beyond everything else.
+        let sky_z = d.at(48, 5);
+        assert!(a.estimate.sky.at(48, 5) > 0.9);
+        let ground_max = (30..h).map(|y| d.at(48, y)).fold(0.0f32, f32::max);
+        assert!(sky_z > 10.0 * ground_max, "{sky_z} vs {ground_max}");
+        // Ground recedes toward the horizon.
+        assert!(d.at(48, 60) < d.at(48, 45));
+        assert!(d.at(48, 45) < d.at(48, 32));
+    }
+
+    #[test]
+    fn horizon_override_is_used() {
+        let (w, h) = (40, 30);
+        let img = landscape(w, h, 10);
+        let est = ClassicalDepth::new(ClassicalDepthParams {
+            horizon: Some(0.6),
+            ..Default::default()
+        });
+        let a = est
+            .analyse(&img, &intrinsics(w, h), &Progress::none())
+            .unwrap();
+        assert_eq!(a.horizon, 0.6);
+        assert!(!a.horizon_detected);
+    }
+
+    #[test]
+    fn extreme_images_are_sane() {
+        let e = estimator();
+        // All sky.
+        let sky = Raster::new(50, 30, [0.5, 0.7, 0.95]);
+        let out = e
+            .estimate(&sky, &intrinsics(50, 30), &Progress::none())
+            .unwrap();
+        check_sane(&out, 50, 30);
+        assert!(out.sky.data().iter().all(|s| *s > 0.9));
+        // All black.
+        let black = Raster::new(50, 30, [0.0; 3]);
+        let out = e
+            .estimate(&black, &intrinsics(50, 30), &Progress::none())
+            .unwrap();
+        check_sane(&out, 50, 30);
+        // 1×1, 1×N, N×1.
+        for (w, h) in [(1, 1), (1, 7), (9, 1)] {
+            let img = Raster::new(w, h, [0.3, 0.4, 0.5]);
+            let out = e
+                .estimate(&img, &intrinsics(w, h), &Progress::none())
+                .unwrap();
+            check_sane(&out, w, h);
+        }
+        // NaN and Inf pixels, and invalid intrinsics.
+        let mut nan = landscape(20, 20, 8);
+        nan.set(3, 3, [f32::NAN, f32::INFINITY, -1.0]);
+        let bad = Intrinsics {
+            fx: f32::NAN,
+            fy: 0.0,
+            cx: 0.0,
+            cy: 0.0,
+        };
+        let out = e.estimate(&nan, &bad, &Progress::none()).unwrap();
+        check_sane(&out, 20, 20);
+        // Empty image is an error, not a panic.
+        let empty: RgbRaster = Raster::new(0, 0, [0.0; 3]);
+        assert!(
+            e.estimate(&empty, &intrinsics(1, 1), &Progress::none())
+                .is_err()
+        );
+    }
+
+    fn load_test_photo(name: &str) -> RgbRaster {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data")
+            .join(name);
+        let img = image::open(&path).unwrap().to_rgb32f();
+        let (w, h) = (img.width() as usize, img.height() as usize);
+        Raster::from_vec(w, h, img.pixels().map(|p| p.0).collect()).unwrap()
+    }
+
+    /// Median depth over a box given in fractions of the image `[x0, y0, x1, y1]`.
+    fn median_depth(d: &GrayRaster, b: [f32; 4]) -> f32 {
+        let (w, h) = d.size();
+        let mut v = Vec::new();
+        for y in (b[1] * h as f32) as usize..(b[3] * h as f32) as usize {
+            for x in (b[0] * w as f32) as usize..(b[2] * w as f32) as usize {
+                v.push(d.at(x, y));
+            }
+        }
+        quantile(&v, 0.5).unwrap()
+    }
+
+    #[test]
+    fn landscape_photos_have_far_sky_and_near_foreground() {
+        for (name, sky_box, far_box, near_box) in [
+            // Sky, far shore, pebbles in front of the boats.
+            (
+                "evening_glow_320.jpg",
+                [0.3, 0.02, 0.7, 0.15],
+                [0.3, 0.38, 0.7, 0.45],
+                [0.3, 0.85, 0.7, 0.98],
+            ),
+            // Fog, end of the pier, first boards.
+            (
+                "cold_ripple_320.jpg",
+                [0.3, 0.02, 0.7, 0.2],
+                [0.3, 0.52, 0.7, 0.56],
+                [0.3, 0.9, 0.7, 0.98],
+            ),
+        ] {
+            let img = load_test_photo(name);
+            let (w, h) = img.size();
+            let e = estimator()
+                .estimate(&img, &intrinsics(w, h), &Progress::none())
+                .unwrap();
+            check_sane(&e, w, h);
+            let sky = median_depth(&e.depth, sky_box);
+            let far = median_depth(&e.depth, far_box);
+            let near = median_depth(&e.depth, near_box);
+            assert!(sky > far && far > near, "{name}: {sky} {far} {near}");
+            assert!(median_depth(&e.sky, sky_box) > 0.9, "{name}");
+        }
+        // The forest has no open sky; its floor is nearer at the bottom than at mid-height.
+        let img = load_test_photo("forest_path_320.jpg");
+        let (w, h) = img.size();
+        let e = estimator()
+            .estimate(&img, &intrinsics(w, h), &Progress::none())
+            .unwrap();
+        check_sane(&e, w, h);
+        let mid = median_depth(&e.depth, [0.2, 0.5, 0.8, 0.6]);
+        let near = median_depth(&e.depth, [0.2, 0.9, 0.8, 1.0]);
+        assert!(near < mid, "{near} {mid}");
+    }
+
+    #[test]
+    fn cancel_stops_the_estimate() {
+        let p = Progress::none();
+        p.cancel();
+        let img = landscape(20, 20, 8);
+        assert!(matches!(
+            estimator().estimate(&img, &intrinsics(20, 20), &p),
+            Err(Error::Cancelled)
+        ));
+    }
+
+    #[test]
+    fn params_validate_and_roundtrip() {
+        let p = ClassicalDepthParams::default();
+        p.validate().unwrap();
+        let json = serde_json::to_string(&p).unwrap();
+        let back: ClassicalDepthParams = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, p);
+        // Missing fields take defaults.
+        let partial: ClassicalDepthParams = serde_json::from_str(r#"{"horizon":0.4}"#).unwrap();
+        assert_eq!(partial.horizon, Some(0.4));
+        assert_eq!(partial.camera_height_m, 1.6);
+        let bad = ClassicalDepthParams {
+            camera_height_m: f32::NAN,
+            ..Default::default()
+        };
+        assert!(bad.validate().is_err());
+        let bad = ClassicalDepthParams {
+            horizon: Some(f32::INFINITY),
+            ..Default::default()
+        };
+        assert!(bad.validate().is_err());
+    }
+}

@@ -1,0 +1,279 @@
+//! Completing the layers: inpainting each layer's hidden region (colour and depth), and the
+//! layer-based depth of Make-It-4D (eq. 4–5).
+
+use super::{Layer, LayerPlan, LayeredScene};
+use crate::error::{Error, Result};
+use crate::geometry::Intrinsics;
+use crate::progress::Progress;
+use crate::raster::{RgbRaster, quantile};
+use crate::stages::depth::DepthEstimator;
+use crate::stages::inpaint::{InpaintRequest, Inpainter};
+use serde::{Deserialize, Serialize};
+
+/// The seed of layer `index`'s inpainting job, derived from the stage seed (SplitMix64 finaliser,
+/// so neighbouring layers get unrelated streams).
+fn layer_seed(seed: u64, index: usize) -> u64 {
+    let mut z = seed ^ (index as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// A depth for a hidden pixel of the layer with interval `[near, far]`: the completed value
+/// clamped into the interval (so it stays behind the nearer pixel that hid it, whose depth is
+/// `< near`); `near` when the completion gave no finite value.
+fn hidden_depth(completed: f32, [near, far]: [f32; 2]) -> f32 {
+    if completed.is_finite() {
+        completed.clamp(near, far.max(near))
+    } else {
+        near
+    }
+}
+
+/// Fills each layer's hole with `inpainter` (algorithms.md §4): the request copies texture only
+/// from the layer's context (the layer itself and the layers behind it, eroded), and the refined
+/// depth is the guide, so colour and depth are completed together. The layer keeps the canvas
+/// colour and refined depth on its own pixels; its hidden pixels (behind nearer layers) get the
+/// completed colour and the completed depth clamped into the layer's interval `[d_i, d_{i+1}]`,
+/// which keeps every inpainted pixel behind the pixel that hid it.
+///
+/// Layer `i`'s job uses a seed derived from `seed` and `i`. Layers without a hole skip the
+/// inpainter.
+pub fn inpaint_layers(
+    canvas: &RgbRaster,
+    plan: &LayerPlan,
+    inpainter: &dyn Inpainter,
+    seed: u64,
+    progress: &Progress,
+) -> Result<LayeredScene> {
+    if !canvas.same_size(&plan.depth) {
+        return Err(Error::invalid(format!(
+            "layers: canvas is {}×{} but the layer plan is {}×{}",
+            canvas.width(),
+            canvas.height(),
+            plan.depth.width(),
+            plan.depth.height()
+        )));
+    }
+    let count = plan.regions.len();
+    let mut layers = Vec::with_capacity(count);
+    for (k, region) in plan.regions.iter().enumerate() {
+        progress.check()?;
+        let sub = progress.sub(k as f32 / count as f32, (k + 1) as f32 / count as f32);
+        let has_hole = region.hole.data().iter().any(|&v| v);
+        let (completed_image, completed_depth) = if has_hole {
+            let request = InpaintRequest {
+                image: canvas,
+                hole: &region.hole,
+                allowed_source: Some(&region.context),
+                guide: Some(&plan.depth),
+                seed: layer_seed(seed, k),
+            };
+            let result = inpainter.inpaint(&request, &sub)?;
+            let guide = result.guide.ok_or_else(|| {
+                Error::invalid(format!(
+                    "layers: inpainter {} returned no completed depth guide",
+                    inpainter.name()
+                ))
+            })?;
+            if !result.image.same_size(canvas) || !guide.same_size(canvas) {
+                return Err(Error::invalid(format!(
+                    "layers: inpainter {} returned a result of the wrong size",
+                    inpainter.name()
+                )));
+            }
+            (result.image, guide)
+        } else {
+            (canvas.clone(), plan.depth.clone())
+        };
+        let mut image = completed_image;
+        let mut depth = completed_depth;
+        for i in 0..canvas.len() {
+            if region.mask.data()[i] {
+                image.data_mut()[i] = canvas.data()[i];
+                depth.data_mut()[i] = plan.depth.data()[i];
+            } else if region.hidden.data()[i] {
+                let c = &mut image.data_mut()[i];
+                for v in c.iter_mut() {
+                    *v = if v.is_finite() {
+                        v.clamp(0.0, 1.0)
+                    } else {
+                        0.0
+                    };
+                }
+                let z = depth.data()[i];
+                depth.data_mut()[i] = hidden_depth(z, region.interval);
+            }
+        }
+        layers.push(Layer {
+            interval: region.interval,
+            image,
+            depth,
+            mask: region.mask.clone(),
+            inpainted: region.hidden.clone(),
+            hole: region.hole.clone(),
+        });
+        sub.report(1.0, "layer inpainting");
+    }
+    Ok(LayeredScene {
+        thresholds: plan.thresholds.clone(),
+        layers,
+    })
+}
+
+/// Parameters of the layer-based depth (Make-It-4D eq. 5's robust normalisation).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct LayerDepthParams {
+    /// Quantile taken as `min D_i` (robust minimum), in `[0, 1)`.
+    pub low_quantile: f32,
+    /// Quantile taken as `max D_i` (robust maximum), in `(low_quantile, 1]`.
+    pub high_quantile: f32,
+}
+
+impl Default for LayerDepthParams {
+    fn default() -> Self {
+        Self {
+            low_quantile: 0.01,
+            high_quantile: 0.99,
+        }
+    }
+}
+
+/// Make-It-4D eq. 5: `D̂ = (d_{i+1} − d_i)·(D − min D)/(max D − min D) + d_i`, clamped to
+/// `[d_i, d_{i+1}]` (robust `min`/`max` leave a few values outside). `None` when the range is
+/// empty or not finite; a non-finite `D` maps to `d_i`.
+pub fn remap_to_interval(d: f32, [min_d, max_d]: [f32; 2], [near, far]: [f32; 2]) -> Option<f32> {
+    let range = max_d - min_d;
+    if !(range.is_finite() && range > 0.0 && near.is_finite() && far.is_finite()) {
+        return None;
+    }
+    if !d.is_finite() {
+        return Some(near);
+    }
+    let t = ((d - min_d) / range).clamp(0.0, 1.0);
+    Some(((far - near) * t + near).clamp(near.min(far), far.max(near)))
+}
+
+/// Layer-based depth (Make-It-4D eq. 4–5): for each layer `i`, `D_i = depth(⊕_{s=i..L} Î_s)` is
+/// estimated by `estimator` on the cumulative overlay of the completed layers `i..L` (nearer
+/// layers' pixels outside layer `i`'s hole keep the canvas colour), robustly normalised with the
+/// quantiles of `params` over the layer's pixels (`mask ∪ inpainted`), and remapped into the
+/// layer's interval with [`remap_to_interval`]. The result replaces the layer's depth on those
+/// pixels; every value lies in `[d_i, d_{i+1})` (closed for the last layer), so inpainted
+/// pixels stay strictly behind the pixels that hid them. A layer whose estimate is flat keeps
+/// its depth.
+///
+/// Not calling this function is the "off" switch: the layers then keep the depth from
+/// [`inpaint_layers`] (the refined canvas depth plus the completion's guide).
+pub fn layer_based_depth(
+    scene: &LayeredScene,
+    canvas: &RgbRaster,
+    estimator: &dyn DepthEstimator,
+    intrinsics: &Intrinsics,
+    params: &LayerDepthParams,
+    progress: &Progress,
+) -> Result<LayeredScene> {
+    let LayerDepthParams {
+        low_quantile,
+        high_quantile,
+    } = *params;
+    let ordered =
+        (0.0..1.0).contains(&low_quantile) && high_quantile > low_quantile && high_quantile <= 1.0;
+    if !ordered {
+        return Err(Error::invalid(format!(
+            "layers: depth quantiles [{low_quantile}, {high_quantile}] must satisfy 0 ≤ low < high ≤ 1"
+        )));
+    }
+    if scene.layers.iter().any(|l| !l.image.same_size(canvas)) {
+        return Err(Error::invalid(
+            "layers: the canvas and the layers differ in size",
+        ));
+    }
+    let count = scene.layers.len();
+    let mut out = scene.clone();
+    for (k, layer) in out.layers.iter_mut().enumerate() {
+        progress.check()?;
+        let sub = progress.sub(k as f32 / count as f32, (k + 1) as f32 / count as f32);
+        let (overlay, _, _) = scene.overlay(k, canvas);
+        let estimate = estimator.estimate(&overlay, intrinsics, &sub)?;
+        if !estimate.depth.same_size(canvas) {
+            return Err(Error::invalid(format!(
+                "layers: depth estimator {} returned a {}×{} depth for a {}×{} image",
+                estimator.name(),
+                estimate.depth.width(),
+                estimate.depth.height(),
+                canvas.width(),
+                canvas.height()
+            )));
+        }
+        // Half-open except for the last layer, so that no point of this layer ties with the
+        // nearest possible point of the next one (`d_{i+1}`).
+        let [near, far] = layer.interval;
+        let interval = if k + 1 < count {
+            [near, far.next_down().max(near)]
+        } else {
+            [near, far]
+        };
+        let covered: Vec<usize> = (0..canvas.len())
+            .filter(|&i| layer.mask.data()[i] || layer.inpainted.data()[i])
+            .collect();
+        let values: Vec<f32> = covered.iter().map(|&i| estimate.depth.data()[i]).collect();
+        let range = quantile(&values, low_quantile).zip(quantile(&values, high_quantile));
+        if let Some((lo, hi)) = range
+            && remap_to_interval(lo, [lo, hi], interval).is_some()
+        {
+            for &i in &covered {
+                if let Some(z) = remap_to_interval(estimate.depth.data()[i], [lo, hi], interval) {
+                    layer.depth.data_mut()[i] = z;
+                }
+            }
+        }
+        sub.report(1.0, "layer depth");
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn remap_known_answers_and_extremes() {
+        // D in [0, 1] onto [2, 4]: D̂ = 2·D + 2.
+        assert_eq!(remap_to_interval(0.0, [0.0, 1.0], [2.0, 4.0]), Some(2.0));
+        assert_eq!(remap_to_interval(0.25, [0.0, 1.0], [2.0, 4.0]), Some(2.5));
+        assert_eq!(remap_to_interval(1.0, [0.0, 1.0], [2.0, 4.0]), Some(4.0));
+        // Values beyond the robust range are clamped into the interval.
+        assert_eq!(remap_to_interval(-7.0, [0.0, 1.0], [2.0, 4.0]), Some(2.0));
+        assert_eq!(remap_to_interval(1e30, [0.0, 1.0], [2.0, 4.0]), Some(4.0));
+        // NaN goes to the near end; a flat or broken range gives no mapping.
+        assert_eq!(
+            remap_to_interval(f32::NAN, [0.0, 1.0], [2.0, 4.0]),
+            Some(2.0)
+        );
+        assert_eq!(remap_to_interval(0.5, [1.0, 1.0], [2.0, 4.0]), None);
+        assert_eq!(
+            remap_to_interval(0.5, [0.0, f32::INFINITY], [2.0, 4.0]),
+            None
+        );
+        // A degenerate interval maps everything onto its one depth.
+        assert_eq!(remap_to_interval(0.7, [0.0, 1.0], [3.0, 3.0]), Some(3.0));
+    }
+
+    #[test]
+    fn hidden_depth_stays_in_the_interval() {
+        assert_eq!(hidden_depth(1.0, [5.0, 9.0]), 5.0);
+        assert_eq!(hidden_depth(7.0, [5.0, 9.0]), 7.0);
+        assert_eq!(hidden_depth(70.0, [5.0, 9.0]), 9.0);
+        assert_eq!(hidden_depth(f32::NAN, [5.0, 9.0]), 5.0);
+        assert_eq!(hidden_depth(f32::NEG_INFINITY, [5.0, 9.0]), 5.0);
+    }
+
+    #[test]
+    fn layer_seeds_differ_and_are_stable() {
+        assert_ne!(layer_seed(1, 0), layer_seed(1, 1));
+        assert_ne!(layer_seed(1, 0), layer_seed(2, 0));
+        assert_eq!(layer_seed(1, 3), layer_seed(1, 3));
+    }
+}

@@ -1,0 +1,797 @@
+//! Outpainting (algorithms.md §2): a canvas larger than the photo, sized from the camera path,
+//! and filled by an [`Inpainter`].
+//!
+//! Sizing: the scene lies between the depths `near` and `far` of the input camera (the world
+//! origin, `world_from_camera = identity`). Every ray through an output pixel of a frame can only
+//! meet the scene on its stretch inside that slab, so the union over all frames of those
+//! stretches, projected into the input camera, is the part of the input image plane that the
+//! path can ever see. Its bounding box plus a margin of a few patch widths is the canvas. The
+//! stretch of a ray is a segment (its two ends suffice, since the slab lies in front of the input
+//! camera and a projection maps segments to segments), and the projected footprint of a
+//! frustum is bounded by its border rays, so only border rays are traced. Rays that never meet
+//! the slab (looking back past the input camera) or run along it to infinity are clamped to the
+//! largest canvas allowed. A still camera gives the photo itself, with no margin.
+//!
+//! Intrinsics: the focal length is kept and the principal point shifted by the padding
+//! (InfNat-Zero's rule, [`Intrinsics::padded`]).
+
+use crate::error::{Error, Result};
+use crate::geometry::{Intrinsics, View};
+use crate::progress::Progress;
+use crate::raster::{GrayRaster, MaskRaster, RgbRaster, quantile};
+use crate::stages::inpaint::{InpaintRequest, Inpainter};
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+/// Where the photo sits on the canvas, in input pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub struct CanvasLayout {
+    /// Columns added left of the photo.
+    pub left_pad: usize,
+    /// Rows added above the photo.
+    pub top_pad: usize,
+    /// Canvas width in pixels.
+    pub width: usize,
+    /// Canvas height in pixels.
+    pub height: usize,
+}
+
+/// Where a fixed-factor canvas puts the photo.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Placement {
+    /// Centred horizontally, touching the bottom (the released Make-It-4D code: more room above,
+    /// where the sky is).
+    #[default]
+    BottomCentre,
+    /// Centred both ways.
+    Centre,
+}
+
+impl CanvasLayout {
+    /// The photo itself: no padding.
+    pub fn identity(input_size: (usize, usize)) -> Self {
+        Self {
+            left_pad: 0,
+            top_pad: 0,
+            width: input_size.0,
+            height: input_size.1,
+        }
+    }
+
+    /// A canvas `factor` times the photo on each side (rounded to whole pixels), the photo placed
+    /// by `placement`. The paper's setting is `factor = 1.5` with [`Placement::BottomCentre`]
+    /// (512² → 768²). Errors when `factor` is not finite or below 1.
+    pub fn fixed(input_size: (usize, usize), factor: f32, placement: Placement) -> Result<Self> {
+        if !factor.is_finite() || factor < 1.0 {
+            return Err(Error::invalid(format!(
+                "canvas factor must be at least 1, got {factor}"
+            )));
+        }
+        let (w, h) = input_size;
+        let width = ((w as f64 * factor as f64).round() as usize).max(w);
+        let height = ((h as f64 * factor as f64).round() as usize).max(h);
+        let left_pad = (width - w) / 2;
+        let top_pad = match placement {
+            Placement::BottomCentre => height - h,
+            Placement::Centre => (height - h) / 2,
+        };
+        Ok(Self {
+            left_pad,
+            top_pad,
+            width,
+            height,
+        })
+    }
+
+    /// True when the canvas is exactly the photo.
+    pub fn is_identity(&self, input_size: (usize, usize)) -> bool {
+        *self == Self::identity(input_size)
+    }
+
+    /// Columns added right of a photo `input_width` wide.
+    pub fn right_pad(&self, input_width: usize) -> usize {
+        self.width.saturating_sub(self.left_pad + input_width)
+    }
+
+    /// Rows added below a photo `input_height` tall.
+    pub fn bottom_pad(&self, input_height: usize) -> usize {
+        self.height.saturating_sub(self.top_pad + input_height)
+    }
+
+    /// The input camera on the canvas: same focal length, principal point shifted by the pads.
+    pub fn intrinsics(&self, input: &Intrinsics) -> Intrinsics {
+        input.padded(self.left_pad as f32, self.top_pad as f32)
+    }
+
+    /// True when a photo of `input_size` fits on the canvas at the pads.
+    pub fn contains_photo(&self, input_size: (usize, usize)) -> bool {
+        self.left_pad + input_size.0 <= self.width && self.top_pad + input_size.1 <= self.height
+    }
+
+    /// The canvas pixels outside the photo (`true` = to be synthesised).
+    pub fn synthesised_mask(&self, input_size: (usize, usize)) -> MaskRaster {
+        let (w, h) = input_size;
+        MaskRaster::from_fn(self.width, self.height, |x, y| {
+            x < self.left_pad || y < self.top_pad || x >= self.left_pad + w || y >= self.top_pad + h
+        })
+    }
+}
+
+/// The depths of the input camera between which the scene lies.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DepthRange {
+    /// Nearest scene depth (`> 0`).
+    pub near: f32,
+    /// Farthest scene depth, the far plane (`≥ near`).
+    pub far: f32,
+}
+
+impl DepthRange {
+    /// Checks `0 < near ≤ far`, both finite.
+    pub fn new(near: f32, far: f32) -> Result<Self> {
+        if !(near.is_finite() && far.is_finite() && near > 0.0 && far >= near) {
+            return Err(Error::invalid(format!(
+                "depth range needs 0 < near ≤ far, got near {near}, far {far}"
+            )));
+        }
+        Ok(Self { near, far })
+    }
+
+    /// From a depth map: near = its 1st percentile (robust to stray pixels), far = its maximum,
+    /// over the finite positive values.
+    pub fn from_depth(depth: &GrayRaster) -> Result<Self> {
+        let values: Vec<f32> = depth
+            .data()
+            .iter()
+            .copied()
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .collect();
+        let (Some(near), Some(far)) = (quantile(&values, 0.01), quantile(&values, 1.0)) else {
+            return Err(Error::invalid("the depth map has no finite positive value"));
+        };
+        Self::new(near, far)
+    }
+}
+
+/// Settings of [`canvas_from_views`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct CanvasOptions {
+    /// Pixels added beyond the footprint on every side that needs padding (a few patch
+    /// widths, so the inpainter has room and splats near the edge have texture behind them).
+    pub margin_px: usize,
+    /// The canvas is at most this many times the photo along each axis (centred on it); rays
+    /// that would need more are clamped.
+    pub max_factor: f32,
+    /// Spacing of the traced rays along each output border, output pixels (corners always).
+    pub ray_step_px: usize,
+}
+
+impl Default for CanvasOptions {
+    fn default() -> Self {
+        Self {
+            margin_px: 24,
+            max_factor: 2.0,
+            ray_step_px: 8,
+        }
+    }
+}
+
+/// How the project sizes its canvas.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "mode")]
+pub enum CanvasSizing {
+    /// From the camera path's coverage ([`canvas_from_views`]).
+    FromPath(CanvasOptions),
+    /// A fixed factor (user override, [`CanvasLayout::fixed`]).
+    Fixed {
+        /// Canvas side over photo side, ≥ 1.
+        factor: f32,
+        /// Where the photo goes.
+        placement: Placement,
+    },
+}
+
+impl Default for CanvasSizing {
+    fn default() -> Self {
+        CanvasSizing::FromPath(CanvasOptions::default())
+    }
+}
+
+impl CanvasSizing {
+    /// The canvas for a photo of `input_size` seen through `input_intrinsics`, for the frames
+    /// `views` rendered at `output_size` of a scene in `depth` (the last three are ignored by
+    /// [`CanvasSizing::Fixed`]).
+    pub fn layout(
+        &self,
+        input_size: (usize, usize),
+        input_intrinsics: &Intrinsics,
+        views: &[View],
+        output_size: (usize, usize),
+        depth: DepthRange,
+    ) -> Result<CanvasLayout> {
+        match self {
+            CanvasSizing::FromPath(options) => canvas_from_views(
+                input_size,
+                input_intrinsics,
+                views,
+                output_size,
+                depth,
+                options,
+            ),
+            CanvasSizing::Fixed { factor, placement } => {
+                CanvasLayout::fixed(input_size, *factor, *placement)
+            }
+        }
+    }
+}
+
+/// The part of the input image plane a path can see, input pixel coordinates (pixel centres at
+/// integers), clamped to the largest canvas.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Footprint {
+    /// Smallest `u`.
+    pub min_u: f32,
+    /// Smallest `v`.
+    pub min_v: f32,
+    /// Largest `u`.
+    pub max_u: f32,
+    /// Largest `v`.
+    pub max_v: f32,
+    /// Rays traced.
+    pub rays: usize,
+    /// Rays that needed clamping (never met the scene, or ran off beyond the largest canvas).
+    pub clamped_rays: usize,
+}
+
+/// The footprint on the input image plane of every view in `views` (output images of
+/// `output_size`), for a scene between `depth.near` and `depth.far` of the input camera.
+pub fn footprint_from_views(
+    input_size: (usize, usize),
+    input_intrinsics: &Intrinsics,
+    views: &[View],
+    output_size: (usize, usize),
+    depth: DepthRange,
+    options: &CanvasOptions,
+) -> Result<Footprint> {
+    let (w, h) = input_size;
+    if w == 0 || h == 0 {
+        return Err(Error::invalid("the photo has no pixels"));
+    }
+    if !input_intrinsics.is_valid() {
+        return Err(Error::invalid("the input intrinsics are not valid"));
+    }
+    DepthRange::new(depth.near, depth.far)?;
+    let factor = if options.max_factor.is_finite() {
+        options.max_factor.max(1.0)
+    } else {
+        return Err(Error::invalid("max canvas factor must be finite"));
+    };
+    let (ow, oh) = output_size;
+    // Largest canvas, pixel-centre coordinates of the input image.
+    let extra_u = 0.5 * (factor - 1.0) * w as f32;
+    let extra_v = 0.5 * (factor - 1.0) * h as f32;
+    let limit = [
+        -0.5 - extra_u,
+        -0.5 - extra_v,
+        w as f32 - 0.5 + extra_u,
+        h as f32 - 0.5 + extra_v,
+    ];
+    let mut fp = Footprint {
+        min_u: f32::INFINITY,
+        min_v: f32::INFINITY,
+        max_u: f32::NEG_INFINITY,
+        max_v: f32::NEG_INFINITY,
+        rays: 0,
+        clamped_rays: 0,
+    };
+    if views.is_empty() || ow == 0 || oh == 0 {
+        return Ok(Footprint {
+            min_u: 0.0,
+            min_v: 0.0,
+            max_u: (w - 1) as f32,
+            max_v: (h - 1) as f32,
+            ..fp
+        });
+    }
+    let step = options.ray_step_px.max(1);
+    let border = border_pixels(ow, oh, step);
+    let include = |fp: &mut Footprint, u: f32, v: f32| {
+        let cu = u.clamp(limit[0], limit[2]);
+        let cv = v.clamp(limit[1], limit[3]);
+        fp.min_u = fp.min_u.min(cu);
+        fp.max_u = fp.max_u.max(cu);
+        fp.min_v = fp.min_v.min(cv);
+        fp.max_v = fp.max_v.max(cv);
+        cu != u || cv != v
+    };
+    for (k, view) in views.iter().enumerate() {
+        let pose = view.world_from_camera;
+        if !view.intrinsics.is_valid()
+            || !pose.translation.is_finite()
+            || !pose.rotation.is_finite()
+        {
+            return Err(Error::invalid(format!(
+                "view {k} has non-finite or invalid geometry"
+            )));
+        }
+        let origin = pose.translation;
+        for &(u, v) in &border {
+            fp.rays += 1;
+            let direction = pose.transform_vector(view.intrinsics.unproject(u, v, 1.0));
+            match slab_segment(origin, direction, depth) {
+                Some((t0, t1)) => {
+                    let mut clamped = false;
+                    for t in [t0, t1] {
+                        let p = origin + direction * t;
+                        // Inside the slab, so in front of the input camera.
+                        let (pu, pv) = project_in_front(input_intrinsics, p);
+                        clamped |= include(&mut fp, pu, pv);
+                    }
+                    if clamped {
+                        fp.clamped_rays += 1;
+                    }
+                }
+                None => {
+                    // Never meets the scene: looks back past the input camera. Clamp: the
+                    // largest canvas.
+                    fp.clamped_rays += 1;
+                    include(&mut fp, f32::NEG_INFINITY, f32::NEG_INFINITY);
+                    include(&mut fp, f32::INFINITY, f32::INFINITY);
+                }
+            }
+        }
+    }
+    Ok(fp)
+}
+
+/// The canvas a path needs: the footprint of every frame's view ([`footprint_from_views`])
+/// rounded out to whole pixels, plus `options.margin_px` on each side that needs padding.
+/// A still camera (every view sees no more than the photo) gives the photo exactly.
+pub fn canvas_from_views(
+    input_size: (usize, usize),
+    input_intrinsics: &Intrinsics,
+    views: &[View],
+    output_size: (usize, usize),
+    depth: DepthRange,
+    options: &CanvasOptions,
+) -> Result<CanvasLayout> {
+    let fp = footprint_from_views(
+        input_size,
+        input_intrinsics,
+        views,
+        output_size,
+        depth,
+        options,
+    )?;
+    let (w, h) = input_size;
+    let factor = options.max_factor.max(1.0);
+    let max_extra_u = (0.5 * (factor - 1.0) * w as f32).floor() as usize;
+    let max_extra_v = (0.5 * (factor - 1.0) * h as f32).floor() as usize;
+    // A footprint reaching less than half a pixel beyond the photo needs no padding (that is
+    // within the border pixels' own area; it absorbs rounding and pixel-centre offsets).
+    let pad = |beyond: f32, max_extra: usize| -> usize {
+        if beyond <= 0.5 {
+            0
+        } else {
+            ((beyond - 0.5).ceil() as usize + options.margin_px).min(max_extra)
+        }
+    };
+    let left = pad(-fp.min_u, max_extra_u);
+    let right = pad(fp.max_u - (w - 1) as f32, max_extra_u);
+    let top = pad(-fp.min_v, max_extra_v);
+    let bottom = pad(fp.max_v - (h - 1) as f32, max_extra_v);
+    Ok(CanvasLayout {
+        left_pad: left,
+        top_pad: top,
+        width: w + left + right,
+        height: h + top + bottom,
+    })
+}
+
+/// Output pixels along the border of a `w × h` image, every `step` pixels, corners included.
+fn border_pixels(w: usize, h: usize, step: usize) -> Vec<(f32, f32)> {
+    let axis = |n: usize| -> Vec<f32> {
+        let mut v: Vec<f32> = (0..n).step_by(step).map(|i| i as f32).collect();
+        if v.last().is_some_and(|&l| l < (n - 1) as f32) {
+            v.push((n - 1) as f32);
+        }
+        v
+    };
+    let (xs, ys) = (axis(w), axis(h));
+    let (right, bottom) = ((w - 1) as f32, (h - 1) as f32);
+    let mut out = Vec::with_capacity(2 * (xs.len() + ys.len()));
+    for &x in &xs {
+        out.push((x, 0.0));
+        out.push((x, bottom));
+    }
+    for &y in &ys {
+        out.push((0.0, y));
+        out.push((right, y));
+    }
+    out
+}
+
+/// The stretch `[t0, t1]` (`t ≥ 0`) of the ray `origin + t·direction` with world depth
+/// `z ∈ [near, far]`; `None` when it never enters. A ray that stays inside forever gets a very
+/// large `t1` (its projection is then clamped).
+fn slab_segment(origin: Vec3, direction: Vec3, depth: DepthRange) -> Option<(f32, f32)> {
+    const FAR_AWAY: f32 = 1e6;
+    let (oz, dz) = (origin.z, direction.z);
+    let scale = direction.length().max(f32::MIN_POSITIVE);
+    if dz.abs() <= 1e-7 * scale {
+        if (depth.near..=depth.far).contains(&oz) {
+            let t1 = FAR_AWAY * depth.far / scale;
+            return Some((0.0, t1));
+        }
+        return None;
+    }
+    let ta = (depth.near - oz) / dz;
+    let tb = (depth.far - oz) / dz;
+    let (enter, exit) = if ta < tb { (ta, tb) } else { (tb, ta) };
+    let t0 = enter.max(0.0);
+    (exit >= t0).then_some((t0, exit))
+}
+
+/// Projection of a point known to lie in front of the camera (`z ≥ near > 0`).
+fn project_in_front(k: &Intrinsics, p: Vec3) -> (f32, f32) {
+    let z = p.z.max(f32::MIN_POSITIVE);
+    (k.fx * p.x / z + k.cx, k.fy * p.y / z + k.cy)
+}
+
+/// Puts `image` on the canvas `layout` and fills the rest with `inpainter` (seeded with `seed`).
+/// Returns the canvas and the mask of the synthesised pixels. An identity layout returns the
+/// image and an all-false mask without work. Errors when the photo does not fit the layout.
+pub fn outpaint(
+    image: &RgbRaster,
+    layout: &CanvasLayout,
+    inpainter: &dyn Inpainter,
+    seed: u64,
+    progress: &Progress,
+) -> Result<(RgbRaster, MaskRaster)> {
+    let (w, h) = image.size();
+    if !layout.contains_photo((w, h)) {
+        return Err(Error::invalid(format!(
+            "a {w}×{h} photo at ({}, {}) does not fit a {}×{} canvas",
+            layout.left_pad, layout.top_pad, layout.width, layout.height
+        )));
+    }
+    let mask = layout.synthesised_mask((w, h));
+    if layout.is_identity((w, h)) {
+        return Ok((image.clone(), mask));
+    }
+    let mut canvas = RgbRaster::new(layout.width, layout.height, [0.0; 3]);
+    for y in 0..h {
+        let dst = (y + layout.top_pad) * layout.width + layout.left_pad;
+        canvas.data_mut()[dst..dst + w].copy_from_slice(image.row(y));
+    }
+    let request = InpaintRequest {
+        image: &canvas,
+        hole: &mask,
+        allowed_source: None,
+        guide: None,
+        seed,
+    };
+    progress.report(0.0, "outpainting");
+    let filled = inpainter.inpaint(&request, progress)?;
+    progress.report(1.0, "outpainting");
+    Ok((filled.image, mask))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Pose;
+    use crate::stages::inpaint::HarmonicInpainter;
+    use glam::Quat;
+
+    const W: usize = 64;
+    const H: usize = 48;
+
+    fn camera() -> Intrinsics {
+        Intrinsics::from_hfov(W, H, 60.0)
+    }
+
+    fn view(rotation: Quat, position: Vec3) -> View {
+        View {
+            intrinsics: camera(),
+            world_from_camera: Pose::new(rotation, position),
+        }
+    }
+
+    #[test]
+    fn still_camera_gives_the_photo_exactly() {
+        let views = vec![view(Quat::IDENTITY, Vec3::ZERO); 5];
+        let depth = DepthRange::new(0.5, 100.0).unwrap();
+        let layout = canvas_from_views(
+            (W, H),
+            &camera(),
+            &views,
+            (W, H),
+            depth,
+            &CanvasOptions::default(),
+        )
+        .unwrap();
+        assert_eq!(layout, CanvasLayout::identity((W, H)));
+        // The same field of view rendered at twice the resolution sees the same area.
+        let big = View {
+            intrinsics: camera().scaled(2.0, 2.0),
+            world_from_camera: Pose::IDENTITY,
+        };
+        let layout2 = canvas_from_views(
+            (W, H),
+            &camera(),
+            &[big],
+            (2 * W, 2 * H),
+            depth,
+            &CanvasOptions::default(),
+        )
+        .unwrap();
+        assert!(layout2.is_identity((W, H)), "{layout2:?}");
+        // No views: nothing to see beyond the photo.
+        let none = canvas_from_views(
+            (W, H),
+            &camera(),
+            &[],
+            (W, H),
+            depth,
+            &CanvasOptions::default(),
+        )
+        .unwrap();
+        assert!(none.is_identity((W, H)));
+    }
+
+    /// Traces every output pixel's ray to scene planes between near and far (and a ground
+    /// plane) and counts `(hits, hits landing outside the canvas)`.
+    fn coverage(layout: &CanvasLayout, views: &[View], depth: DepthRange) -> (usize, usize) {
+        let k = camera();
+        let (l, t) = (layout.left_pad as f32, layout.top_pad as f32);
+        let (cw, ch) = (layout.width as f32, layout.height as f32);
+        let (mut hits, mut outside) = (0, 0);
+        for v in views {
+            let pose = v.world_from_camera;
+            for py in 0..H {
+                for px in 0..W {
+                    let d =
+                        pose.transform_vector(v.intrinsics.unproject(px as f32, py as f32, 1.0));
+                    let o = pose.translation;
+                    let planes = [depth.near, 0.5 * (depth.near + depth.far), depth.far];
+                    let mut points: Vec<Vec3> = planes
+                        .iter()
+                        .filter_map(|&z| {
+                            let s = (z - o.z) / d.z;
+                            (s > 0.0).then(|| o + d * s)
+                        })
+                        .collect();
+                    // Ground plane y = 1 (below the camera), where it lies inside the slab.
+                    if d.y > 1e-6 {
+                        let s = (1.0 - o.y) / d.y;
+                        let p = o + d * s;
+                        if s > 0.0 && p.z >= depth.near && p.z <= depth.far {
+                            points.push(p);
+                        }
+                    }
+                    for p in points {
+                        let (u, vv, _) = k.project(p).unwrap();
+                        let (cu, cv) = (u + l, vv + t);
+                        if !(cu >= -0.5 && cu <= cw - 0.5 && cv >= -0.5 && cv <= ch - 0.5) {
+                            outside += 1;
+                        }
+                        hits += 1;
+                    }
+                }
+            }
+        }
+        (hits, outside)
+    }
+
+    #[test]
+    fn fly_out_with_pan_is_covered() {
+        // Camera backs away along −z and pans to the right (yaw about +y) over 10 frames.
+        let views: Vec<View> = (0..10)
+            .map(|i| {
+                let s = i as f32 / 9.0;
+                view(
+                    Quat::from_rotation_y(0.15 * s),
+                    Vec3::new(0.0, 0.0, -1.5 * s),
+                )
+            })
+            .collect();
+        let depth = DepthRange::new(2.0, 30.0).unwrap();
+        let options = CanvasOptions {
+            max_factor: 4.0,
+            ..CanvasOptions::default()
+        };
+        let fp = footprint_from_views((W, H), &camera(), &views, (W, H), depth, &options).unwrap();
+        assert_eq!(fp.clamped_rays, 0, "{fp:?}");
+        let layout = canvas_from_views((W, H), &camera(), &views, (W, H), depth, &options).unwrap();
+        assert!(layout.width > W && layout.height > H, "{layout:?}");
+        // The pan to the right needs more room on the right than on the left.
+        assert!(layout.right_pad(W) > layout.left_pad, "{layout:?}");
+        let (hits, outside) = coverage(&layout, &views, depth);
+        assert!(
+            hits > 10_000 && outside == 0,
+            "{hits} hits, {outside} outside {layout:?}"
+        );
+        // Without the margin the canvas still covers; a few pixels less on any side does not.
+        let tight = canvas_from_views(
+            (W, H),
+            &camera(),
+            &views,
+            (W, H),
+            depth,
+            &CanvasOptions {
+                margin_px: 0,
+                ..options
+            },
+        )
+        .unwrap();
+        assert_eq!(coverage(&tight, &views, depth).1, 0, "{tight:?}");
+        let shrunk = [
+            CanvasLayout {
+                left_pad: tight.left_pad - 2,
+                width: tight.width - 2,
+                ..tight
+            },
+            CanvasLayout {
+                width: tight.width - 2,
+                ..tight
+            },
+            CanvasLayout {
+                top_pad: tight.top_pad - 2,
+                height: tight.height - 2,
+                ..tight
+            },
+            CanvasLayout {
+                height: tight.height - 2,
+                ..tight
+            },
+        ];
+        for s in shrunk {
+            assert!(
+                coverage(&s, &views, depth).1 > 0,
+                "{s:?} should miss some rays"
+            );
+        }
+        // The margin: every padded side has at least margin_px beyond the footprint.
+        assert!((layout.left_pad as f32) >= -fp.min_u + options.margin_px as f32 - 1.0);
+    }
+
+    #[test]
+    fn looking_backwards_clamps_to_the_largest_canvas() {
+        let views = [view(
+            Quat::from_rotation_y(std::f32::consts::PI),
+            Vec3::ZERO,
+        )];
+        let depth = DepthRange::new(1.0, 10.0).unwrap();
+        let options = CanvasOptions {
+            max_factor: 1.5,
+            ..CanvasOptions::default()
+        };
+        let fp = footprint_from_views((W, H), &camera(), &views, (W, H), depth, &options).unwrap();
+        assert_eq!(fp.clamped_rays, fp.rays);
+        let layout = canvas_from_views((W, H), &camera(), &views, (W, H), depth, &options).unwrap();
+        assert_eq!((layout.width, layout.height), (W + 2 * 16, H + 2 * 12));
+        // A sideways ray inside the slab runs off to infinity: clamped too.
+        let sideways = [view(
+            Quat::from_rotation_y(std::f32::consts::FRAC_PI_2),
+            Vec3::new(0.0, 0.0, 5.0),
+        )];
+        let fp2 =
+            footprint_from_views((W, H), &camera(), &sideways, (W, H), depth, &options).unwrap();
+        assert!(fp2.clamped_rays > 0);
+        assert!(fp2.max_u.is_finite() && fp2.min_u.is_finite());
+    }
+
+    #[test]
+    fn bad_geometry_is_rejected() {
+        let views = [view(Quat::IDENTITY, Vec3::new(f32::NAN, 0.0, 0.0))];
+        let depth = DepthRange::new(1.0, 10.0).unwrap();
+        let o = CanvasOptions::default();
+        assert!(canvas_from_views((W, H), &camera(), &views, (W, H), depth, &o).is_err());
+        assert!(DepthRange::new(0.0, 1.0).is_err());
+        assert!(DepthRange::new(2.0, 1.0).is_err());
+        assert!(DepthRange::new(1.0, f32::INFINITY).is_err());
+        let d = GrayRaster::from_vec(2, 2, vec![f32::NAN, 2.0, 4.0, -1.0]).unwrap();
+        assert_eq!(
+            DepthRange::from_depth(&d).unwrap(),
+            DepthRange {
+                near: 2.0,
+                far: 4.0
+            }
+        );
+        assert!(DepthRange::from_depth(&GrayRaster::new(2, 2, f32::NAN)).is_err());
+        assert!(CanvasLayout::fixed((10, 10), 0.5, Placement::Centre).is_err());
+    }
+
+    #[test]
+    fn fixed_factor_matches_the_paper() {
+        let l = CanvasLayout::fixed((512, 512), 1.5, Placement::BottomCentre).unwrap();
+        assert_eq!(
+            l,
+            CanvasLayout {
+                left_pad: 128,
+                top_pad: 256,
+                width: 768,
+                height: 768
+            }
+        );
+        let c = CanvasLayout::fixed((100, 60), 1.5, Placement::Centre).unwrap();
+        assert_eq!(
+            (c.left_pad, c.top_pad, c.width, c.height),
+            (25, 15, 150, 90)
+        );
+        assert_eq!((c.right_pad(100), c.bottom_pad(60)), (25, 15));
+        let k = Intrinsics::from_hfov(100, 60, 60.0);
+        let kc = c.intrinsics(&k);
+        assert_eq!((kc.fx, kc.cx, kc.cy), (k.fx, k.cx + 25.0, k.cy + 15.0));
+        // The project-file form and its serialisation.
+        let sizing = CanvasSizing::Fixed {
+            factor: 1.5,
+            placement: Placement::Centre,
+        };
+        let depth = DepthRange::new(1.0, 10.0).unwrap();
+        assert_eq!(
+            sizing.layout((100, 60), &k, &[], (100, 60), depth).unwrap(),
+            c
+        );
+        let json = serde_json::to_string(&sizing).unwrap();
+        assert_eq!(serde_json::from_str::<CanvasSizing>(&json).unwrap(), sizing);
+        let path: CanvasSizing =
+            serde_json::from_str(r#"{"mode": "from_path", "margin_px": 8}"#).unwrap();
+        assert_eq!(
+            path,
+            CanvasSizing::FromPath(CanvasOptions {
+                margin_px: 8,
+                ..CanvasOptions::default()
+            })
+        );
+        assert!(
+            path.layout((100, 60), &k, &[], (100, 60), depth)
+                .unwrap()
+                .is_identity((100, 60))
+        );
+    }
+
+    #[test]
+    fn outpaint_keeps_the_photo_and_fills_the_rest() {
+        let img = RgbRaster::from_fn(20, 12, |x, y| [x as f32 / 19.0, y as f32 / 11.0, 0.5]);
+        let layout = CanvasLayout::fixed((20, 12), 1.5, Placement::BottomCentre).unwrap();
+        let (canvas, mask) =
+            outpaint(&img, &layout, &HarmonicInpainter, 1, &Progress::none()).unwrap();
+        assert_eq!(canvas.size(), (30, 18));
+        assert_eq!(
+            mask.data().iter().filter(|&&b| b).count(),
+            30 * 18 - 20 * 12
+        );
+        for y in 0..12 {
+            for x in 0..20 {
+                assert_eq!(canvas.at(x + 5, y + 6), img.at(x, y));
+                assert!(!mask.at(x + 5, y + 6));
+            }
+        }
+        // The fill continues the photo: the top-left corner is near the photo's top-left.
+        let c = canvas.at(0, 0);
+        assert!(c[0] < 0.2 && c[1] < 0.2, "{c:?}");
+        // Identity: no work, same image.
+        let (same, none) = outpaint(
+            &img,
+            &CanvasLayout::identity((20, 12)),
+            &HarmonicInpainter,
+            1,
+            &Progress::none(),
+        )
+        .unwrap();
+        assert_eq!(same, img);
+        assert!(!none.data().iter().any(|&b| b));
+        // A layout the photo does not fit.
+        let bad = CanvasLayout {
+            left_pad: 5,
+            top_pad: 0,
+            width: 20,
+            height: 12,
+        };
+        assert!(outpaint(&img, &bad, &HarmonicInpainter, 1, &Progress::none()).is_err());
+    }
+}
