@@ -10,7 +10,7 @@ use makeit4d::export::{
 use makeit4d::path::{CameraPath, Preset, PresetKind};
 use makeit4d::progress::Progress;
 use makeit4d::project::Project;
-use makeit4d::render::cpu::CpuRenderer;
+use makeit4d::render::gpu::{RendererChoice, select_renderer};
 use makeit4d::scene::SceneBuilder;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -200,6 +200,10 @@ struct RenderArgs {
     /// Horizontal field of view of the input photo, degrees.
     #[arg(long)]
     fov: Option<f32>,
+    /// Splat renderer: cpu, gpu (an error without a GPU adapter) or auto (the GPU on a hardware
+    /// adapter, else the CPU; prints which and why).
+    #[arg(long, default_value = "auto")]
+    renderer: RendererChoice,
     /// Frame file-name pattern with one %d or %0Nd.
     #[arg(long, default_value = "frame_%04d.png")]
     pattern: String,
@@ -334,6 +338,7 @@ fn parse_size(s: &str) -> Result<(usize, usize), String> {
 }
 
 fn main() -> ExitCode {
+    quiet_vulkan_device_select_layer();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) => {
@@ -378,6 +383,21 @@ fn main() -> ExitCode {
         Err(e) => {
             eprintln!("error: {}", format!("{e:#}").replace('\n', " "));
             ExitCode::from(EXIT_ERROR)
+        }
+    }
+}
+
+/// Mesa's implicit Vulkan device-select layer (it reorders GPUs for programs that take the first
+/// one) prints "XDG_RUNTIME_DIR is invalid" on headless machines whenever a Vulkan instance is
+/// created, which would add lines to our one-line errors. wgpu chooses its adapter itself, so the
+/// layer is switched off for this process unless the user configured it.
+fn quiet_vulkan_device_select_layer() {
+    if std::env::var_os("NODEVICE_SELECT").is_none() {
+        // SAFETY: called first thing in `main`, before any other thread exists, so nothing can
+        // read the environment concurrently.
+        #[allow(unsafe_code)]
+        unsafe {
+            std::env::set_var("NODEVICE_SELECT", "1");
         }
     }
 }
@@ -584,11 +604,15 @@ fn render_one(
             .save(path)
             .with_context(|| "saving the project".to_string())?;
     }
-    let mut renderer = CpuRenderer::new(project.render);
+    // Chosen once the inputs are known to be good: opening a GPU adapter can be slow and some
+    // Vulkan layers print to stderr, which would spoil the one-line error of a bad input.
+    let (mut renderer, why) = select_renderer(args.renderer, project.render)?;
+    // Said on stdout, with the summary: stderr is kept for warnings and the one-line error.
+    bar.suspend(|| println!("renderer: {why}"));
     let summary = render_sequence(
         &project,
         &scene,
-        &mut renderer,
+        renderer.as_mut(),
         out,
         &options,
         &progress.sub(0.1, 1.0),
