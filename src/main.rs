@@ -124,6 +124,9 @@ enum BenchCommand {
     Inpaint(BenchInpaintArgs),
     /// Motion: flow solve, loop precompute, per-frame displacement and blend cost.
     Motion(BenchMotionArgs),
+    /// Renderers: frames/s and points/s for 0.5 M, 2 M and 8 M points at 720p and 1080p, GPU
+    /// and CPU side by side, with the CPU bandwidth floor.
+    Render,
 }
 
 #[derive(Args, Debug)]
@@ -371,6 +374,7 @@ fn main() -> ExitCode {
         Command::Bench(BenchCommand::Depth(args)) => bench_depth(args),
         Command::Bench(BenchCommand::Inpaint(args)) => bench_inpaint(args, cancel),
         Command::Bench(BenchCommand::Motion(args)) => bench_motion(args),
+        Command::Bench(BenchCommand::Render) => bench_render(),
         Command::Inpaint(args) => inpaint(args, cancel),
         Command::Doctor(args) => doctor(args),
     };
@@ -699,6 +703,10 @@ fn bench_depth(args: BenchDepthArgs) -> anyhow::Result<()> {
 
 fn doctor(args: DoctorArgs) -> anyhow::Result<()> {
     println!("makeit4d {}", env!("CARGO_PKG_VERSION"));
+    match makeit4d::render::gpu::GpuContext::new() {
+        Ok(context) => println!("GPU adapter: {}", context.describe()),
+        Err(e) => println!("GPU adapter: none ({e:#}); the CPU renderer is used"),
+    }
     println!("{}", makeit4d::ml::ort_status());
     match &args.project {
         Some(p) => {
@@ -841,5 +849,12 @@ fn bench_motion(args: BenchMotionArgs) -> anyhow::Result<()> {
         "\nloop memory: {:.1} MB",
         t.memory_bytes as f64 / (1024.0 * 1024.0)
     );
+    Ok(())
+}
+
+fn bench_render() -> anyhow::Result<()> {
+    let options = makeit4d::render::bench::BenchOptions::default();
+    let table = makeit4d::render::bench::bench_render(&options, |line| eprintln!("{line}"))?;
+    print!("{table}");
     Ok(())
 }
