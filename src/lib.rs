@@ -6,6 +6,7 @@ pub mod error;
 pub mod export;
 pub mod geometry;
 pub mod image_io;
+pub mod metrics;
 pub mod ml;
 pub mod path;
 pub mod progress;

@@ -4,7 +4,6 @@ pub mod bench;
 pub mod command;
 mod common;
 pub mod harmonic;
-mod metrics;
 pub mod onnx;
 pub mod patchmatch;
 
