@@ -3,6 +3,7 @@
 //! the editor are thin front ends over it.
 
 pub mod error;
+pub mod eval;
 pub mod export;
 pub mod geometry;
 pub mod image_io;
