@@ -122,6 +122,9 @@ struct EvalNvsArgs {
     /// Layer-based depth on or off (default: off for oracle depth, on for estimated).
     #[arg(long)]
     layer_depth: Option<bool>,
+    /// Also write each row's right view into this folder.
+    #[arg(long)]
+    save: Option<PathBuf>,
     /// Print JSON instead of a markdown table.
     #[arg(long)]
     json: bool,
@@ -690,6 +693,7 @@ fn eval_nvs(args: EvalNvsArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
         steps: args.steps,
         preset: args.inpaint_preset.parse()?,
         layer_depth: args.layer_depth,
+        save_dir: args.save.clone(),
         ..NvsOptions::default()
     };
     if let Some(m) = &args.depth_model {
