@@ -696,6 +696,7 @@ fn eval_nvs(args: EvalNvsArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
         save_dir: args.save.clone(),
         ..NvsOptions::default()
     };
+
     if let Some(m) = &args.depth_model {
         options.depth_settings.method = makeit4d::stages::depth::DepthMethod::Onnx;
         options.depth_settings.model = Some(m.clone());

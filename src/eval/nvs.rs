@@ -390,6 +390,8 @@ pub struct NvsOptions {
     pub methods: Vec<NvsMethod>,
     /// Also write each row's right view here as `<method>.png` (folder created).
     pub save_dir: Option<PathBuf>,
+    /// Layer settings of the scene methods (the project default unless changed).
+    pub layer_params: crate::stages::layers::LayerParams,
 }
 
 impl Default for NvsOptions {
@@ -404,6 +406,7 @@ impl Default for NvsOptions {
             layer_depth: None,
             methods: NvsMethod::ALL.to_vec(),
             save_dir: None,
+            layer_params: crate::stages::layers::LayerParams::default(),
         }
     }
 }
@@ -600,6 +603,7 @@ pub fn nvs_project(
     project.inpaint.preset = options.preset;
     project.inpaint.seed = options.seed;
     project.layers.layer_depth = layer_depth;
+    project.layers.params = options.layer_params.clone();
     match method {
         NvsMethod::NoOutpaint => project.canvas.enabled = false,
         NvsMethod::NoLayerInpaint => project.layers.inpaint = false,
