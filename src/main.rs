@@ -182,6 +182,9 @@ struct BenchSceneArgs {
     /// Run every case in this process (peak memory is then cumulative).
     #[arg(long)]
     in_process: bool,
+    /// Keep the rendered middle frames in OUT/frames (default: a temporary folder).
+    #[arg(long)]
+    keep_frames: bool,
 }
 
 #[derive(Args, Debug)]
@@ -714,7 +717,7 @@ fn eval_nvs(args: EvalNvsArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
 }
 
 fn bench_scene(args: BenchSceneArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
-    use makeit4d::eval::bench::{SceneBenchCase, default_photos, run_scene_case, score_cases};
+    use makeit4d::eval::bench::default_photos;
     use makeit4d::stages::inpaint::InpaintPreset;
     let photos = if args.photo.is_empty() {
         default_photos()
@@ -729,13 +732,40 @@ fn bench_scene(args: BenchSceneArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<
         .iter()
         .map(|p| p.parse::<InpaintPreset>())
         .collect::<Result<Vec<_>, _>>()?;
-    let frames_dir = args.out.join("frames");
+    let frames_dir = if args.keep_frames {
+        args.out.join("frames")
+    } else {
+        std::env::temp_dir().join(format!("makeit4d-bench-{}", std::process::id()))
+    };
     std::fs::create_dir_all(&frames_dir)
         .with_context(|| format!("{}: cannot create folder", frames_dir.display()))?;
+    let result = bench_scene_cases(&args, &photos, &presets, &frames_dir, &cancel);
+    if !args.keep_frames {
+        let _ = std::fs::remove_dir_all(&frames_dir);
+    }
+    let report = result?;
+    print!("{}", report.to_markdown());
+    println!(
+        "wrote {} (bench.md, bench.json, quality_vs_time.png)",
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// Runs every case of `bench scene` (each in a child process unless `--in-process`), scores
+/// them and writes the report.
+fn bench_scene_cases(
+    args: &BenchSceneArgs,
+    photos: &[PathBuf],
+    presets: &[makeit4d::stages::inpaint::InpaintPreset],
+    frames_dir: &std::path::Path,
+    cancel: &AtomicBool,
+) -> anyhow::Result<makeit4d::eval::bench::SceneBenchReport> {
+    use makeit4d::eval::bench::{SceneBenchCase, run_scene_case, score_cases};
     let exe = std::env::current_exe().context("locating the makeit4d executable")?;
     let mut cases: Vec<SceneBenchCase> = Vec::new();
-    for photo in &photos {
-        for &preset in &presets {
+    for photo in photos {
+        for &preset in presets {
             if cancel.load(std::sync::atomic::Ordering::Relaxed) {
                 return Err(Error::Cancelled.into());
             }
@@ -767,12 +797,7 @@ fn bench_scene(args: BenchSceneArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<
     }
     let report = score_cases(cases)?;
     report.write(&args.out)?;
-    print!("{}", report.to_markdown());
-    println!(
-        "wrote {} (bench.md, bench.json, quality_vs_time.png)",
-        args.out.display()
-    );
-    Ok(())
+    Ok(report)
 }
 
 fn bench_scene_case(args: BenchSceneCaseArgs) -> anyhow::Result<()> {
