@@ -408,24 +408,46 @@ fn nan_and_inf_in_an_imported_depth_are_sanitised() {
 
 #[test]
 fn nan_in_a_model_output_never_reaches_the_frames() {
-    // The fixture model outputs NaN and ±Inf. With ONNX Runtime present its output is refused
-    // and the stage falls back to the classical estimator with a warning; without it the
-    // fallback happens at load time. Either way the frames are finite.
+    // The fixture model outputs disparity ln(R − 0.5): NaN where the red channel is below 0.5.
+    // With ONNX Runtime present, the depth stage patches a minority of bad values (the model's
+    // estimate is used) and refuses a majority, falling back to the classical estimator with a
+    // warning; without the runtime the fallback happens at load time. Either way the frames
+    // are finite.
     let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/depth_nonfinite.json");
     let dir = tempfile::tempdir().unwrap();
-    let input = write_image(dir.path(), "in.png", &textured(40, 30));
-    let mut p = project(&input, 5);
-    p.depth.method = DepthMethod::Onnx;
-    p.depth.model = Some(fixture);
-    let scene = build_and_render(&p, &[0, 2, 4], "NaN model");
-    assert!(
-        scene.depth_estimator.contains("classical"),
-        "{}",
-        scene.depth_estimator
-    );
-    assert!(
-        scene.warnings.iter().all(|w| !w.contains('\n')),
-        "{:?}",
-        scene.warnings
-    );
+    let (w, h) = (40, 30);
+    for (bad_columns, what) in [(12, "30 % NaN"), (32, "80 % NaN")] {
+        let image = Raster::from_fn(w, h, |x, y| {
+            let t = textured(w, h).at(x, y);
+            [if x < bad_columns { 0.2 } else { 0.55 + 0.4 * t[1] }, t[1], t[2]]
+        });
+        let input = write_image(dir.path(), "in.png", &image);
+        let mut p = project(&input, 5);
+        p.depth.method = DepthMethod::Onnx;
+        p.depth.model = Some(fixture.clone());
+        // The depth stage on its own (layer-based depth off).
+        p.layers.layer_depth = false;
+        let scene = build_and_render(&p, &[0, 2, 4], what);
+        if bad_columns > w / 2 {
+            assert!(
+                scene.depth_estimator.contains("classical"),
+                "{what}: {}",
+                scene.depth_estimator
+            );
+            assert!(!scene.warnings.is_empty(), "{what}: the fallback must be reported");
+        }
+        assert!(
+            scene.warnings.iter().all(|w| !w.contains('\n')),
+            "{:?}",
+            scene.warnings
+        );
+        // Layer-based depth runs the same model on each layer's overlay, where the share of bad
+        // values differs; it has no fallback of its own, so the build may fail there — but only
+        // with a clear error that names the model.
+        p.layers.layer_depth = true;
+        match SceneBuilder::new().build(&p, &Progress::none()) {
+            Ok(scene) => assert_finite_scene(&scene, what),
+            Err(e) => assert_clear_error(&e, &["depth_nonfinite.onnx"]),
+        }
+    }
 }
