@@ -69,7 +69,7 @@ fn eval_nvs_on_quarter_aloe_with_oracle_depth() {
     assert!(noop["consistency"].is_null());
 
     // The markdown form has the same rows.
-    let md = nvs(&["--steps", "1"]);
+    let md = nvs(&[]);
     let text = String::from_utf8_lossy(&md.stdout);
     assert!(md.status.success());
     for name in ["full", "w/o outpainting", "w/o layer inpainting", "per-frame", "naive"] {
