@@ -57,7 +57,10 @@ impl SsimChannels {
     }
 }
 
-fn check_sizes<A: Copy, B: Copy>(a: &crate::raster::Raster<A>, b: &crate::raster::Raster<B>) -> Result<()> {
+fn check_sizes<A: Copy, B: Copy>(
+    a: &crate::raster::Raster<A>,
+    b: &crate::raster::Raster<B>,
+) -> Result<()> {
     if a.width() != b.width() || a.height() != b.height() {
         return Err(Error::invalid(format!(
             "metrics: images differ in size ({}×{} vs {}×{})",
@@ -380,11 +383,11 @@ pub fn consistency_error(first: &ViewImage<'_>, later: &ViewImage<'_>) -> Result
             let mut n = 0usize;
             for x in 0..w {
                 let z = first.depth.at(x, y);
-                if !first.valid.at(x, y) || !(z.is_finite() && z > 0.0) {
+                if !(first.valid.at(x, y) && z.is_finite() && z > 0.0) {
                     continue;
                 }
-                let p: Vec3 = later_from_first
-                    .transform_point(k_first.unproject(x as f32, y as f32, z));
+                let p: Vec3 =
+                    later_from_first.transform_point(k_first.unproject(x as f32, y as f32, z));
                 let Some((u, v, z_later)) = k_later.project(p) else {
                     continue;
                 };
@@ -393,17 +396,26 @@ pub fn consistency_error(first: &ViewImage<'_>, later: &ViewImage<'_>) -> Result
                 }
                 // Every bilinear neighbour with a non-zero weight must hold content.
                 let (x0, y0) = (u.floor() as usize, v.floor() as usize);
-                let x1 = if u > x0 as f32 { (x0 + 1).min(lw - 1) } else { x0 };
-                let y1 = if v > y0 as f32 { (y0 + 1).min(lh - 1) } else { y0 };
+                let x1 = if u > x0 as f32 {
+                    (x0 + 1).min(lw - 1)
+                } else {
+                    x0
+                };
+                let y1 = if v > y0 as f32 {
+                    (y0 + 1).min(lh - 1)
+                } else {
+                    y0
+                };
                 let neighbours_valid = [(x0, y0), (x1, y0), (x0, y1), (x1, y1)]
                     .iter()
                     .all(|&(xx, yy)| later.valid.at(xx, yy));
                 if !neighbours_valid {
                     continue;
                 }
-                let rendered = later
-                    .depth
-                    .at((u.round() as usize).min(lw - 1), (v.round() as usize).min(lh - 1));
+                let rendered = later.depth.at(
+                    (u.round() as usize).min(lw - 1),
+                    (v.round() as usize).min(lh - 1),
+                );
                 if (rendered - z_later).abs() > OCCLUSION_TOLERANCE * z_later {
                     continue;
                 }
@@ -464,7 +476,13 @@ mod tests {
         // Empty masks and size mismatches are errors.
         assert!(psnr_masked(&c, &d, &MaskRaster::new(2, 2, false)).is_err());
         assert!(psnr(&c, &RgbRaster::new(3, 2, [0.0; 3])).is_err());
-        assert!(psnr(&RgbRaster::new(0, 0, [0.0; 3]), &RgbRaster::new(0, 0, [0.0; 3])).is_err());
+        assert!(
+            psnr(
+                &RgbRaster::new(0, 0, [0.0; 3]),
+                &RgbRaster::new(0, 0, [0.0; 3])
+            )
+            .is_err()
+        );
     }
 
     #[test]
@@ -541,13 +559,20 @@ mod tests {
         let expected = [
             ("ssim per channel", per, SKIMAGE_SSIM_RGB),
             ("ssim luma", lum, SKIMAGE_SSIM_LUMA),
-            ("ssim per channel masked", per_masked, SKIMAGE_SSIM_RGB_MASKED),
+            (
+                "ssim per channel masked",
+                per_masked,
+                SKIMAGE_SSIM_RGB_MASKED,
+            ),
             ("ssim luma masked", lum_masked, SKIMAGE_SSIM_LUMA_MASKED),
             ("psnr", p, SKIMAGE_PSNR),
             ("psnr masked", p_masked, SKIMAGE_PSNR_MASKED),
         ];
         for (name, got, want) in expected {
-            assert!((got - want).abs() < 1e-5, "{name}: {got} vs scikit-image {want}");
+            assert!(
+                (got - want).abs() < 1e-5,
+                "{name}: {got} vs scikit-image {want}"
+            );
         }
     }
 
@@ -665,10 +690,7 @@ mod tests {
         assert!((c.valid_fraction - 5.0 / 8.0).abs() < 1e-12, "{c:?}");
         // Nothing visible: an error.
         let none = MaskRaster::new(w, h, false);
-        let b_none = ViewImage {
-            valid: &none,
-            ..b
-        };
+        let b_none = ViewImage { valid: &none, ..b };
         assert!(consistency_error(&a, &b_none).is_err());
         // NaN depths are skipped, not propagated.
         let nan_depth = Raster::new(w, h, f32::NAN);

@@ -233,8 +233,7 @@ impl SceneBuilder {
 
     fn ran(&mut self, stage: Stage, started: std::time::Instant) {
         *self.runs.entry(stage).or_insert(0) += 1;
-        self.seconds
-            .insert(stage, started.elapsed().as_secs_f64());
+        self.seconds.insert(stage, started.elapsed().as_secs_f64());
     }
 
     /// Builds (or re-uses) every stage for `project`.

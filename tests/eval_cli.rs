@@ -22,8 +22,22 @@ fn nvs(extra: &[&str]) -> Output {
         .arg("--gt-disparity")
         .arg(data("aloe_disparity_q.png"))
         // Quarter size: f = 3740/4 px, disparities stored ×256.
-        .args(["--disparity-factor", "256", "--focal", "935", "--baseline", "160"])
-        .args(["--border", "10", "--steps", "2", "--inpaint-preset", "draft"])
+        .args([
+            "--disparity-factor",
+            "256",
+            "--focal",
+            "935",
+            "--baseline",
+            "160",
+        ])
+        .args([
+            "--border",
+            "10",
+            "--steps",
+            "2",
+            "--inpaint-preset",
+            "draft",
+        ])
         .args(extra)
         .output()
         .expect("spawn makeit4d")
@@ -47,7 +61,14 @@ fn eval_nvs_on_quarter_aloe_with_oracle_depth() {
     assert_eq!(json["rows"].as_array().unwrap().len(), 6, "{json}");
     assert_eq!(json["width"], 320);
     for r in json["rows"].as_array().unwrap() {
-        for key in ["psnr_db", "ssim", "ssim_luma", "psnr_known_db", "ssim_known", "seconds"] {
+        for key in [
+            "psnr_db",
+            "ssim",
+            "ssim_luma",
+            "psnr_known_db",
+            "ssim_known",
+            "seconds",
+        ] {
             let v = r[key].as_f64().unwrap_or(f64::NAN);
             assert!(v.is_finite(), "{key} of {}: {v}", r["name"]);
         }
@@ -57,7 +78,10 @@ fn eval_nvs_on_quarter_aloe_with_oracle_depth() {
     let per_frame = row(&json, "per_frame");
     // Quality gates with margin (measured: full ≈ 24.8 dB, known ≈ 27.9 dB, no-op ≈ 15.6 dB).
     let psnr = |r: &serde_json::Value, k: &str| r[k].as_f64().unwrap();
-    assert!(psnr(full, "psnr_db") > psnr(noop, "psnr_db") + 6.0, "{json}");
+    assert!(
+        psnr(full, "psnr_db") > psnr(noop, "psnr_db") + 6.0,
+        "{json}"
+    );
     assert!(psnr(full, "psnr_known_db") > 26.0, "{json}");
     assert!(psnr(full, "ssim") > 0.7, "{json}");
     assert!(psnr(full, "hole_percent") < 0.5, "{json}");
@@ -72,7 +96,13 @@ fn eval_nvs_on_quarter_aloe_with_oracle_depth() {
     let md = nvs(&[]);
     let text = String::from_utf8_lossy(&md.stdout);
     assert!(md.status.success());
-    for name in ["full", "w/o outpainting", "w/o layer inpainting", "per-frame", "naive"] {
+    for name in [
+        "full",
+        "w/o outpainting",
+        "w/o layer inpainting",
+        "per-frame",
+        "naive",
+    ] {
         assert!(text.contains(name), "{text}");
     }
 }

@@ -63,7 +63,11 @@ fn assert_finite_frame(frame: &Frame, what: &str) {
         "{what}: colour not finite"
     );
     assert!(
-        frame.depth.data().iter().all(|z| z.is_finite() && *z >= 0.0),
+        frame
+            .depth
+            .data()
+            .iter()
+            .all(|z| z.is_finite() && *z >= 0.0),
         "{what}: depth not finite"
     );
     assert!(
@@ -231,8 +235,7 @@ fn fields_of_view_1_and_170_degrees() {
     p.camera.hfov_deg = 180.0;
     let e = SceneBuilder::new()
         .build(&p, &Progress::none())
-        .err()
-        .expect("fov 180° must be refused");
+        .expect_err("fov 180° must be refused");
     assert_clear_error(&e, &["field of view", "180"]);
 }
 
@@ -355,17 +358,17 @@ fn png_header(width: u32, height: u32) -> Vec<u8> {
 
 #[test]
 fn an_8000_by_8000_input_is_refused_by_the_size_limit() {
-    assert!(8000u64 * 8000 > MAX_PIXELS, "the test assumes a 40 MP limit");
+    // The test assumes the 40 MP limit.
+    const { assert!(8000u64 * 8000 > MAX_PIXELS) };
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("huge.png");
     std::fs::write(&path, png_header(8000, 8000)).unwrap();
-    let e = load_image(&path).err().expect("8000×8000 must be refused");
+    let e = load_image(&path).expect_err("8000×8000 must be refused");
     assert_clear_error(&e, &["huge.png", "8000×8000", "limit"]);
     // The same through the scene builder (what the command line and the editor call).
     let e = SceneBuilder::new()
         .build(&project(&path, 3), &Progress::none())
-        .err()
-        .expect("8000×8000 must be refused");
+        .expect_err("8000×8000 must be refused");
     assert_clear_error(&e, &["8000×8000", "megapixels"]);
 }
 
@@ -401,8 +404,7 @@ fn nan_and_inf_in_an_imported_depth_are_sanitised() {
     );
     let e = SceneBuilder::new()
         .build(&p, &Progress::none())
-        .err()
-        .expect("an all-NaN depth must be refused");
+        .expect_err("an all-NaN depth must be refused");
     assert_clear_error(&e, &["no finite positive value"]);
 }
 
@@ -419,7 +421,15 @@ fn nan_in_a_model_output_never_reaches_the_frames() {
     for (bad_columns, what) in [(12, "30 % NaN"), (32, "80 % NaN")] {
         let image = Raster::from_fn(w, h, |x, y| {
             let t = textured(w, h).at(x, y);
-            [if x < bad_columns { 0.2 } else { 0.55 + 0.4 * t[1] }, t[1], t[2]]
+            [
+                if x < bad_columns {
+                    0.2
+                } else {
+                    0.55 + 0.4 * t[1]
+                },
+                t[1],
+                t[2],
+            ]
         });
         let input = write_image(dir.path(), "in.png", &image);
         let mut p = project(&input, 5);
@@ -434,7 +444,10 @@ fn nan_in_a_model_output_never_reaches_the_frames() {
                 "{what}: {}",
                 scene.depth_estimator
             );
-            assert!(!scene.warnings.is_empty(), "{what}: the fallback must be reported");
+            assert!(
+                !scene.warnings.is_empty(),
+                "{what}: the fallback must be reported"
+            );
         }
         assert!(
             scene.warnings.iter().all(|w| !w.contains('\n')),

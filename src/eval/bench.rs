@@ -289,8 +289,8 @@ impl SceneBenchReport {
     pub fn write(&self, dir: &Path) -> Result<()> {
         std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e))?;
         crate::image_io::write_atomic(&dir.join("bench.md"), self.to_markdown().as_bytes())?;
-        let json = serde_json::to_string_pretty(self)
-            .map_err(|e| Error::invalid(format!("json: {e}")))?;
+        let json =
+            serde_json::to_string_pretty(self).map_err(|e| Error::invalid(format!("json: {e}")))?;
         crate::image_io::write_atomic(&dir.join("bench.json"), json.as_bytes())?;
         let png = self.chart().render(900, 520);
         crate::image_io::save_rgb_png(&dir.join("quality_vs_time.png"), &png, false)
@@ -306,10 +306,7 @@ pub fn default_photos() -> Vec<PathBuf> {
             .map(|rd| {
                 rd.filter_map(|e| e.ok().map(|e| e.path()))
                     .filter(|p| {
-                        p.is_file()
-                            && p.file_name()
-                                .and_then(|n| n.to_str())
-                                .is_some_and(|n| keep(n))
+                        p.is_file() && p.file_name().and_then(|n| n.to_str()).is_some_and(keep)
                     })
                     .collect()
             })

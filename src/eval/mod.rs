@@ -24,10 +24,8 @@ impl TempDir {
             .duration_since(std::time::UNIX_EPOCH)
             .map(|d| d.as_nanos())
             .unwrap_or(0);
-        let path = std::env::temp_dir().join(format!(
-            "makeit4d-{tag}-{}-{nanos}",
-            std::process::id()
-        ));
+        let path =
+            std::env::temp_dir().join(format!("makeit4d-{tag}-{}-{nanos}", std::process::id()));
         std::fs::create_dir_all(&path).map_err(|e| Error::file(&path, e))?;
         Ok(Self { path })
     }

@@ -290,8 +290,8 @@ pub fn fill_unknown_disparity(disparity: &GrayRaster) -> Result<GrayRaster> {
     }
     // Rows with nothing known: the nearest row that had something.
     let known_rows: Vec<usize> = (0..h).filter(|&y| row_known[y]).collect();
-    for y in 0..h {
-        if row_known[y] {
+    for (y, &known) in row_known.iter().enumerate() {
+        if known {
             continue;
         }
         let nearest = known_rows
@@ -685,12 +685,11 @@ fn run_scene_method(
     let project = nvs_project(pair, left_path, depth_path, method, options, layer_depth);
     let started = Instant::now();
     let scene = SceneBuilder::new().build(&project, &progress.sub(0.0, 0.8))?;
-    let evaluator = project.camera.path.evaluator(
-        &scene.intrinsics,
-        w,
-        &scene.scale,
-        project.output.frames,
-    )?;
+    let evaluator =
+        project
+            .camera
+            .path
+            .evaluator(&scene.intrinsics, w, &scene.scale, project.output.frames)?;
     let mut renderer = CpuRenderer::new(project.render);
     renderer.set_cloud(scene.cloud.clone())?;
     let right_view = evaluator.view_at(1.0);
@@ -792,7 +791,11 @@ fn run_per_frame(
         let filled = result.guide.unwrap_or(disparity);
         image_depth = filled.map(|d| {
             let z = 1.0 / d;
-            if z.is_finite() && z > 0.0 { z.min(far) } else { far }
+            if z.is_finite() && z > 0.0 {
+                z.min(far)
+            } else {
+                far
+            }
         });
         image = result.image;
         frames.push(PathFrame {
@@ -825,7 +828,9 @@ pub fn forward_splat(
     view: &View,
 ) -> Result<(RgbRaster, GrayRaster, MaskRaster)> {
     if !image.same_size(depth) {
-        return Err(Error::invalid("forward splat: image and depth differ in size"));
+        return Err(Error::invalid(
+            "forward splat: image and depth differ in size",
+        ));
     }
     let (w, h) = image.size();
     let camera_from_world = view.world_from_camera.inverse();
@@ -1047,7 +1052,20 @@ mod tests {
         let d = Raster::from_vec(
             4,
             3,
-            vec![5.0, 0.0, f32::NAN, 2.0, 0.0, 4.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            vec![
+                5.0,
+                0.0,
+                f32::NAN,
+                2.0,
+                0.0,
+                4.0,
+                -1.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+            ],
         )
         .unwrap();
         let f = fill_unknown_disparity(&d).unwrap();
@@ -1063,10 +1081,18 @@ mod tests {
         // painted grey.
         let (w, h) = (24, 12);
         let d = Raster::from_fn(w, h, |x, y| {
-            if (8..14).contains(&x) && (3..9).contains(&y) { 4.0 } else { 2.0 }
+            if (8..14).contains(&x) && (3..9).contains(&y) {
+                4.0
+            } else {
+                2.0
+            }
         });
         let left = Raster::from_fn(w, h, |x, y| {
-            [x as f32 / 24.0, y as f32 / 12.0, ((x * 7 + y * 3) % 5) as f32 / 5.0]
+            [
+                x as f32 / 24.0,
+                y as f32 / 12.0,
+                ((x * 7 + y * 3) % 5) as f32 / 5.0,
+            ]
         });
         let k = Intrinsics {
             fx: 10.0,
