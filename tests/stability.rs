@@ -313,7 +313,13 @@ fn one_pixel_layers() {
     p.layers.params.min_layer_px = 1;
     p.layers.params.min_context_px = 1;
     let scene = build_and_render(&p, &[0, 2, 4], "one-pixel layers");
-    assert!(!scene.layers.layers.is_empty());
+    let sizes: Vec<usize> = scene
+        .layers
+        .layers
+        .iter()
+        .map(|l| l.mask.data().iter().filter(|&&m| m).count())
+        .collect();
+    assert!(sizes.contains(&1), "no one-pixel layer: {sizes:?}");
 }
 
 #[test]
