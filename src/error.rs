@@ -27,6 +27,9 @@ pub enum Error {
         /// What is wrong, one line.
         message: String,
     },
+    /// No usable GPU adapter, or the GPU reported an error (validation, out of memory, lost).
+    #[error("GPU: {0}")]
+    Gpu(String),
 }
 
 impl Error {

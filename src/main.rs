@@ -10,7 +10,7 @@ use makeit4d::export::{
 use makeit4d::path::{CameraPath, Preset, PresetKind};
 use makeit4d::progress::Progress;
 use makeit4d::project::Project;
-use makeit4d::render::cpu::CpuRenderer;
+use makeit4d::render::gpu::{RendererChoice, select_renderer};
 use makeit4d::scene::SceneBuilder;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -39,6 +39,8 @@ enum Command {
     Render(Box<RenderArgs>),
     /// Estimate the depth of a photo on its own (16-bit disparity PNG + JSON sidecar).
     Depth(DepthArgs),
+    /// Fill the white pixels of a mask in a photo (PatchMatch), on its own.
+    Inpaint(InpaintArgs),
     /// Score stages against ground truth.
     #[command(subcommand)]
     Eval(EvalCommand),
@@ -69,6 +71,24 @@ struct DepthArgs {
     /// Horizon row as a fraction of the height (0 = top); default: detected.
     #[arg(long)]
     horizon: Option<f32>,
+}
+
+#[derive(Args, Debug)]
+struct InpaintArgs {
+    /// The photo.
+    image: PathBuf,
+    /// The hole mask: same size as the photo, white (≥ 50 %) = fill.
+    #[arg(long)]
+    mask: PathBuf,
+    /// The filled PNG to write.
+    #[arg(long)]
+    out: PathBuf,
+    /// Quality: draft, preview or final.
+    #[arg(long, default_value = "preview")]
+    preset: String,
+    /// Seed for the random search (same seed, same bytes).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
 }
 
 #[derive(Subcommand, Debug)]
@@ -159,12 +179,38 @@ struct EvalDepthArgs {
 enum BenchCommand {
     /// The classical depth estimator: median seconds over several runs.
     Depth(BenchDepthArgs),
+    /// Inpainting presets against the harmonic baseline on holes cut from real photos.
+    Inpaint(BenchInpaintArgs),
+    /// Motion: flow solve, loop precompute, per-frame displacement and blend cost.
+    Motion(BenchMotionArgs),
     /// Every stage for each inpainting preset on each photo: seconds, peak memory, quality
     /// against the final preset; writes bench.md, bench.json and quality_vs_time.png.
     Scene(BenchSceneArgs),
     /// One case of `bench scene` (run in a child process for a clean peak memory); prints JSON.
     #[command(hide = true)]
     SceneCase(BenchSceneCaseArgs),
+}
+
+#[derive(Args, Debug)]
+struct BenchInpaintArgs {
+    /// Photos (default: ../shared/data/photos/*.jpg when present, else tests/data).
+    photos: Vec<PathBuf>,
+    /// Timed repeats per case (the median is printed).
+    #[arg(long, default_value_t = 3)]
+    repeats: usize,
+}
+
+#[derive(Args, Debug)]
+struct BenchMotionArgs {
+    /// Canvas width.
+    #[arg(long, default_value_t = 1280)]
+    width: usize,
+    /// Canvas height.
+    #[arg(long, default_value_t = 800)]
+    height: usize,
+    /// Loop length N.
+    #[arg(long, default_value_t = 100)]
+    frames: u32,
 }
 
 #[derive(Args, Debug)]
@@ -235,15 +281,24 @@ struct RenderArgs {
     /// Frames per second.
     #[arg(long)]
     fps: Option<f32>,
-    /// Camera preset.
+    /// Camera preset: still, fly-in, fly-out, orbit, swing, pan, dolly-zoom, or autocruise
+    /// (auto-pilot over the 3D scene; becomes editable keyframes in --save-project).
     #[arg(long)]
     preset: Option<String>,
+    /// Print per-frame hole and synthesised-content fractions of the path (low-resolution
+    /// renders), frames over the threshold, and the safe extent.
+    #[arg(long)]
+    diagnostics: bool,
     /// Output size WIDTHxHEIGHT (default: the input's).
     #[arg(long, value_parser = parse_size)]
     size: Option<(usize, usize)>,
     /// Horizontal field of view of the input photo, degrees.
     #[arg(long)]
     fov: Option<f32>,
+    /// Splat renderer: cpu, gpu (an error without a GPU adapter) or auto (the GPU on a hardware
+    /// adapter, else the CPU; prints which and why).
+    #[arg(long, default_value = "auto")]
+    renderer: RendererChoice,
     /// Frame file-name pattern with one %d or %0Nd.
     #[arg(long, default_value = "frame_%04d.png")]
     pattern: String,
@@ -271,9 +326,10 @@ struct RenderArgs {
     /// Do not inpaint what each layer hides (the paper's ablation).
     #[arg(long)]
     no_layer_inpaint: bool,
-    /// Keep the completed depth of inpainted pixels instead of re-estimating each layer's depth.
+    /// Re-estimate each layer's depth on the inpainted overlay (paper eq. 4–5; off by default,
+    /// best with a learned depth model).
     #[arg(long)]
-    no_layer_depth: bool,
+    layer_depth: bool,
     /// Do not outpaint: the canvas is the photo.
     #[arg(long)]
     no_outpaint: bool,
@@ -377,6 +433,7 @@ fn parse_size(s: &str) -> Result<(usize, usize), String> {
 }
 
 fn main() -> ExitCode {
+    quiet_vulkan_device_select_layer();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) => {
@@ -408,6 +465,9 @@ fn main() -> ExitCode {
         Command::Eval(EvalCommand::Depth(args)) => eval_depth(args, cancel),
         Command::Eval(EvalCommand::Nvs(args)) => eval_nvs(args, cancel),
         Command::Bench(BenchCommand::Depth(args)) => bench_depth(args),
+        Command::Bench(BenchCommand::Inpaint(args)) => bench_inpaint(args, cancel),
+        Command::Bench(BenchCommand::Motion(args)) => bench_motion(args),
+        Command::Inpaint(args) => inpaint(args, cancel),
         Command::Bench(BenchCommand::Scene(args)) => bench_scene(args, cancel),
         Command::Bench(BenchCommand::SceneCase(args)) => bench_scene_case(args),
         Command::Doctor(args) => doctor(args),
@@ -421,6 +481,21 @@ fn main() -> ExitCode {
         Err(e) => {
             eprintln!("error: {}", format!("{e:#}").replace('\n', " "));
             ExitCode::from(EXIT_ERROR)
+        }
+    }
+}
+
+/// Mesa's implicit Vulkan device-select layer (it reorders GPUs for programs that take the first
+/// one) prints "XDG_RUNTIME_DIR is invalid" on headless machines whenever a Vulkan instance is
+/// created, which would add lines to our one-line errors. wgpu chooses its adapter itself, so the
+/// layer is switched off for this process unless the user configured it.
+fn quiet_vulkan_device_select_layer() {
+    if std::env::var_os("NODEVICE_SELECT").is_none() {
+        // SAFETY: called first thing in `main`, before any other thread exists, so nothing can
+        // read the environment concurrently.
+        #[allow(unsafe_code)]
+        unsafe {
+            std::env::set_var("NODEVICE_SELECT", "1");
         }
     }
 }
@@ -538,9 +613,14 @@ fn render_one(
     if let Some(fov) = args.fov {
         project.camera.hfov_deg = fov;
     }
-    if let Some(name) = &args.preset {
+    let autocruise = args.preset.as_deref() == Some("autocruise");
+    if let Some(name) = args.preset.as_deref().filter(|_| !autocruise) {
         let kind: PresetKind = name.parse()?;
         project.camera.path = CameraPath::Preset(Preset::new(kind));
+    }
+    if autocruise {
+        // First pass: the photo's own cloud (a still path needs no canvas).
+        project.camera.path = CameraPath::Preset(Preset::new(PresetKind::Still));
     }
     apply_scene_flags(args, &mut project)?;
     project.validate()?;
@@ -568,6 +648,28 @@ fn render_one(
     let (bar, progress) = progress_bar(cancel);
     let mut builder = SceneBuilder::new();
     let mut scene = builder.build(&project, &progress.sub(0.0, 0.1))?;
+    if autocruise {
+        // Fly the auto-pilot over the scene, then rebuild with its keyframes so the canvas is
+        // outpainted for exactly that path (load and depth are re-used from the cache).
+        let (w, h) = makeit4d::export::output_size(&project, &scene);
+        let (iw, ih) = scene.input.rgb.size();
+        let k = scene
+            .intrinsics
+            .scaled(w as f32 / iw as f32, h as f32 / ih as f32);
+        let cruise = makeit4d::path::autocruise(
+            &scene.cloud,
+            &k,
+            w,
+            h,
+            &scene.scale,
+            &makeit4d::path::AutocruiseParams::default(),
+            project.output.frames,
+            &progress.sub(0.0, 0.1),
+        )?;
+        bar.suspend(|| eprintln!("{cruise}"));
+        project.camera.path = CameraPath::Keyframes(cruise.keyframes);
+        scene = builder.build(&project, &progress.sub(0.0, 0.1))?;
+    }
     if args.motion == Some(MotionArg::Auto) {
         // The suggestion lives in canvas pixels, so it is made on the built canvas; the second
         // build re-uses every cached stage and runs only motion.
@@ -581,17 +683,34 @@ fn render_one(
     for w in &scene.warnings {
         bar.suspend(|| eprintln!("warning: {w}"));
     }
+    if args.diagnostics {
+        let (w, h) = makeit4d::export::output_size(&project, &scene);
+        let views = makeit4d::export::output_views(&project, &scene)?;
+        let d = makeit4d::path::path_diagnostics(
+            &scene.cloud,
+            &views,
+            w,
+            h,
+            &makeit4d::path::DiagnosticsParams::default(),
+            &progress,
+        )?;
+        bar.suspend(|| println!("{d}"));
+    }
     makeit4d::image_io::prepare_output_dir(out)?;
     if let Some(path) = &args.save_project {
         project
             .save(path)
             .with_context(|| "saving the project".to_string())?;
     }
-    let mut renderer = CpuRenderer::new(project.render);
+    // Chosen once the inputs are known to be good: opening a GPU adapter can be slow and some
+    // Vulkan layers print to stderr, which would spoil the one-line error of a bad input.
+    let (mut renderer, why) = select_renderer(args.renderer, project.render)?;
+    // Said on stdout, with the summary: stderr is kept for warnings and the one-line error.
+    bar.suspend(|| println!("renderer: {why}"));
     let summary = render_sequence(
         &project,
         &scene,
-        &mut renderer,
+        renderer.as_mut(),
         out,
         &options,
         &progress.sub(0.1, 1.0),
@@ -862,8 +981,8 @@ fn apply_scene_flags(args: &RenderArgs, project: &mut Project) -> anyhow::Result
     if args.no_layer_inpaint {
         project.layers.inpaint = false;
     }
-    if args.no_layer_depth {
-        project.layers.layer_depth = false;
+    if args.layer_depth {
+        project.layers.layer_depth = true;
     }
     if args.no_outpaint {
         project.canvas.enabled = false;
@@ -889,5 +1008,68 @@ fn apply_scene_flags(args: &RenderArgs, project: &mut Project) -> anyhow::Result
     if args.motion == Some(MotionArg::Off) {
         project.motion = Default::default();
     }
+    Ok(())
+}
+
+fn inpaint(args: InpaintArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::stages::inpaint::{InpaintPreset, command};
+    let preset: InpaintPreset = args.preset.parse()?;
+    let image = makeit4d::image_io::load_image(&args.image)?;
+    let hole = command::read_hole_mask(&args.mask, image.rgb.size())?;
+    let (bar, progress) = progress_bar(cancel);
+    let start = std::time::Instant::now();
+    let filled = command::inpaint_command(&image.rgb, &hole, preset, args.seed, &progress);
+    bar.finish_and_clear();
+    let filled = filled?;
+    makeit4d::image_io::save_rgb_png(&args.out, &filled, false)?;
+    println!(
+        "{}; wrote {}",
+        command::format_inpaint_summary(&hole, preset, start.elapsed().as_secs_f64()),
+        args.out.display()
+    );
+    Ok(())
+}
+
+fn bench_inpaint(args: BenchInpaintArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::stages::inpaint::{BenchOptions, bench_inpaint, format_bench_table};
+    let photos = if args.photos.is_empty() {
+        makeit4d::stages::inpaint::bench::default_bench_photos()
+    } else {
+        args.photos.clone()
+    };
+    let options = BenchOptions {
+        repeats: args.repeats.max(1),
+        ..BenchOptions::default()
+    };
+    let (bar, progress) = progress_bar(cancel);
+    let rows = bench_inpaint(&photos, &options, &progress);
+    bar.finish_and_clear();
+    print!("{}", format_bench_table(&rows?));
+    Ok(())
+}
+
+fn bench_motion(args: BenchMotionArgs) -> anyhow::Result<()> {
+    let t = makeit4d::stages::motion::bench_motion(args.width, args.height, args.frames, 3)?;
+    let blend = makeit4d::render::blend::bench_blend(args.width, args.height, 10)?;
+    println!("| step | seconds |");
+    println!("|---|---:|");
+    println!(
+        "| flow solve ({}×{}) | {:.3} |",
+        t.width, t.height, t.field_secs
+    );
+    println!(
+        "| spread flow into hidden layer pixels | {:.3} |",
+        t.layers_secs
+    );
+    println!(
+        "| precompute {}-frame loop (forward + backward) | {:.3} |",
+        t.loop_frames, t.integrate_secs
+    );
+    println!("| one frame's displacements | {:.4} |", t.frame_secs);
+    println!("| symmetric blend, one frame | {blend:.4} |");
+    println!(
+        "\nloop memory: {:.1} MB",
+        t.memory_bytes as f64 / (1024.0 * 1024.0)
+    );
     Ok(())
 }

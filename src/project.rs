@@ -83,7 +83,10 @@ pub struct LayerSettings {
     pub enabled: bool,
     /// Inpaint what each layer hides (off: the ablation without layer inpainting).
     pub inpaint: bool,
-    /// Re-estimate each layer's depth on the inpainted overlay (paper eq. 4–5).
+    /// Re-estimate each layer's depth on the inpainted overlay (paper eq. 4–5). Off by
+    /// default: the paper relies on a learned estimator (DPT) that is consistent between the
+    /// overlays; the classical estimator is not, and re-estimating warps long structures (the
+    /// pier of cold_ripple.jpg bends into waves). Worth turning on with a learned depth model.
     pub layer_depth: bool,
     /// Clustering and mask parameters.
     pub params: LayerParams,
@@ -94,7 +97,7 @@ impl Default for LayerSettings {
         Self {
             enabled: true,
             inpaint: true,
-            layer_depth: true,
+            layer_depth: false,
             params: LayerParams::default(),
         }
     }

@@ -268,6 +268,25 @@ impl BoxAverage for Rgb {
     }
 }
 
+/// Calls `f` with the linear index of each 4-neighbour (left, right, up, down) of pixel `i` in a
+/// row-major `w × h` grid, skipping those outside it.
+#[inline]
+pub fn for_each_neighbour4(i: usize, w: usize, h: usize, mut f: impl FnMut(usize)) {
+    let (x, y) = (i % w, i / w);
+    if x > 0 {
+        f(i - 1);
+    }
+    if x + 1 < w {
+        f(i + 1);
+    }
+    if y > 0 {
+        f(i - w);
+    }
+    if y + 1 < h {
+        f(i + w);
+    }
+}
+
 /// Rec. 709 luma of an sRGB-encoded colour.
 #[inline]
 pub fn luma(c: Rgb) -> f32 {
@@ -315,6 +334,16 @@ mod tests {
         // Box-averaged pairs: 0.5, 2.5, 4.5, 6.5.
         assert!((half.at(0, 0) - 0.5).abs() < 1e-6);
         assert!((half.at(3, 0) - 6.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn neighbours_stay_inside_the_grid() {
+        let mut seen = Vec::new();
+        for_each_neighbour4(0, 3, 2, |j| seen.push(j));
+        assert_eq!(seen, [1, 3]);
+        seen.clear();
+        for_each_neighbour4(4, 3, 2, |j| seen.push(j));
+        assert_eq!(seen, [3, 5, 1]);
     }
 
     #[test]

@@ -285,3 +285,48 @@ fn psnr(a: &image::RgbImage, b: &image::RgbImage) -> f64 {
         / a.as_raw().len() as f64;
     10.0 * (255.0f64 * 255.0 / mse.max(1e-12)).log10()
 }
+
+#[test]
+fn autocruise_becomes_editable_keyframes_with_diagnostics() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let project = d.join("cruise.json");
+    let a = d.join("a");
+    let o = render(
+        &data("evening_glow_320.jpg"),
+        &a,
+        &[
+            "--frames",
+            "6",
+            "--preset",
+            "autocruise",
+            "--diagnostics",
+            "--inpaint-preset",
+            "draft",
+            "--save-project",
+            project.to_str().unwrap(),
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("path diagnostics") && stdout.contains("safe"),
+        "{stdout}"
+    );
+    let saved = std::fs::read_to_string(&project).unwrap();
+    assert!(saved.contains("\"keyframes\""), "{saved}");
+    // The saved keyframes render the same frames.
+    let b = d.join("b");
+    let o = exe()
+        .arg("render")
+        .arg("--project")
+        .arg(&project)
+        .arg("--out")
+        .arg(&b)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for (x, y) in frames_in(&a).iter().zip(frames_in(&b)) {
+        assert_eq!(std::fs::read(x).unwrap(), std::fs::read(&y).unwrap());
+    }
+}

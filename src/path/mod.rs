@@ -8,9 +8,11 @@
 //!   [`CameraPath::evaluator`] checks the path once and then gives [`PathEvaluator::view_at`] for
 //!   any (fractional) frame.
 //! * [`CameraPath::to_keyframes`] turns a preset into editable keys.
-//! * Generated paths (autocruise, later) produce views or poses and enter as keyframes through
-//!   [`KeyframePath::from_views`]: a dense suggestion the user thins out and edits. There is no
-//!   autocruise variant until the generator exists.
+//! * Generated paths enter as keyframes: [`autocruise::autocruise`] flies the camera through
+//!   the point cloud (InfNat-Zero's auto-pilot) and returns dense views plus suggested keys
+//!   ([`KeyframePath::from_views`] turns any list of views into keys).
+//! * [`diagnostics::path_diagnostics`] renders a path at low resolution and reports, per frame,
+//!   the holes and the synthesised content, and how far the path is safe.
 //! * [`timing`] maps output (video) frames to path frames (once, loop, ping-pong), independent of
 //!   the motion loop's length; [`export`] writes the per-frame cameras for compositing tools
 //!   (JSON, and a Blender script).
@@ -18,6 +20,8 @@
 //! Field of view changes scale `fx` and `fy` together about the principal point, which the path
 //! never moves.
 
+pub mod autocruise;
+pub mod diagnostics;
 pub mod ease;
 pub mod export;
 pub mod keyframes;
@@ -25,6 +29,8 @@ pub mod presets;
 pub mod rotation;
 pub mod timing;
 
+pub use autocruise::{AutocruiseParams, AutocruiseResult, CruiseDirection, autocruise};
+pub use diagnostics::{DiagnosticsParams, PathDiagnostics, path_diagnostics};
 pub use ease::Ease;
 pub use keyframes::{Interpolation, Keyframe, KeyframePath};
 pub use presets::{Preset, PresetKind};

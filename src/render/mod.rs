@@ -1,7 +1,9 @@
 //! Rendering the point cloud into frames (algorithms.md §7).
 
+pub mod bench;
 pub mod blend;
 pub mod cpu;
+pub mod gpu;
 
 use crate::error::{Error, Result};
 use crate::geometry::View;

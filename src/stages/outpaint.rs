@@ -199,6 +199,34 @@ impl Default for CanvasSizing {
     }
 }
 
+impl CanvasSizing {
+    /// The canvas for a photo of `input_size` seen through `input_intrinsics`, for the frames
+    /// `views` rendered at `output_size` of a scene in `depth` (the last three are ignored by
+    /// [`CanvasSizing::Fixed`]).
+    pub fn layout(
+        &self,
+        input_size: (usize, usize),
+        input_intrinsics: &Intrinsics,
+        views: &[View],
+        output_size: (usize, usize),
+        depth: DepthRange,
+    ) -> Result<CanvasLayout> {
+        match self {
+            CanvasSizing::FromPath(options) => canvas_from_views(
+                input_size,
+                input_intrinsics,
+                views,
+                output_size,
+                depth,
+                options,
+            ),
+            CanvasSizing::Fixed { factor, placement } => {
+                CanvasLayout::fixed(input_size, *factor, *placement)
+            }
+        }
+    }
+}
+
 /// The part of the input image plane a path can see, input pixel coordinates (pixel centres at
 /// integers), clamped to the largest canvas.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -698,6 +726,32 @@ mod tests {
         let k = Intrinsics::from_hfov(100, 60, 60.0);
         let kc = c.intrinsics(&k);
         assert_eq!((kc.fx, kc.cx, kc.cy), (k.fx, k.cx + 25.0, k.cy + 15.0));
+        // The project-file form and its serialisation.
+        let sizing = CanvasSizing::Fixed {
+            factor: 1.5,
+            placement: Placement::Centre,
+        };
+        let depth = DepthRange::new(1.0, 10.0).unwrap();
+        assert_eq!(
+            sizing.layout((100, 60), &k, &[], (100, 60), depth).unwrap(),
+            c
+        );
+        let json = serde_json::to_string(&sizing).unwrap();
+        assert_eq!(serde_json::from_str::<CanvasSizing>(&json).unwrap(), sizing);
+        let path: CanvasSizing =
+            serde_json::from_str(r#"{"mode": "from_path", "margin_px": 8}"#).unwrap();
+        assert_eq!(
+            path,
+            CanvasSizing::FromPath(CanvasOptions {
+                margin_px: 8,
+                ..CanvasOptions::default()
+            })
+        );
+        assert!(
+            path.layout((100, 60), &k, &[], (100, 60), depth)
+                .unwrap()
+                .is_identity((100, 60))
+        );
     }
 
     #[test]

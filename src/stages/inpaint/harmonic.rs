@@ -174,22 +174,11 @@ fn sor<const N: usize>(
             }
             let mut nb = [0u32; 4];
             let mut n = 0u8;
-            let mut push = |j: usize| {
+            let push = |j: usize| {
                 nb[n as usize] = j as u32;
                 n += 1;
             };
-            if x > 0 {
-                push(i - 1);
-            }
-            if x + 1 < w {
-                push(i + 1);
-            }
-            if y > 0 {
-                push(i - w);
-            }
-            if y + 1 < h {
-                push(i + w);
-            }
+            crate::raster::for_each_neighbour4(i, w, h, push);
             colours[(x + y) % 2].push((i as u32, nb, n));
         }
     }

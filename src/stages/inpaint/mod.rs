@@ -1,4 +1,10 @@
 //! Image completion: the [`Inpainter`] trait and its implementations.
+//!
+//! - [`PatchMatchInpainter`] (`patchmatch`): example-based completion, presets `draft`,
+//!   `preview`, `final`; honours `allowed_source` and completes a guide channel.
+//! - [`HarmonicInpainter`] (`harmonic`): the membrane fill, the smooth baseline.
+//! - `command`: the `makeit4d inpaint` command as functions (mask decoding, checks).
+//! - `bench`: holes cut out of real photos, scored against them (PSNR, SSIM) and timed.
 
 pub mod bench;
 pub mod command;

@@ -1,22 +1,37 @@
 //! Example-based completion: PatchMatch search (Barnes et al. 2009) inside multi-scale EM
-//! completion (Wexler et al. 2007).
+//! completion (Wexler et al. 2007), with the refinements of Newson et al. (2014, 2017).
 //!
-//! The image, hole and source masks are reduced into a pyramid until the hole is shallow
-//! (every hole pixel within about one patch radius of known pixels). On the coarsest level the
-//! hole starts from the membrane fill; on every finer level it starts from the coarser
-//! nearest-neighbour field (NNF), scaled up and voted with the finer source pixels. Each EM
-//! iteration improves the NNF with PatchMatch passes (propagation from the scan-order
-//! neighbours plus random search at halving radii, plus one candidate drawn from the whole
-//! source) and then re-synthesises the hole by voting: every pixel becomes the weighted mean of
-//! the pixels that the overlapping patches copy onto it, each patch weighted by
-//! `exp(−d / 2σ²)` with `d` its mean squared distance and `σ²` the 75th percentile of those
-//! distances (Wexler's weights).
+//! Pyramid: the image, hole and source masks are halved until the hole is shallow (every hole
+//! pixel within about one patch radius of known pixels), as long as a coarser level keeps
+//! enough source patches (with many holes, the grown coarse hole mask swallows them).
+//!
+//! Coarsest level: the hole starts from the membrane fill and is then onion-peeled: filled
+//! ring by ring from its border inwards, each pixel copied from its best match over the known
+//! part of its patch. Finer levels start from the coarser nearest-neighbour field (NNF),
+//! scaled up and voted with the finer source pixels.
+//!
+//! EM iteration: PatchMatch passes improve the NNF (propagation from the scan-order
+//! neighbours, random search at halving radii, one candidate drawn from the whole source), then
+//! voting re-synthesises the hole: every pixel becomes the weighted mean of what the
+//! overlapping patches copy onto it, each patch weighted by `exp(−d / 2σ²)·γ^−depth` (`d` its
+//! mean squared distance, `σ²` the 75th percentile of those, `depth` how far its centre lies
+//! inside the hole: Wexler's weights).
+//!
+//! Matching cost: squared differences over colour, guide and two texture features (mean luma
+//! gradients along x and y over a patch-sized window, computed at full resolution and
+//! synthesised with the colour; without them EM settles on a smooth fill in textured regions),
+//! plus a small locality prior that prefers nearby sources among near-equal matches (without
+//! it, a sky border may be filled from a similar-looking lake far below).
+//!
+//! Finish: the fill is blended into its surroundings in the gradient domain (the mismatch
+//! between the known ring around the hole and what the patches predict there is interpolated
+//! harmonically into the hole), which removes colour steps at the border.
 //!
 //! Source restriction: a source patch must lie wholly on `allowed_source` pixels outside the
 //! hole. Known pixels that may not be copied and lie near the hole are synthesised along with
 //! it (so they never pull the match towards their colours), and stay unchanged in the output.
 //!
-//! Guide: a fourth channel (e.g. depth) normalised by its robust range and scaled by
+//! Guide: a channel (e.g. depth) normalised by its robust range and scaled by
 //! [`PatchMatchParams::guide_weight`] enters the patch distance and is voted with the same
 //! patches, which is how the completed guide is made.
 //!
@@ -24,6 +39,9 @@
 //! propagation runs in scan order, across bands it reads the field as it was before the pass.
 //! Every random draw is keyed by (seed, level, pass, pixel), and every sum runs in a fixed
 //! order, so the result is the same whatever the number of threads.
+//!
+//! Memory: a few buffers of the image's size per level (working pixels of 6 floats, the NNF,
+//! distances, weights, masks); about 500 MB peak for a 2560×1600 image with a 60 % hole.
 
 use super::common::{self, KeyedRng, Plan};
 use super::harmonic::membrane_fill;
@@ -57,6 +75,11 @@ const KEEP_SOURCE_FRACTION: f32 = 0.5;
 /// An EM loop on a level stops early when the mean absolute change of the synthesised pixels
 /// falls below this.
 const CONVERGED_CHANGE: f32 = 2e-4;
+/// On levels finer than the coarsest the random search starts at this fraction of the level's
+/// larger side.
+const FINE_SEARCH_DIVISOR: usize = 8;
+/// Default locality prior.
+const LOCALITY: f32 = 0.05;
 /// Default weight of the texture features.
 const TEXTURE_WEIGHT: f32 = 3.0;
 /// Wexler's spatial weight base γ: a patch one pixel deeper in the hole weighs 1/γ as much.
@@ -66,12 +89,15 @@ const CONFIDENCE_DECAY: f32 = 1.3;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum InpaintPreset {
-    /// Fastest: small patches, one pass per EM step, no EM at full resolution.
+    /// Fastest: 5×5 patches, one PatchMatch pass per EM step, no EM at full resolution (the
+    /// full-resolution fill is the coarser field voted once).
     Draft,
-    /// Interactive preview: the default.
+    /// Interactive preview, the default: 7×7 patches, two passes per EM step, one EM
+    /// iteration at full resolution.
     #[default]
     Preview,
-    /// Best quality: more EM iterations on every level, including full resolution.
+    /// Best quality: 7×7 patches, three passes per EM step, twice the preview's EM iterations on
+    /// the coarse levels and three at full resolution.
     Final,
 }
 
@@ -104,6 +130,8 @@ impl InpaintPreset {
                 guide_weight: 1.0,
                 seamless: true,
                 texture_weight: TEXTURE_WEIGHT,
+                onion_peel: true,
+                locality: LOCALITY,
             },
             InpaintPreset::Preview => PatchMatchParams {
                 patch_size: 7,
@@ -114,6 +142,8 @@ impl InpaintPreset {
                 guide_weight: 1.0,
                 seamless: true,
                 texture_weight: TEXTURE_WEIGHT,
+                onion_peel: true,
+                locality: LOCALITY,
             },
             InpaintPreset::Final => PatchMatchParams {
                 patch_size: 7,
@@ -124,6 +154,8 @@ impl InpaintPreset {
                 guide_weight: 1.0,
                 seamless: true,
                 texture_weight: TEXTURE_WEIGHT,
+                onion_peel: true,
+                locality: LOCALITY,
             },
         }
     }
@@ -176,6 +208,13 @@ pub struct PatchMatchParams {
     /// Weight of the texture features (local mean luma gradients) in the patch distance;
     /// 0 = colour and guide only.
     pub texture_weight: f32,
+    /// Start the coarsest level by onion peeling (fill from the border inwards, each pixel
+    /// copied from its best match on the known part of its patch) instead of the membrane.
+    pub onion_peel: bool,
+    /// Locality prior: the extra matching cost, per patch pixel, of a source a full image
+    /// diagonal away (growing with the squared offset); prefers nearby texture among near-equal
+    /// matches. 0 = none.
+    pub locality: f32,
 }
 
 impl Default for PatchMatchParams {
@@ -439,10 +478,15 @@ struct Problem {
     valid: Vec<bool>,
     /// The valid centres as a list (for global random candidates).
     valid_list: Vec<u32>,
+    /// Locality prior per squared pixel of offset (see [`Problem::cost`]).
+    locality_per_px2: f32,
+    /// Largest random-search radius: the whole level on the coarsest, a fraction of it on
+    /// finer levels (whose field comes from the coarser search already).
+    search_radius: usize,
 }
 
 impl Problem {
-    fn new(level: &Level, r: usize) -> Problem {
+    fn new(level: &Level, r: usize, coarsest: bool, locality: f32) -> Problem {
         let (w, h) = (level.w, level.h);
         let near_hole = common::dilate(&level.hole, w, h, 2 * r);
         let domain_list: Vec<u32> = (0..w * h)
@@ -464,10 +508,24 @@ impl Problem {
             .collect();
         let valid = common::erode_inside(&level.source, w, h, r);
         let valid_list: Vec<u32> = (0..w * h).filter(|&i| valid[i]).map(|i| i as u32).collect();
+        let search_radius = if coarsest {
+            w.max(h)
+        } else {
+            (w.max(h) / FINE_SEARCH_DIVISOR).max(4 * r).max(1)
+        };
+        let side = (2 * r + 1) as f32;
+        let diagonal2 = (w * w + h * h).max(1) as f32;
+        let locality_per_px2 = if locality.is_finite() && locality > 0.0 {
+            locality * side * side / diagonal2
+        } else {
+            0.0
+        };
         Problem {
             w,
             h,
             r,
+            locality_per_px2,
+            search_radius,
             domain_list,
             target,
             confidence,
@@ -510,6 +568,53 @@ impl Problem {
         sum
     }
 
+    /// The matching cost of source centre `s` for target centre `t`: the patch distance plus
+    /// the locality prior, a cost growing with the squared offset (a full-diagonal jump costs
+    /// `locality` per patch pixel), which prefers nearby texture among near-equal matches.
+    #[inline]
+    fn cost(&self, pixels: &[Px], t: usize, s: usize, bound: f32) -> f32 {
+        let prior = self.prior(t, s);
+        prior + self.ssd(pixels, t, s, bound - prior)
+    }
+
+    #[inline]
+    fn prior(&self, t: usize, s: usize) -> f32 {
+        if self.locality_per_px2 == 0.0 {
+            return 0.0;
+        }
+        let w = self.w;
+        let dx = (t % w) as f32 - (s % w) as f32;
+        let dy = (t / w) as f32 - (s / w) as f32;
+        self.locality_per_px2 * (dx * dx + dy * dy)
+    }
+
+    /// Like [`Problem::ssd`] but over the pixels of the target patch that are `known` only.
+    #[inline]
+    fn masked_ssd(&self, pixels: &[Px], known: &[bool], t: usize, s: usize, bound: f32) -> f32 {
+        let (w, r) = (self.w, self.r);
+        let side = 2 * r + 1;
+        let t0 = t - r * w - r;
+        let s0 = s - r * w - r;
+        let mut sum = 0.0f32;
+        for row in 0..side {
+            for col in 0..side {
+                let (ti, si) = (t0 + row * w + col, s0 + row * w + col);
+                if !known[ti] {
+                    continue;
+                }
+                let (a, b) = (&pixels[ti], &pixels[si]);
+                for c in 0..CH {
+                    let d = a[c] - b[c];
+                    sum += d * d;
+                }
+            }
+            if sum >= bound {
+                return sum;
+            }
+        }
+        sum
+    }
+
     fn patch_pixels(&self) -> f32 {
         let side = 2 * self.r + 1;
         (side * side) as f32
@@ -541,7 +646,7 @@ fn complete(
     let pm = params.pm_iterations.max(1);
     let em_at = |l: usize| -> usize {
         if n_levels <= 1 {
-            return params.em_iterations_coarse.max(params.em_iterations_fine);
+            return params.em_iterations_fine.max(2);
         }
         let (c, f) = (
             params.em_iterations_coarse as f32,
@@ -565,23 +670,32 @@ fn complete(
             break;
         };
         progress.check()?;
-        let problem = Problem::new(&level, r);
+        let problem = Problem::new(&level, r, coarser.is_none(), params.locality);
         let level_progress = progress.sub(done / total, (done + work[l]) / total);
         let stage = format!("inpainting: level {} of {n_levels}", n_levels - l);
         let key = |pass: usize| (l as u64, pass as u64);
         let mut field = match coarser.take() {
             None => {
-                // Coarsest: membrane fill of everything that is not a source, random field.
+                // Coarsest: membrane fill of everything that is not a source (the fallback),
+                // then onion peeling of the domain; the field starts from the peeled matches.
                 let unknown: Vec<bool> = level.source.iter().map(|&s| !s).collect();
                 membrane_fill(&mut level.pixels, level.w, level.h, &unknown, progress)?;
+                let peeled = if params.onion_peel {
+                    onion_peel(&problem, &mut level, seed, l as u64, progress)?
+                } else {
+                    vec![NONE; level.w * level.h]
+                };
                 let nnf: Vec<u32> = (0..level.w * level.h)
                     .map(|i| {
-                        if problem.target[i] {
-                            let mut rng = KeyedRng::new(seed, l as u64, u64::MAX, i as u64);
-                            problem.random_source(&mut rng)
-                        } else {
-                            NONE
+                        if !problem.target[i] {
+                            return NONE;
                         }
+                        let m = peeled[i];
+                        if m != NONE && problem.valid[m as usize] {
+                            return m;
+                        }
+                        let mut rng = KeyedRng::new(seed, l as u64, u64::MAX, i as u64);
+                        problem.random_source(&mut rng)
                     })
                     .collect();
                 let dist = vec![f32::INFINITY; nnf.len()];
@@ -635,6 +749,141 @@ fn complete(
         Some((level, _)) => Ok(level.pixels),
         None => Err(Error::invalid("inpainting produced no level")),
     }
+}
+
+/// Onion-peel initialisation of the coarsest level (Newson et al. 2017): the domain is filled
+/// ring by ring from its border inwards. Each ring pixel looks for the source patch closest to
+/// its own patch over the pixels already known (sources and earlier rings; propagation from
+/// filled neighbours, random sources, random search), and copies the pixel that match puts
+/// there. Returns, per pixel, the source patch centre its match suggests for a patch centred
+/// there (`NONE` where it was not peeled).
+fn onion_peel(
+    problem: &Problem,
+    level: &mut Level,
+    seed: u64,
+    level_key: u64,
+    progress: &Progress,
+) -> Result<Vec<u32>> {
+    const RANDOM_SOURCES: usize = 24;
+    let (w, h, r) = (problem.w, problem.h, problem.r);
+    let n = w * h;
+    let mut known = level.source.clone();
+    // Source pixel copied onto each peeled pixel.
+    let mut copied = vec![NONE; n];
+    let mut remaining: Vec<u32> = problem.domain_list.clone();
+    let max_radius = w.max(h);
+    let mut ring_index = 0u64;
+    while !remaining.is_empty() {
+        progress.check()?;
+        let (front, rest): (Vec<u32>, Vec<u32>) = remaining.iter().partition(|&&q| {
+            let (x, y) = (q as usize % w, q as usize / w);
+            (y.saturating_sub(1)..(y + 2).min(h))
+                .any(|yy| (x.saturating_sub(1)..(x + 2).min(w)).any(|xx| known[yy * w + xx]))
+        });
+        if front.is_empty() {
+            // Cut off from every source pixel: keep the membrane values.
+            break;
+        }
+        let pixels = &level.pixels;
+        let known_ref = &known;
+        let copied_ref = &copied;
+        let results: Vec<(u32, u32)> = front
+            .par_iter()
+            .with_min_len(64)
+            .map(|&q| {
+                let q = q as usize;
+                let (qx, qy) = (q % w, q / w);
+                let (cx, cy) = (qx.clamp(r, w - 1 - r), qy.clamp(r, h - 1 - r));
+                let c = cy * w + cx;
+                // The source centre that copies pixel `m` onto `q`.
+                let centre_for = |m: usize| -> Option<usize> {
+                    let (mx, my) = ((m % w) as isize, (m / w) as isize);
+                    let sx = mx - qx as isize + cx as isize;
+                    let sy = my - qy as isize + cy as isize;
+                    if sx < 0 || sy < 0 || sx >= w as isize || sy >= h as isize {
+                        return None;
+                    }
+                    let s = sy as usize * w + sx as usize;
+                    problem.valid[s].then_some(s)
+                };
+                let mut best = NONE as usize;
+                let mut best_d = f32::INFINITY;
+                let consider = |s: usize, best: &mut usize, best_d: &mut f32| {
+                    if s == *best || !problem.valid[s] {
+                        return;
+                    }
+                    let d = problem.masked_ssd(pixels, known_ref, c, s, *best_d);
+                    if d < *best_d {
+                        *best_d = d;
+                        *best = s;
+                    }
+                };
+                // Propagation: continue what the known neighbours copied.
+                for yy in qy.saturating_sub(1)..(qy + 2).min(h) {
+                    for xx in qx.saturating_sub(1)..(qx + 2).min(w) {
+                        let j = yy * w + xx;
+                        if copied_ref[j] == NONE {
+                            continue;
+                        }
+                        let m = copied_ref[j] as usize;
+                        // Neighbour j shows source pixel m; q would show m + (q − j).
+                        let mx = (m % w) as isize + qx as isize - xx as isize;
+                        let my = (m / w) as isize + qy as isize - yy as isize;
+                        if mx < 0 || my < 0 || mx >= w as isize || my >= h as isize {
+                            continue;
+                        }
+                        if let Some(s) = centre_for(my as usize * w + mx as usize) {
+                            consider(s, &mut best, &mut best_d);
+                        }
+                    }
+                }
+                let mut rng = KeyedRng::new(seed ^ 0x0710, level_key, ring_index, q as u64);
+                for _ in 0..RANDOM_SOURCES {
+                    consider(
+                        problem.random_source(&mut rng) as usize,
+                        &mut best,
+                        &mut best_d,
+                    );
+                }
+                let mut radius = max_radius;
+                while radius >= 1 && best != NONE as usize {
+                    let (sx, sy) = ((best % w) as isize, (best / w) as isize);
+                    let tx = (sx + rng.symmetric(radius)).clamp(r as isize, (w - 1 - r) as isize);
+                    let ty = (sy + rng.symmetric(radius)).clamp(r as isize, (h - 1 - r) as isize);
+                    consider(ty as usize * w + tx as usize, &mut best, &mut best_d);
+                    radius /= 2;
+                }
+                if best == NONE as usize {
+                    return (q as u32, NONE);
+                }
+                // The pixel of the matched patch that lands on q.
+                let m = (best + qy * w + qx) - c;
+                (q as u32, m as u32)
+            })
+            .collect();
+        for &(q, m) in &results {
+            let q = q as usize;
+            if m != NONE {
+                level.pixels[q] = level.pixels[m as usize];
+                copied[q] = m;
+            }
+            known[q] = true;
+        }
+        remaining = rest;
+        ring_index += 1;
+    }
+    // Per pixel: the source centre for a patch centred there, from what it copied.
+    let centres = (0..n)
+        .map(|p| {
+            let m = copied[p];
+            if m == NONE {
+                return NONE;
+            }
+            let s = m as usize;
+            if problem.valid[s] { s as u32 } else { NONE }
+        })
+        .collect();
+    Ok(centres)
 }
 
 /// Initial field and pixels on a finer level from the coarser solution: the synthesised pixels
@@ -708,7 +957,7 @@ fn refresh_distances(problem: &Problem, pixels: &[Px], field: &mut Field) {
             let base = b * BAND_ROWS * w;
             for (k, (d, &s)) in dist.iter_mut().zip(nnf).enumerate() {
                 if s != NONE {
-                    *d = problem.ssd(pixels, base + k, s as usize, f32::INFINITY);
+                    *d = problem.cost(pixels, base + k, s as usize, f32::INFINITY);
                 }
             }
         });
@@ -730,7 +979,7 @@ fn patchmatch_pass(
     let (w, h, r) = (problem.w, problem.h, problem.r);
     let before_nnf = field.nnf.clone();
     let n = w * h;
-    let max_radius = w.max(h);
+    let max_radius = problem.search_radius;
     let step: isize = if forward { -1 } else { 1 };
     field
         .nnf
@@ -763,7 +1012,7 @@ fn patchmatch_pass(
                         if cand == *best || !problem.valid[cand] {
                             return;
                         }
-                        let d = problem.ssd(pixels, i, cand, *best_d);
+                        let d = problem.cost(pixels, i, cand, *best_d);
                         if d < *best_d {
                             *best_d = d;
                             *best = cand;
@@ -951,27 +1200,15 @@ fn poisson_correct(
         queue.push_back(i);
     }
     while let Some(i) = queue.pop_front() {
-        let (x, y) = (i % w, i / w);
         let m = correction[i];
-        let mut visit = |j: usize| {
+        let visit = |j: usize| {
             if !known[j] && level.source[j] {
                 known[j] = true;
                 correction[j] = m;
                 queue.push_back(j);
             }
         };
-        if x > 0 {
-            visit(i - 1);
-        }
-        if x + 1 < w {
-            visit(i + 1);
-        }
-        if y > 0 {
-            visit(i - w);
-        }
-        if y + 1 < h {
-            visit(i + w);
-        }
+        crate::raster::for_each_neighbour4(i, w, h, visit);
     }
     let unknown: Vec<bool> = known.iter().map(|&k| !k).collect();
     membrane_fill(&mut correction, w, h, &unknown, progress)?;

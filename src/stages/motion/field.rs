@@ -372,25 +372,13 @@ impl Level {
             stack.push(start);
             while let Some(i) = stack.pop() {
                 has_fixed |= self.fixed[i].is_some();
-                let (x, y) = (i % w, i / w);
-                let mut visit = |j: usize| {
+                let visit = |j: usize| {
                     if self.support[j] && component[j] == u32::MAX {
                         component[j] = id;
                         stack.push(j);
                     }
                 };
-                if x > 0 {
-                    visit(i - 1);
-                }
-                if x + 1 < w {
-                    visit(i + 1);
-                }
-                if y > 0 {
-                    visit(i - w);
-                }
-                if y + 1 < h {
-                    visit(i + w);
-                }
+                crate::raster::for_each_neighbour4(i, w, h, visit);
             }
             constrained.push(has_fixed);
         }

@@ -1,0 +1,204 @@
+//! The stage graph end to end on a small real photo: caching, outpainting from the path,
+//! layering, motion loops.
+
+use makeit4d::geometry::View;
+use makeit4d::path::{CameraPath, Preset, PresetKind};
+use makeit4d::progress::Progress;
+use makeit4d::project::Project;
+use makeit4d::render::FrameRenderer;
+use makeit4d::render::cpu::CpuRenderer;
+use makeit4d::scene::{Scene, SceneBuilder, Stage};
+use makeit4d::stages::inpaint::InpaintPreset;
+use makeit4d::stages::layers::LayerCount;
+use makeit4d::stages::motion::{Arrow, MotionRegion, MotionSpec, Stroke};
+use std::path::PathBuf;
+
+fn photo(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+fn project(name: &str, preset: PresetKind, frames: usize) -> Project {
+    let mut p = Project::new(photo(name));
+    p.output.frames = frames;
+    p.camera.path = CameraPath::Preset(Preset::new(preset));
+    p.inpaint.preset = InpaintPreset::Draft;
+    p
+}
+
+fn views(p: &Project, scene: &Scene) -> Vec<View> {
+    makeit4d::export::output_views(p, scene).expect("views")
+}
+
+#[test]
+fn moving_a_threshold_reruns_layers_onward_only() {
+    let mut p = project("evening_glow_320.jpg", PresetKind::FlyIn, 10);
+    p.layers.params.mode = LayerCount::Count(3);
+    let mut builder = SceneBuilder::new();
+    let first = builder.build(&p, &Progress::none()).expect("build");
+    let thresholds = first.layers.thresholds.clone();
+    assert!(thresholds.len() >= 3, "{thresholds:?}");
+    for stage in Stage::ALL {
+        assert_eq!(builder.runs().get(&stage), Some(&1), "{stage:?}");
+    }
+    // Same project again: nothing runs.
+    builder.build(&p, &Progress::none()).expect("rebuild");
+    assert!(builder.runs().values().all(|&n| n == 1));
+    // Drag the first interior threshold a little.
+    let mut overrides = vec![None; thresholds.len()];
+    overrides[1] = Some(thresholds[1] * 1.05);
+    p.layers.params.overrides = overrides;
+    let second = builder
+        .build(&p, &Progress::none())
+        .expect("threshold edit");
+    let runs = builder.runs();
+    for stage in [Stage::Load, Stage::Depth, Stage::Canvas] {
+        assert_eq!(runs[&stage], 1, "{stage:?} re-ran");
+    }
+    for stage in [Stage::Layers, Stage::Inpaint, Stage::Cloud] {
+        assert_eq!(runs[&stage], 2, "{stage:?} did not re-run");
+    }
+    assert_ne!(second.layers.thresholds, thresholds);
+}
+
+#[test]
+fn still_camera_needs_no_canvas_and_fly_out_needs_one() {
+    let mut builder = SceneBuilder::new();
+    let still = project("evening_glow_320.jpg", PresetKind::Still, 5);
+    let scene = builder.build(&still, &Progress::none()).expect("still");
+    assert_eq!(scene.canvas.image.size(), scene.input.rgb.size());
+    assert!(scene.canvas.synthesised.data().iter().all(|&s| !s));
+
+    let fly_out = project("evening_glow_320.jpg", PresetKind::FlyOut, 8);
+    let scene = SceneBuilder::new()
+        .build(&fly_out, &Progress::none())
+        .expect("fly-out");
+    let (cw, ch) = scene.canvas.image.size();
+    let (w, h) = scene.input.rgb.size();
+    assert!(cw > w && ch > h, "canvas {cw}×{ch} for a {w}×{h} photo");
+    // Every frame of the path is covered: almost no holes, and none along the border where
+    // an un-outpainted fly-out would show empty space.
+    let mut renderer = CpuRenderer::new(fly_out.render);
+    renderer.set_cloud(scene.cloud.clone()).unwrap();
+    let vs = views(&fly_out, &scene);
+    let last = renderer.render(vs.last().unwrap(), w, h, None).unwrap();
+    let border_holes = (0..w)
+        .flat_map(|x| [(x, 0), (x, h - 1)])
+        .chain((0..h).flat_map(|y| [(0, y), (w - 1, y)]))
+        .filter(|&(x, y)| last.coverage.at(x, y) < 0.5)
+        .count();
+    assert_eq!(border_holes, 0, "border holes in the last fly-out frame");
+
+    let mut no_canvas = fly_out.clone();
+    no_canvas.canvas.enabled = false;
+    let bare = SceneBuilder::new()
+        .build(&no_canvas, &Progress::none())
+        .expect("no canvas");
+    let mut renderer = CpuRenderer::new(no_canvas.render);
+    renderer.set_cloud(bare.cloud.clone()).unwrap();
+    let bare_last = renderer.render(vs.last().unwrap(), w, h, None).unwrap();
+    assert!(
+        bare_last.hole_fraction() > last.hole_fraction() + 0.01,
+        "outpainting did not reduce holes: {} vs {}",
+        bare_last.hole_fraction(),
+        last.hole_fraction()
+    );
+}
+
+fn sky_motion(loop_frames: u32) -> MotionSpec {
+    // Paint the top third as one region and push it to the right.
+    let stroke = Stroke {
+        points: (0..=16).map(|i| [i as f32 * 20.0, 30.0]).collect(),
+        radius: 30.0,
+        hardness: 1.0,
+        erase: false,
+    };
+    MotionSpec {
+        regions: vec![MotionRegion {
+            name: "sky".into(),
+            strokes: vec![stroke],
+            arrows: vec![Arrow {
+                start: [100.0, 30.0],
+                end: [140.0, 30.0],
+                speed: 1.5,
+            }],
+        }],
+        loop_frames,
+        ..MotionSpec::default()
+    }
+}
+
+#[test]
+fn motion_loops_and_leaves_unpainted_pixels_alone() {
+    let n = 12usize;
+    let mut p = project("evening_glow_320.jpg", PresetKind::Still, 2 * n + 1);
+    p.layers.enabled = false;
+    let still_scene = SceneBuilder::new()
+        .build(&p, &Progress::none())
+        .expect("still");
+    p.motion = sky_motion(n as u32);
+    let scene = SceneBuilder::new()
+        .build(&p, &Progress::none())
+        .expect("moving");
+    let motion = scene.motion.as_ref().expect("motion prepared");
+    let (w, h) = scene.input.rgb.size();
+    let vs = views(&p, &scene);
+    let mut renderer = CpuRenderer::new(p.render);
+    renderer.set_cloud(scene.cloud.clone()).unwrap();
+    let f0 = scene.render_frame(&mut renderer, &vs[0], 0, w, h).unwrap();
+    let mid = scene
+        .render_frame(&mut renderer, &vs[n / 2], n / 2, w, h)
+        .unwrap();
+    let fnn = scene.render_frame(&mut renderer, &vs[n], n, w, h).unwrap();
+    // Frame N equals frame 0 (the loop closes).
+    assert!(
+        psnr(&f0.colour, &fnn.colour) >= 45.0,
+        "loop closure PSNR {}",
+        psnr(&f0.colour, &fnn.colour)
+    );
+    assert_ne!(f0.colour, mid.colour, "nothing moved");
+    // Pixels far outside the painted mask never change.
+    let mask = &motion.field.mask;
+    let mut checked = 0;
+    for y in 0..h {
+        for x in 0..w {
+            let far_from_mask = (y as isize - 30).abs() > 80;
+            if far_from_mask && mask.at(x, y) == 0.0 {
+                assert_eq!(
+                    mid.colour.at(x, y),
+                    f0.colour.at(x, y),
+                    "pixel {x},{y} moved"
+                );
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > w * h / 4);
+
+    // Zero speed: bit-identical to the static render.
+    let mut zero = p.clone();
+    zero.motion.speed = 0.0;
+    let zero_scene = SceneBuilder::new()
+        .build(&zero, &Progress::none())
+        .expect("zero");
+    let mut r2 = CpuRenderer::new(p.render);
+    r2.set_cloud(zero_scene.cloud.clone()).unwrap();
+    let z = zero_scene.render_frame(&mut r2, &vs[3], 3, w, h).unwrap();
+    let mut r3 = CpuRenderer::new(p.render);
+    r3.set_cloud(still_scene.cloud.clone()).unwrap();
+    let s = r3.render(&vs[3], w, h, None).unwrap();
+    assert_eq!(z, s);
+}
+
+fn psnr(a: &makeit4d::raster::RgbRaster, b: &makeit4d::raster::RgbRaster) -> f64 {
+    let mut se = 0.0f64;
+    for (p, q) in a.data().iter().zip(b.data()) {
+        for c in 0..3 {
+            let d = (p[c] - q[c]) as f64;
+            se += d * d;
+        }
+    }
+    let mse = se / (3 * a.len()) as f64;
+    10.0 * (1.0 / mse.max(1e-20)).log10()
+}
