@@ -316,7 +316,10 @@ fn main() -> ExitCode {
             }
         });
     }
-    let result = match cli.command.unwrap_or(Command::Edit(EditArgs { path: None })) {
+    let result = match cli
+        .command
+        .unwrap_or(Command::Edit(EditArgs { path: None }))
+    {
         Command::Edit(args) => makeit4d::app::run(args.path),
         Command::Render(args) => render(*args, cancel),
         Command::Depth(args) => depth(args, cancel),

@@ -52,7 +52,9 @@ fn harness(open: PathBuf) -> Option<Harness<'static, EditorApp>> {
     match built {
         Ok(h) => Some(h),
         Err(_) if std::env::var_os("CI").is_some() => {
-            panic!("CI is set but the wgpu harness could not start (no adapter? install mesa-vulkan-drivers)")
+            panic!(
+                "CI is set but the wgpu harness could not start (no adapter? install mesa-vulkan-drivers)"
+            )
         }
         Err(_) => {
             eprintln!("skipping: no wgpu adapter (install mesa-vulkan-drivers for lavapipe)");
@@ -125,7 +127,14 @@ fn editor_end_to_end() {
     let target = egui::pos2(right.min(1280.0 - 340.0 - 20.0), handles[0].y);
     drag(&mut h, handles[0], target);
     assert!(
-        h.state().project().unwrap().layers.params.overrides.iter().any(Option::is_some),
+        h.state()
+            .project()
+            .unwrap()
+            .layers
+            .params
+            .overrides
+            .iter()
+            .any(Option::is_some),
         "the drag set an override"
     );
     wait_idle(&mut h, limit);
@@ -146,7 +155,11 @@ fn editor_end_to_end() {
     h.get_by_label("5 Motion").click();
     h.step();
     h.step();
-    let view = h.state().probe().view.expect("the motion view draws the canvas");
+    let view = h
+        .state()
+        .probe()
+        .view
+        .expect("the motion view draws the canvas");
     let a = view.rect.lerp_inside(egui::vec2(0.3, 0.2));
     let b = view.rect.lerp_inside(egui::vec2(0.7, 0.25));
     drag(&mut h, a, b);
@@ -170,7 +183,10 @@ fn editor_end_to_end() {
     h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
     h.step();
     let p = h.state().project().unwrap();
-    assert!(matches!(p.camera.path, CameraPath::Preset(_)), "undo removed the key");
+    assert!(
+        matches!(p.camera.path, CameraPath::Preset(_)),
+        "undo removed the key"
+    );
     assert_eq!(p.motion.regions.len(), 1, "undo went back one edit only");
     wait_idle(&mut h, limit);
 
@@ -180,7 +196,7 @@ fn editor_end_to_end() {
     h.step();
     h.state_mut().set_export_folder(&out);
     h.step();
-    h.get_by_label("⏺ Export").click();
+    h.get_by_label("Export").click();
     h.step();
     let start = Instant::now();
     while h.state().last_export().is_none() {

@@ -66,18 +66,31 @@ fn regenerate_screenshots() {
     let start = Instant::now();
     loop {
         h.step();
-        if let Some(accept) = h.query_by_label("✔ Accept") {
+        if let Some(accept) = h.query_by_label("Accept") {
             accept.click();
             break;
         }
-        let none = h.state().notices().iter().any(|n| n.contains("no sky or water"));
-        assert!(!none && start.elapsed() < Duration::from_secs(300), "no suggestion");
+        let none = h
+            .state()
+            .notices()
+            .iter()
+            .any(|n| n.contains("no sky or water"));
+        assert!(
+            !none && start.elapsed() < Duration::from_secs(300),
+            "no suggestion"
+        );
         std::thread::sleep(Duration::from_millis(25));
     }
     wait(&mut h, "the motion build", EditorApp::is_idle);
 
     let tabs = [
-        "1 Input", "2 Canvas", "3 Depth", "4 Layers", "5 Motion", "6 Camera", "7 Preview",
+        "1 Input",
+        "2 Canvas",
+        "3 Depth",
+        "4 Layers",
+        "5 Motion",
+        "6 Camera",
+        "7 Preview",
         "8 Export",
     ];
     h.state_mut().seek(30);
@@ -85,14 +98,19 @@ fn regenerate_screenshots() {
         h.get_by_label(label).click();
         h.remove_cursor();
         if *label == "7 Preview" || *label == "6 Camera" {
-            wait(&mut h, "the preview", |a| a.hole_fractions().contains_key(&30));
+            wait(&mut h, "the preview", |a| {
+                a.hole_fractions().contains_key(&30)
+            });
         } else {
             for _ in 0..6 {
                 h.step();
             }
         }
         let image = h.render().expect("render the window");
-        let name = label.split_once(' ').map_or(*label, |(_, n)| n).to_lowercase();
+        let name = label
+            .split_once(' ')
+            .map_or(*label, |(_, n)| n)
+            .to_lowercase();
         let path = out.join(format!("{:02}-{name}.png", i + 1));
         image.save(&path).unwrap();
         eprintln!("wrote {}", path.display());

@@ -210,9 +210,10 @@ impl EditorApp {
         .stderr(std::process::Stdio::null())
         .status()
         .is_ok_and(|s| s.success());
-        let renderer_name = preview_worker
-            .as_ref()
-            .map_or_else(|| "no preview".to_string(), |p| p.renderer_name().to_string());
+        let renderer_name = preview_worker.as_ref().map_or_else(
+            || "no preview".to_string(),
+            |p| p.renderer_name().to_string(),
+        );
         Self {
             doc: None,
             history: History::default(),
@@ -531,7 +532,9 @@ impl EditorApp {
     }
 
     fn poll_dialog(&mut self) {
-        let Some((kind, rx)) = &self.dialog else { return };
+        let Some((kind, rx)) = &self.dialog else {
+            return;
+        };
         let kind = *kind;
         let answer = match rx.try_recv() {
             Ok(a) => a,
@@ -620,7 +623,9 @@ impl EditorApp {
     // ---- Per-frame work ----
 
     fn handle_events(&mut self) {
-        let Some(worker) = &self.scene_worker else { return };
+        let Some(worker) = &self.scene_worker else {
+            return;
+        };
         let mut events = Vec::new();
         while let Some(e) = worker.try_event() {
             events.push(e);
@@ -637,11 +642,10 @@ impl EditorApp {
                     if let Some(s) = &latest
                         && s.generation == generation
                     {
-                        let scene_changed = self
-                            .snapshot
-                            .as_ref()
-                            .is_none_or(|old| !Arc::ptr_eq(&old.scene.cloud, &s.scene.cloud)
-                                || old.project.motion != s.project.motion);
+                        let scene_changed = self.snapshot.as_ref().is_none_or(|old| {
+                            !Arc::ptr_eq(&old.scene.cloud, &s.scene.cloud)
+                                || old.project.motion != s.project.motion
+                        });
                         if scene_changed {
                             self.timeline.hole_fractions.clear();
                         }
@@ -649,16 +653,17 @@ impl EditorApp {
                         self.preview_key = None;
                         self.camera_key = None;
                     }
-                    if self.build_error.as_ref().is_some_and(|(g, _)| *g <= generation) {
+                    if self
+                        .build_error
+                        .as_ref()
+                        .is_some_and(|(g, _)| *g <= generation)
+                    {
                         self.build_error = None;
                     }
                     self.last_build_stages = stages_run.clone();
                     if !stages_run.is_empty() {
                         let names: Vec<&str> = stages_run.iter().map(|s| s.name()).collect();
-                        self.notify(format!(
-                            "rebuilt {} in {seconds:.1} s",
-                            names.join(", ")
-                        ));
+                        self.notify(format!("rebuilt {} in {seconds:.1} s", names.join(", ")));
                     }
                 }
                 Event::BuildFailed {
@@ -672,7 +677,9 @@ impl EditorApp {
                     if spec.regions.is_empty() {
                         self.notify("no sky or water found to suggest motion for");
                     } else {
-                        self.notify("motion suggested (magenta): accept or reject it in the inspector");
+                        self.notify(
+                            "motion suggested (magenta): accept or reject it in the inspector",
+                        );
                     }
                     let m = PanelMessage::Suggestion(spec);
                     for p in &mut self.panels {
@@ -726,8 +733,15 @@ impl EditorApp {
         let p = &doc.project;
         let scale = snapshot.scene.scale;
         let (iw, ih) = snapshot.scene.input.rgb.size();
-        let key = serde_json::to_string(&(&p.camera, &p.output, scale.median_depth, scale.near_depth, iw, ih))
-            .unwrap_or_default();
+        let key = serde_json::to_string(&(
+            &p.camera,
+            &p.output,
+            scale.median_depth,
+            scale.near_depth,
+            iw,
+            ih,
+        ))
+        .unwrap_or_default();
         if self.camera_key.as_ref() == Some(&key) {
             return;
         }
@@ -766,7 +780,9 @@ impl EditorApp {
                     at: Instant::now(),
                 });
             } else {
-                let texture = self.textures.get(ctx, "preview", frame.id, || frame.image.clone());
+                let texture = self
+                    .textures
+                    .get(ctx, "preview", frame.id, || frame.image.clone());
                 self.preview.texture = Some(texture.id());
                 self.preview.size = frame.image.size;
                 self.preview.frame_index = frame.frame_index;
@@ -790,12 +806,7 @@ impl EditorApp {
             return;
         }
         let side = self.preview.max_side.max(32);
-        let key = (
-            snapshot.generation,
-            frame,
-            format!("{:?}", view),
-            side,
-        );
+        let key = (snapshot.generation, frame, format!("{:?}", view), side);
         if self.preview_key.as_ref() == Some(&key) {
             return;
         }
@@ -886,8 +897,14 @@ impl EditorApp {
     }
 
     fn handle_dropped_files(&mut self, ctx: &egui::Context) {
-        let dropped: Vec<PathBuf> =
-            ctx.input(|i| i.raw.dropped_files.iter().filter_map(|f| f.path.clone()).collect());
+        let dropped: Vec<PathBuf> = ctx.input(|i| {
+            i.raw
+                .dropped_files
+                .iter()
+                .map(|f| f.path().to_path_buf())
+                .filter(|p| !p.as_os_str().is_empty())
+                .collect()
+        });
         if let Some(path) = dropped.first() {
             self.open(path);
         }
@@ -1005,7 +1022,11 @@ impl EditorApp {
                     .file_name()
                     .map(|n| n.to_string_lossy().into_owned())
                     .unwrap_or_default();
-                let dirty = if doc.generation != doc.saved_generation { " •" } else { "" };
+                let dirty = if doc.generation != doc.saved_generation {
+                    " (modified)"
+                } else {
+                    ""
+                };
                 ui.label(format!("{name}{dirty}"));
             }
         });
@@ -1089,7 +1110,7 @@ impl EditorApp {
                 .show(ui, |ui| {
                     ui.horizontal(|ui| {
                         ui.colored_label(text, &n.text);
-                        if ui.small_button("✖").clicked() {
+                        if ui.small_button("x").clicked() {
                             dismiss = Some(i);
                         }
                     });
@@ -1107,9 +1128,12 @@ impl EditorApp {
         ui.vertical_centered(|ui| {
             ui.add_space(ui.available_height() * 0.2);
             ui.heading("makeit4d");
-            ui.label("One photo → a consistent, living fly-through video.");
+            ui.label("One photo to a consistent, living fly-through video.");
             ui.add_space(12.0);
-            if ui.button(RichText::new("Open a photo or project…").size(18.0)).clicked() {
+            if ui
+                .button(RichText::new("Open a photo or project…").size(18.0))
+                .clicked()
+            {
                 self.start_dialog(DialogKind::Open);
             }
             ui.label(RichText::new("or drop a file on the window (Ctrl+O)").weak());
@@ -1139,7 +1163,10 @@ impl eframe::App for EditorApp {
         self.poll_dialog();
         self.handle_dropped_files(ctx);
         let frames = self.doc.as_ref().map_or(1, |d| d.project.output.frames);
-        let fps = self.doc.as_ref().map_or(25.0, |d| f64::from(d.project.output.fps));
+        let fps = self
+            .doc
+            .as_ref()
+            .map_or(25.0, |d| f64::from(d.project.output.fps));
         let dt = ctx.input(|i| f64::from(i.stable_dt)).min(0.25);
         self.timeline.advance(dt, fps, frames);
         if self.timeline.playing {
@@ -1218,7 +1245,7 @@ impl eframe::App for EditorApp {
             self.handle_request(r);
         }
         // Messages float over the top of the central area.
-        egui::Area::new(egui::Id::new("notices"))
+        egui::Area::new(egui::Id::unique("notices"))
             .anchor(egui::Align2::CENTER_TOP, egui::vec2(0.0, 64.0))
             .interactable(true)
             .show(&ctx, |ui| self.notices_ui(ui));

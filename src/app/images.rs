@@ -59,7 +59,12 @@ pub fn masked_rgb(raster: &RgbRaster, keep: &MaskRaster, max_side: usize) -> Col
 }
 
 /// A soft mask in `[0, 1]` as a translucent overlay of `colour` (alpha = mask × `opacity`).
-pub fn mask_overlay(mask: &GrayRaster, colour: Color32, opacity: f32, max_side: usize) -> ColorImage {
+pub fn mask_overlay(
+    mask: &GrayRaster,
+    colour: Color32,
+    opacity: f32,
+    max_side: usize,
+) -> ColorImage {
     let (w, h) = fit_size(mask.width(), mask.height(), max_side);
     let small;
     let src = if (w, h) == mask.size() {

@@ -67,7 +67,7 @@ pub fn timeline_ui(ui: &mut Ui, cx: &mut PanelContext<'_>) {
     let frames = cx.project.output.frames.max(1);
     let fps = cx.project.output.fps;
     ui.horizontal(|ui| {
-        let play = if cx.timeline.playing { "⏸ Pause" } else { "▶ Play" };
+        let play = if cx.timeline.playing { "Pause" } else { "Play" };
         if ui
             .button(play)
             .on_hover_text("Play or pause the preview (Space)")
@@ -75,7 +75,7 @@ pub fn timeline_ui(ui: &mut Ui, cx: &mut PanelContext<'_>) {
         {
             toggle_play(cx, frames);
         }
-        if ui.button("⏮").on_hover_text("First frame").clicked() {
+        if ui.button("|<").on_hover_text("First frame").clicked() {
             cx.timeline.seek(0);
         }
         ui.checkbox(&mut cx.timeline.looping, "Loop");
@@ -87,10 +87,14 @@ pub fn timeline_ui(ui: &mut Ui, cx: &mut PanelContext<'_>) {
         {
             cx.timeline.seek(f);
         }
-        ui.label(format!("/ {}  ·  {:.2} s at {fps} fps", frames - 1, f as f32 / fps));
+        ui.label(format!(
+            "/ {}  ·  {:.2} s at {fps} fps",
+            frames - 1,
+            f as f32 / fps
+        ));
         ui.separator();
         if ui
-            .button("◆ Add key")
+            .button("Add key (I)")
             .on_hover_text("Add a keyframe at this frame with the current preview view (I)")
             .clicked()
         {
@@ -139,12 +143,14 @@ fn keyframe_controls_ui(ui: &mut Ui, cx: &mut PanelContext<'_>) {
             }
         });
     if interpolation != key.interpolation {
-        cx.edit("Key interpolation", |p| set_key(p, i, |k| k.interpolation = interpolation));
+        cx.edit("Key interpolation", |p| {
+            set_key(p, i, |k| k.interpolation = interpolation)
+        });
     }
     if ease != key.ease {
         cx.edit("Key ease", |p| set_key(p, i, |k| k.ease = ease));
     }
-    if ui.button("🗑 Delete key").clicked() {
+    if ui.button("Delete key").clicked() {
         delete_key(cx, i);
     }
 }

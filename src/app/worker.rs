@@ -506,9 +506,10 @@ pub fn display_images(scene: &Scene) -> DisplayImages {
         .layers
         .iter()
         .map(|l| {
-            let covered = crate::raster::Raster::from_fn(l.mask.width(), l.mask.height(), |x, y| {
-                l.covers(x, y)
-            });
+            let covered =
+                crate::raster::Raster::from_fn(l.mask.width(), l.mask.height(), |x, y| {
+                    l.covers(x, y)
+                });
             LayerImages {
                 before: masked_rgb(&canvas.image, &l.mask, DISPLAY_MAX_SIDE / 2),
                 after: masked_rgb(&l.image, &covered, DISPLAY_MAX_SIDE / 2),
@@ -543,8 +544,16 @@ pub fn display_images(scene: &Scene) -> DisplayImages {
             0.25,
             DISPLAY_MAX_SIDE,
         ),
-        depth: rgb_image(&depth_preview(&depth.depth, Some(&depth.sky)), DISPLAY_MAX_SIDE),
-        sky: mask_overlay(&depth.sky, Color32::from_rgb(120, 200, 255), 0.5, DISPLAY_MAX_SIDE),
+        depth: rgb_image(
+            &depth_preview(&depth.depth, Some(&depth.sky)),
+            DISPLAY_MAX_SIDE,
+        ),
+        sky: mask_overlay(
+            &depth.sky,
+            Color32::from_rgb(120, 200, 255),
+            0.5,
+            DISPLAY_MAX_SIDE,
+        ),
         detected_horizon: crate::stages::depth::classical::horizon_from_sky(&depth.sky),
         histogram: disparity_histogram(&canvas.depth, HISTOGRAM_BINS),
         layers,
@@ -657,10 +666,7 @@ pub struct PreviewWorker {
 
 impl PreviewWorker {
     /// Starts the preview thread with `renderer`.
-    pub fn start(
-        ctx: egui::Context,
-        renderer: Box<dyn PreviewRenderer>,
-    ) -> std::io::Result<Self> {
+    pub fn start(ctx: egui::Context, renderer: Box<dyn PreviewRenderer>) -> std::io::Result<Self> {
         let shared = Arc::new(PreviewShared {
             request: Mutex::new(None),
             wake: Condvar::new(),

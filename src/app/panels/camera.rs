@@ -177,7 +177,12 @@ impl StagePanel for CameraPanel {
                     match (cx.snapshot, cx.camera.views.first()) {
                         (Some(s), Some(v0)) => {
                             let (w, _) = cx.camera.output_size;
-                            match path.to_keyframes(&v0.intrinsics, w, &s.scene.scale, cx.project.output.frames) {
+                            match path.to_keyframes(
+                                &v0.intrinsics,
+                                w,
+                                &s.scene.scale,
+                                cx.project.output.frames,
+                            ) {
                                 Ok(k) => cx.edit("Preset to keyframes", |p| {
                                     p.camera.path = CameraPath::Keyframes(k)
                                 }),
@@ -186,9 +191,9 @@ impl StagePanel for CameraPanel {
                                 ))),
                             }
                         }
-                        _ => cx
-                            .requests
-                            .push(Request::Notify("wait for the scene to finish building".into())),
+                        _ => cx.requests.push(Request::Notify(
+                            "wait for the scene to finish building".into(),
+                        )),
                     }
                 }
             }
@@ -213,7 +218,7 @@ impl StagePanel for CameraPanel {
                         let key = k.keys[i];
                         let selected = cx.timeline.selected_key == Some(i);
                         if ui
-                            .selectable_label(selected, format!("◆ {}", key.frame))
+                            .selectable_label(selected, format!("frame {}", key.frame))
                             .clicked()
                         {
                             cx.timeline.selected_key = Some(i);
@@ -235,7 +240,7 @@ impl StagePanel for CameraPanel {
                                     ui.selectable_value(&mut ease, v, v.name());
                                 }
                             });
-                        if ui.small_button("🗑").on_hover_text("Delete key").clicked() {
+                        if ui.small_button("x").on_hover_text("Delete key").clicked() {
                             crate::app::timeline::delete_key(cx, i);
                         }
                         if interpolation != key.interpolation || ease != key.ease {

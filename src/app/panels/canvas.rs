@@ -35,7 +35,8 @@ impl StagePanel for CanvasPanel {
         };
         let Some(snapshot) = cx.snapshot else { return };
         if !self.hide_tint
-            && let Some((tint, _)) = cx.scene_texture(ui.ctx(), "canvas-synth", |s| &s.display.synthesised)
+            && let Some((tint, _)) =
+                cx.scene_texture(ui.ctx(), "canvas-synth", |s| &s.display.synthesised)
         {
             ui.painter().image(
                 tint,
@@ -107,8 +108,7 @@ impl StagePanel for CanvasPanel {
                 l.width, l.height, l.left_pad, l.top_pad
             ));
             ui.label(
-                egui::RichText::new("Yellow: the original frame. Orange tint: synthesised.")
-                    .weak(),
+                egui::RichText::new("Yellow: the original frame. Orange tint: synthesised.").weak(),
             );
         }
     }

@@ -86,21 +86,19 @@ impl StagePanel for DepthPanel {
             .display
             .detected_horizon
             .unwrap_or(classical.default_horizon);
-        let horizon = self
-            .horizon_drag
-            .or(classical.horizon)
-            .unwrap_or(auto);
+        let horizon = self.horizon_drag.or(classical.horizon).unwrap_or(auto);
         let y = horizon_y(&view, horizon);
         let primary = response.dragged_by(egui::PointerButton::Primary);
         match self.tool {
             DepthTool::Horizon => {
-                let near_line = response
-                    .hover_pos()
-                    .is_some_and(|p| (p.y - y).abs() < 8.0);
+                let near_line = response.hover_pos().is_some_and(|p| (p.y - y).abs() < 8.0);
                 if near_line || self.horizon_drag.is_some() {
                     ui.ctx().set_cursor_icon(egui::CursorIcon::ResizeVertical);
                 }
-                if response.drag_started_by(egui::PointerButton::Primary) && near_line {
+                let pressed_near_line = ui
+                    .input(|i| i.pointer.press_origin())
+                    .is_some_and(|p| (p.y - y).abs() < 10.0);
+                if response.drag_started_by(egui::PointerButton::Primary) && pressed_near_line {
                     self.horizon_drag = Some(horizon);
                 }
                 if primary
@@ -117,6 +115,11 @@ impl StagePanel for DepthPanel {
                 }
             }
             DepthTool::Brush(kind) => {
+                if response.drag_started_by(egui::PointerButton::Primary)
+                    && let Some(p) = ui.input(|i| i.pointer.press_origin())
+                {
+                    self.stroke = vec![view.to_image(p)];
+                }
                 if primary && let Some(p) = response.interact_pointer_pos() {
                     let q = view.to_image(p);
                     if self
@@ -151,7 +154,10 @@ impl StagePanel for DepthPanel {
                     let pts = self.stroke.iter().map(|q| view.to_screen(*q)).collect();
                     painter.add(egui::Shape::line(
                         pts,
-                        Stroke::new((2.0 * r).max(1.0), Color32::from_rgba_unmultiplied(255, 255, 255, 50)),
+                        Stroke::new(
+                            (2.0 * r).max(1.0),
+                            Color32::from_rgba_unmultiplied(255, 255, 255, 50),
+                        ),
                     ));
                 }
             }
@@ -172,7 +178,11 @@ impl StagePanel for DepthPanel {
         painter.text(
             pos2(view.rect.left() + 6.0, y - 4.0),
             egui::Align2::LEFT_BOTTOM,
-            if overridden { "horizon" } else { "horizon (auto)" },
+            if overridden {
+                "horizon"
+            } else {
+                "horizon (auto)"
+            },
             egui::FontId::proportional(13.0),
             colour,
         );
@@ -209,7 +219,7 @@ impl StagePanel for DepthPanel {
         ui.separator();
         ui.heading("Depth brush");
         ui.horizontal_wrapped(|ui| {
-            ui.selectable_value(&mut self.tool, DepthTool::Horizon, "↕ horizon");
+            ui.selectable_value(&mut self.tool, DepthTool::Horizon, "horizon");
             for (kind, name) in [
                 (DepthStrokeKind::Push, "push (farther)"),
                 (DepthStrokeKind::Pull, "pull (nearer)"),
@@ -219,7 +229,11 @@ impl StagePanel for DepthPanel {
                 ui.selectable_value(&mut self.tool, DepthTool::Brush(kind), name);
             }
         });
-        ui.add(egui::Slider::new(&mut self.radius_px, 2.0..=200.0).text("size px").logarithmic(true));
+        ui.add(
+            egui::Slider::new(&mut self.radius_px, 2.0..=200.0)
+                .text("size px")
+                .logarithmic(true),
+        );
         let max = match self.tool {
             DepthTool::Brush(DepthStrokeKind::Push | DepthStrokeKind::Pull) => 1.5,
             _ => 1.0,
@@ -229,7 +243,10 @@ impl StagePanel for DepthPanel {
         let n = cx.project.depth.strokes.len();
         ui.horizontal(|ui| {
             ui.label(format!("{n} stroke(s)"));
-            if ui.add_enabled(n > 0, egui::Button::new("Clear strokes")).clicked() {
+            if ui
+                .add_enabled(n > 0, egui::Button::new("Clear strokes"))
+                .clicked()
+            {
                 cx.edit("Clear depth strokes", |p| p.depth.strokes.clear());
             }
         });
@@ -237,7 +254,11 @@ impl StagePanel for DepthPanel {
         ui.heading("Classical estimator");
         let c = &cx.project.depth.classical;
         if let Some(v) = committed(ui, "cam-height", c.camera_height_m, |ui, v| {
-            ui.add(egui::Slider::new(v, 0.2..=50.0).logarithmic(true).text("camera height m"))
+            ui.add(
+                egui::Slider::new(v, 0.2..=50.0)
+                    .logarithmic(true)
+                    .text("camera height m"),
+            )
         }) {
             cx.edit("Camera height", |p| p.depth.classical.camera_height_m = v);
         }

@@ -38,9 +38,12 @@ impl ExportPanel {
         ExportOptions {
             sixteen_bit: self.sixteen_bit,
             passes: self.passes,
-            range: self
-                .range_on
-                .then(|| (self.range.0.min(frames.saturating_sub(1)), self.range.1.min(frames).max(self.range.0 + 1))),
+            range: self.range_on.then(|| {
+                (
+                    self.range.0.min(frames.saturating_sub(1)),
+                    self.range.1.min(frames).max(self.range.0 + 1),
+                )
+            }),
             video: self.video.map(VideoOptions::new),
             ..Default::default()
         }
@@ -187,7 +190,7 @@ impl StagePanel for ExportPanel {
         let dir = self.out_dir.trim().to_string();
         ui.horizontal(|ui| {
             if ui
-                .add_enabled(!busy && !dir.is_empty(), egui::Button::new("⏺ Export"))
+                .add_enabled(!busy && !dir.is_empty(), egui::Button::new("Export"))
                 .clicked()
             {
                 cx.requests.push(Request::Export {

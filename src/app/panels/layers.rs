@@ -40,9 +40,10 @@ impl LayersPanel {
         } else {
             1.0
         };
+        // A square-root scale keeps the far sky's spike from flattening everything else.
         let bars: Vec<Bar> = hist
             .iter()
-            .map(|b| Bar::new(b[0], b[1]).width(bar_width))
+            .map(|b| Bar::new(b[0], b[1].sqrt()).width(bar_width))
             .collect();
         let drag = self.drag;
         let last = thresholds.len().saturating_sub(1);
@@ -62,8 +63,8 @@ impl LayersPanel {
             .allow_boxed_zoom(false)
             .allow_double_click_reset(false)
             .show_y(false)
-            .x_axis_label("disparity 1/Z (near → right)")
-            .y_axis_label("pixels")
+            .x_axis_label("disparity 1/Z (near at the right)")
+            .y_axis_label("√ share of pixels")
             .show(ui, |pui| {
                 pui.bar_chart(
                     BarChart::new("disparity", bars).color(Color32::from_rgb(110, 150, 220)),
@@ -92,7 +93,7 @@ impl LayersPanel {
             .map(|&(_, x)| egui::pos2(t.position_from_point_x(x), t.frame().center().y))
             .collect();
         if r.drag_started()
-            && let Some(p) = r.interact_pointer_pos()
+            && let Some(p) = ui.input(|i| i.pointer.press_origin())
         {
             self.drag = lines
                 .iter()
@@ -148,7 +149,10 @@ impl StagePanel for LayersPanel {
         let height = (ui.available_height() * 0.35).clamp(120.0, 260.0);
         self.histogram_ui(ui, cx, height);
         ui.horizontal(|ui| {
-            ui.label(format!("{} layer(s), nearest first.", snapshot.scene.layers.layers.len()));
+            ui.label(format!(
+                "{} layer(s), nearest first.",
+                snapshot.scene.layers.layers.len()
+            ));
             ui.checkbox(&mut self.show_inpainted, "Show after inpainting");
         });
         let n = snapshot.display.layers.len().max(1);
@@ -161,7 +165,11 @@ impl StagePanel for LayersPanel {
                     for (i, layer) in snapshot.display.layers.iter().enumerate() {
                         let name = format!(
                             "layer{i}-{}",
-                            if self.show_inpainted { "after" } else { "before" }
+                            if self.show_inpainted {
+                                "after"
+                            } else {
+                                "before"
+                            }
                         );
                         let image = if self.show_inpainted {
                             &layer.after
@@ -196,11 +204,17 @@ impl StagePanel for LayersPanel {
         ui.heading("Layers");
         let settings = cx.project.layers.clone();
         let mut enabled = settings.enabled;
-        if ui.checkbox(&mut enabled, "Split into depth layers").changed() {
+        if ui
+            .checkbox(&mut enabled, "Split into depth layers")
+            .changed()
+        {
             cx.edit("Layers on/off", |p| p.layers.enabled = enabled);
         }
         let mut inpaint = settings.inpaint;
-        if ui.checkbox(&mut inpaint, "Inpaint hidden regions").changed() {
+        if ui
+            .checkbox(&mut inpaint, "Inpaint hidden regions")
+            .changed()
+        {
             cx.edit("Layer inpainting", |p| p.layers.inpaint = inpaint);
         }
         let mut layer_depth = settings.layer_depth;
@@ -220,7 +234,9 @@ impl StagePanel for LayersPanel {
             ui.radio_value(&mut auto, false, "fixed");
         });
         if auto != is_auto {
-            let current = cx.snapshot.map_or(3, |s| s.scene.layers.layers.len().max(1));
+            let current = cx
+                .snapshot
+                .map_or(3, |s| s.scene.layers.layers.len().max(1));
             cx.edit("Layer count mode", |p| {
                 p.layers.params.mode = if auto {
                     LayerCount::default()
@@ -297,8 +313,11 @@ impl StagePanel for LayersPanel {
                     }
                 });
             }
-            if !overrides.iter().all(Option::is_none) && ui.button("Reset all thresholds").clicked() {
-                cx.edit("Reset layer thresholds", |p| p.layers.params.overrides.clear());
+            if !overrides.iter().all(Option::is_none) && ui.button("Reset all thresholds").clicked()
+            {
+                cx.edit("Reset layer thresholds", |p| {
+                    p.layers.params.overrides.clear()
+                });
             }
         }
         ui.label(

@@ -227,9 +227,7 @@ impl PanelContext<'_> {
         let generation = snapshot.generation;
         let image = pick(snapshot);
         let size = image.size;
-        let texture = self
-            .textures
-            .get(ctx, name, generation, || image.clone());
+        let texture = self.textures.get(ctx, name, generation, || image.clone());
         Some((texture.id(), size))
     }
 }
@@ -278,7 +276,7 @@ pub fn committed<T>(
 where
     T: Clone + PartialEq + Send + Sync + 'static,
 {
-    let id = ui.id().with(salt);
+    let id = ui.scope_id().with(salt);
     let mut v = ui
         .data(|d| d.get_temp::<T>(id))
         .unwrap_or_else(|| value.clone());

@@ -2,7 +2,9 @@
 //! automatic suggestion (shown, then accepted or rejected — never applied silently), loop
 //! length and speed, and the resulting flow as arrows coloured by speed.
 
-use super::{PanelContext, PanelMessage, Request, StagePanel, Tab, committed, scene_image_ui, turbo_colour};
+use super::{
+    PanelContext, PanelMessage, Request, StagePanel, Tab, committed, scene_image_ui, turbo_colour,
+};
 use crate::app::viewport::{ImageView, ViewTransform};
 use crate::stages::motion::{Anchor, Arrow, MotionRegion, MotionSpec, Stroke, rasterise_strokes};
 use eframe::egui::{self, Color32, ColorImage, Painter, Rect, Sense, Ui, pos2};
@@ -100,7 +102,11 @@ pub fn motion_overlay(
     };
     for (i, r) in spec.regions.iter().enumerate() {
         let opacity = if i == selected { 0.5 } else { 0.25 };
-        layer(&r.strokes, REGION_COLOURS[i % REGION_COLOURS.len()], opacity);
+        layer(
+            &r.strokes,
+            REGION_COLOURS[i % REGION_COLOURS.len()],
+            opacity,
+        );
     }
     if let Some(sug) = suggestion {
         for r in &sug.regions {
@@ -156,8 +162,13 @@ impl StagePanel for MotionPanel {
         ) else {
             return;
         };
-        let Some(snapshot) = cx.snapshot.cloned() else { return };
-        let canvas = [snapshot.scene.canvas.layout.width, snapshot.scene.canvas.layout.height];
+        let Some(snapshot) = cx.snapshot.cloned() else {
+            return;
+        };
+        let canvas = [
+            snapshot.scene.canvas.layout.width,
+            snapshot.scene.canvas.layout.height,
+        ];
         let painter = ui.painter_at(response.rect);
         // The mask overlay, redrawn when the motion (or the suggestion) changes.
         let key = (
@@ -170,10 +181,13 @@ impl StagePanel for MotionPanel {
             self.overlay_version += 1;
             self.overlay_of = Some(key);
         }
-        let (spec, suggestion, region) = (&cx.project.motion, self.suggestion.as_ref(), self.region);
-        let overlay = cx.textures.get(ui.ctx(), "motion-overlay", self.overlay_version, || {
-            motion_overlay(spec, suggestion, region, canvas)
-        });
+        let (spec, suggestion, region) =
+            (&cx.project.motion, self.suggestion.as_ref(), self.region);
+        let overlay = cx
+            .textures
+            .get(ui.ctx(), "motion-overlay", self.overlay_version, || {
+                motion_overlay(spec, suggestion, region, canvas)
+            });
         painter.image(
             overlay.id(),
             view.rect,
@@ -188,7 +202,11 @@ impl StagePanel for MotionPanel {
                 let p = view.to_screen(a.at);
                 let v = egui::vec2(a.velocity[0], a.velocity[1]) * k * view.scale();
                 let speed = a.velocity[0].hypot(a.velocity[1]) / snapshot.display.max_speed;
-                painter.arrow(p, v, egui::Stroke::new(1.5, turbo_colour(0.15 + 0.85 * speed)));
+                painter.arrow(
+                    p,
+                    v,
+                    egui::Stroke::new(1.5, turbo_colour(0.15 + 0.85 * speed)),
+                );
             }
         }
         // Hint arrows and anchors.
@@ -211,7 +229,11 @@ impl StagePanel for MotionPanel {
         }
         for a in &cx.project.motion.anchors {
             let c = view.to_screen(a.centre);
-            painter.circle_stroke(c, a.radius * view.scale(), egui::Stroke::new(2.0, Color32::YELLOW));
+            painter.circle_stroke(
+                c,
+                a.radius * view.scale(),
+                egui::Stroke::new(2.0, Color32::YELLOW),
+            );
             painter.circle_filled(c, 3.0, Color32::YELLOW);
         }
         // Tools.
@@ -219,6 +241,11 @@ impl StagePanel for MotionPanel {
         let pointer = response.interact_pointer_pos().or(response.hover_pos());
         match self.tool {
             MotionTool::Paint | MotionTool::Erase | MotionTool::Freeze => {
+                if response.drag_started_by(egui::PointerButton::Primary)
+                    && let Some(p) = ui.input(|i| i.pointer.press_origin())
+                {
+                    self.stroke = vec![view.to_image(p)];
+                }
                 if primary && let Some(p) = pointer {
                     let q = view.to_image(p);
                     if self
@@ -229,7 +256,10 @@ impl StagePanel for MotionPanel {
                         self.stroke.push(q);
                     }
                 }
-                if response.clicked() && self.stroke.is_empty() && let Some(p) = pointer {
+                if response.clicked()
+                    && self.stroke.is_empty()
+                    && let Some(p) = pointer
+                {
                     self.stroke.push(view.to_image(p));
                 }
                 if (response.drag_stopped() || response.clicked()) && !self.stroke.is_empty() {
@@ -276,7 +306,7 @@ impl StagePanel for MotionPanel {
             }
             MotionTool::Arrow => {
                 if response.drag_started_by(egui::PointerButton::Primary)
-                    && let Some(p) = pointer
+                    && let Some(p) = ui.input(|i| i.pointer.press_origin()).or(pointer)
                 {
                     self.arrow_start = Some(view.to_image(p));
                 }
@@ -301,7 +331,9 @@ impl StagePanel for MotionPanel {
                 }
             }
             MotionTool::Anchor => {
-                if response.clicked() && let Some(p) = pointer {
+                if response.clicked()
+                    && let Some(p) = pointer
+                {
                     let anchor = Anchor {
                         centre: view.to_image(p),
                         radius: self.radius,
@@ -328,10 +360,14 @@ impl StagePanel for MotionPanel {
             ui.label(format!(
                 "suggested: {} region(s) ({}), {n} arrow(s)",
                 sug.regions.len(),
-                sug.regions.iter().map(|r| r.name.as_str()).collect::<Vec<_>>().join(", ")
+                sug.regions
+                    .iter()
+                    .map(|r| r.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
             ));
             ui.horizontal(|ui| {
-                if ui.button("✔ Accept").clicked() {
+                if ui.button("Accept").clicked() {
                     cx.edit("Accept motion suggestion", |p| {
                         let loop_frames = p.motion.loop_frames;
                         let speed = p.motion.speed;
@@ -344,7 +380,7 @@ impl StagePanel for MotionPanel {
                     self.suggestion = None;
                     self.region = 0;
                 }
-                if ui.button("✖ Reject").clicked() {
+                if ui.button("Reject").clicked() {
                     self.suggestion = None;
                 }
             });
@@ -355,11 +391,22 @@ impl StagePanel for MotionPanel {
         for (i, r) in regions.iter().enumerate() {
             ui.horizontal(|ui| {
                 let colour = REGION_COLOURS[i % REGION_COLOURS.len()];
-                ui.colored_label(colour, "⏺");
-                let name = if r.name.is_empty() { format!("region {}", i + 1) } else { r.name.clone() };
-                ui.selectable_value(&mut self.region, i, name);
-                ui.label(format!("{} strokes, {} arrows", r.strokes.len(), r.arrows.len()));
-                if ui.small_button("🗑").on_hover_text("Delete region").clicked() {
+                let name = if r.name.is_empty() {
+                    format!("region {}", i + 1)
+                } else {
+                    r.name.clone()
+                };
+                ui.selectable_value(&mut self.region, i, egui::RichText::new(name).color(colour));
+                ui.label(format!(
+                    "{} strokes, {} arrows",
+                    r.strokes.len(),
+                    r.arrows.len()
+                ));
+                if ui
+                    .small_button("x")
+                    .on_hover_text("Delete region")
+                    .clicked()
+                {
                     cx.edit("Delete motion region", |p| {
                         if i < p.motion.regions.len() {
                             p.motion.regions.remove(i);
@@ -372,7 +419,11 @@ impl StagePanel for MotionPanel {
             let n = regions.len();
             cx.edit("Add motion region", |p| {
                 p.motion.regions.push(MotionRegion {
-                    name: if n == 0 { "sky".into() } else { format!("region {}", n + 1) },
+                    name: if n == 0 {
+                        "sky".into()
+                    } else {
+                        format!("region {}", n + 1)
+                    },
                     ..Default::default()
                 })
             });
@@ -382,18 +433,26 @@ impl StagePanel for MotionPanel {
         ui.heading("Tool");
         ui.horizontal_wrapped(|ui| {
             for (t, name) in [
-                (MotionTool::Paint, "🖌 paint"),
+                (MotionTool::Paint, "paint"),
                 (MotionTool::Erase, "erase"),
-                (MotionTool::Freeze, "❄ freeze"),
-                (MotionTool::Arrow, "➡ arrow"),
-                (MotionTool::Anchor, "⚓ anchor"),
+                (MotionTool::Freeze, "freeze"),
+                (MotionTool::Arrow, "arrow"),
+                (MotionTool::Anchor, "anchor"),
             ] {
                 ui.selectable_value(&mut self.tool, t, name);
             }
         });
-        ui.add(egui::Slider::new(&mut self.radius, 1.0..=200.0).logarithmic(true).text("size px"));
+        ui.add(
+            egui::Slider::new(&mut self.radius, 1.0..=200.0)
+                .logarithmic(true)
+                .text("size px"),
+        );
         ui.add(egui::Slider::new(&mut self.hardness, 0.0..=1.0).text("hardness"));
-        ui.add(egui::Slider::new(&mut self.arrow_speed, 0.05..=5.0).logarithmic(true).text("arrow px/frame"));
+        ui.add(
+            egui::Slider::new(&mut self.arrow_speed, 0.05..=5.0)
+                .logarithmic(true)
+                .text("arrow px/frame"),
+        );
         ui.separator();
         ui.heading("Loop");
         let m = &cx.project.motion;
@@ -430,7 +489,10 @@ impl StagePanel for MotionPanel {
         {
             ui.colored_label(
                 ui.visuals().warn_fg_color,
-                format!("{} arrow(s) (red) lie outside their region's mask and do nothing", m.field.ignored_arrows.len()),
+                format!(
+                    "{} arrow(s) (red) lie outside their region's mask and do nothing",
+                    m.field.ignored_arrows.len()
+                ),
             );
         }
     }

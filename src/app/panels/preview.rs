@@ -26,13 +26,24 @@ impl StagePanel for PreviewPanel {
             return;
         };
         let (ow, oh) = cx.camera.output_size;
-        let size = if ow > 0 && oh > 0 { [ow, oh] } else { cx.preview.size };
+        let size = if ow > 0 && oh > 0 {
+            [ow, oh]
+        } else {
+            cx.preview.size
+        };
         // The fly camera takes the drags; the view itself does not zoom or pan here.
         self.transform = ViewTransform::default();
-        let (response, view) =
-            image_view_ui(ui, texture, size, &mut self.transform, Sense::click_and_drag());
+        let (response, view) = image_view_ui(
+            ui,
+            texture,
+            size,
+            &mut self.transform,
+            Sense::click_and_drag(),
+        );
         cx.probe.view = Some(view);
-        let step = cx.snapshot.map_or(0.05, |s| s.scene.scale.near_depth * 0.02);
+        let step = cx
+            .snapshot
+            .map_or(0.05, |s| s.scene.scale.near_depth * 0.02);
         let fly = &mut cx.preview.fly;
         let before = *fly;
         if response.dragged_by(egui::PointerButton::Primary) {
@@ -70,7 +81,11 @@ impl StagePanel for PreviewPanel {
             100.0 * cx.preview.hole_fraction,
             1000.0 * cx.preview.seconds,
             cx.preview.renderer,
-            if cx.preview.fly.is_identity() { "" } else { " · off the path (I keys this view)" }
+            if cx.preview.fly.is_identity() {
+                ""
+            } else {
+                " · off the path (I keys this view)"
+            }
         );
         ui.painter().text(
             view.rect.left_top() + egui::vec2(6.0, 6.0),
