@@ -97,6 +97,7 @@ fn regenerate_screenshots() {
     for (i, label) in tabs.iter().enumerate() {
         h.get_by_label(label).click();
         h.remove_cursor();
+        h.state_mut().clear_notices();
         if *label == "7 Preview" || *label == "6 Camera" {
             wait(&mut h, "the preview", |a| {
                 a.hole_fractions().contains_key(&30)
@@ -107,6 +108,13 @@ fn regenerate_screenshots() {
             }
         }
         let image = h.render().expect("render the window");
+        // Three quarters of the window size keeps the files small and the text readable.
+        let image = image::imageops::resize(
+            &image::DynamicImage::ImageRgba8(image).to_rgb8(),
+            960,
+            570,
+            image::imageops::FilterType::Triangle,
+        );
         let name = label
             .split_once(' ')
             .map_or(*label, |(_, n)| n)

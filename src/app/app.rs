@@ -330,6 +330,11 @@ impl EditorApp {
         self.notices.iter().map(|n| n.text.clone()).collect()
     }
 
+    /// Dismisses every message.
+    pub fn clear_notices(&mut self) {
+        self.notices.clear();
+    }
+
     /// UI frame durations.
     pub fn frame_times(&self) -> &FrameTimes {
         &self.frame_times
@@ -1101,13 +1106,15 @@ impl EditorApp {
         for (i, n) in self.notices.iter().enumerate() {
             let (fill, text) = match n.level {
                 Level::Error => (Color32::from_rgb(120, 30, 30), Color32::WHITE),
-                Level::Info => (ui.visuals().faint_bg_color, ui.visuals().text_color()),
+                Level::Info => (ui.visuals().window_fill, ui.visuals().text_color()),
             };
             egui::Frame::new()
                 .fill(fill)
-                .inner_margin(4.0)
-                .corner_radius(3.0)
+                .stroke(ui.visuals().window_stroke)
+                .inner_margin(6.0)
+                .corner_radius(4.0)
                 .show(ui, |ui| {
+                    ui.set_max_width(520.0);
                     ui.horizontal(|ui| {
                         ui.colored_label(text, &n.text);
                         if ui.small_button("x").clicked() {
@@ -1244,9 +1251,9 @@ impl eframe::App for EditorApp {
         for r in requests {
             self.handle_request(r);
         }
-        // Messages float over the top of the central area.
+        // Messages float in the bottom right corner of the view, above the timeline.
         egui::Area::new(egui::Id::unique("notices"))
-            .anchor(egui::Align2::CENTER_TOP, egui::vec2(0.0, 64.0))
+            .anchor(egui::Align2::RIGHT_BOTTOM, egui::vec2(-360.0, -96.0))
             .interactable(true)
             .show(&ctx, |ui| self.notices_ui(ui));
 
@@ -1254,6 +1261,9 @@ impl eframe::App for EditorApp {
         let busy = self.job.kind.is_some();
         self.frame_times.push(ms, busy);
         if self.frame_log {
+            // Repaint continuously so `dt` is the real frame time (layout, tessellation,
+            // rendering and presenting), not the gap between input events.
+            ctx.request_repaint();
             let dt = ctx.input(|i| i.unstable_dt) * 1000.0;
             eprintln!(
                 "frame ui_ms={ms:.2} dt_ms={dt:.1} busy={busy} stage={}",

@@ -315,12 +315,32 @@ impl Drop for SceneWorker {
     }
 }
 
-/// Runs one job with a fresh cancel flag published in `shared`.
-fn job<T>(
+/// A thread pool for the stages that leaves one core to the UI (the library's loops use
+/// rayon; on the global pool a build would take every core and the window would stutter).
+fn stage_pool(name: &'static str) -> Option<rayon::ThreadPool> {
+    let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(cores.saturating_sub(1).max(1))
+        .thread_name(move |i| format!("{name}-{i}"))
+        .build()
+        .ok()
+}
+
+/// Runs `work` on `pool` (or here, without one).
+fn on_pool<T: Send>(pool: Option<&rayon::ThreadPool>, work: impl FnOnce() -> T + Send) -> T {
+    match pool {
+        Some(p) => p.install(work),
+        None => work(),
+    }
+}
+
+/// Runs one job with a fresh cancel flag published in `shared`, on `pool`.
+fn job<T: Send>(
     shared: &Arc<Shared>,
     ctx: &egui::Context,
     kind: JobKind,
-    work: impl FnOnce(&Progress) -> T,
+    pool: Option<&rayon::ThreadPool>,
+    work: impl FnOnce(&Progress) -> T + Send,
 ) -> T {
     let flag = Arc::new(AtomicBool::new(false));
     *lock(&shared.cancel) = Some((kind, flag.clone()));
@@ -345,7 +365,7 @@ fn job<T>(
         })
         .with_cancel_flag(flag)
     };
-    let out = work(&progress);
+    let out = on_pool(pool, || work(&progress));
     *lock(&shared.cancel) = None;
     *lock(&shared.status) = JobStatus::default();
     ctx.request_repaint();
@@ -364,6 +384,8 @@ fn scene_thread(
     ctx: egui::Context,
 ) {
     let mut builder = SceneBuilder::new();
+    let pool = stage_pool("makeit4d-stage");
+    let pool = pool.as_ref();
     let mut queue: std::collections::VecDeque<Command> = Default::default();
     let send = |event: Event| -> bool {
         let ok = events.send(event).is_ok();
@@ -397,7 +419,15 @@ fn scene_thread(
             Command::Build {
                 generation,
                 project,
-            } => run_build(&mut builder, &shared, &ctx, generation, *project, &send),
+            } => run_build(
+                &mut builder,
+                &shared,
+                &ctx,
+                pool,
+                generation,
+                *project,
+                &send,
+            ),
             Command::SuggestMotion => {
                 let snapshot = lock(&shared.scene).clone();
                 match snapshot {
@@ -405,7 +435,7 @@ fn scene_thread(
                         "no scene yet: wait for the build to finish, then ask again".into(),
                     )),
                     Some(s) => {
-                        let result = job(&shared, &ctx, JobKind::Suggest, |_| {
+                        let result = job(&shared, &ctx, JobKind::Suggest, pool, |_| {
                             crate::stages::motion::suggest_motion(
                                 &s.scene.canvas.image,
                                 Some(&s.scene.canvas.sky),
@@ -427,7 +457,7 @@ fn scene_thread(
                 out_dir,
                 options,
             } => {
-                let result = job(&shared, &ctx, JobKind::Export, |progress| {
+                let result = job(&shared, &ctx, JobKind::Export, pool, |progress| {
                     let scene = builder.build(&project, &progress.sub(0.0, 0.1))?;
                     let mut renderer = CpuRenderer::new(project.render);
                     render_sequence(
@@ -457,13 +487,14 @@ fn run_build(
     builder: &mut SceneBuilder,
     shared: &Arc<Shared>,
     ctx: &egui::Context,
+    pool: Option<&rayon::ThreadPool>,
     generation: u64,
     project: Project,
     send: &impl Fn(Event) -> bool,
 ) -> bool {
     let before = builder.runs().clone();
     let start = Instant::now();
-    let result = job(shared, ctx, JobKind::Build, |progress| {
+    let result = job(shared, ctx, JobKind::Build, pool, |progress| {
         let scene = builder.build(&project, progress)?;
         progress.report(1.0, "display");
         let display = display_images(&scene);
@@ -725,6 +756,7 @@ fn preview_thread(
     mut renderer: Box<dyn PreviewRenderer>,
     ctx: egui::Context,
 ) {
+    let pool = stage_pool("makeit4d-preview-worker");
     loop {
         let request = {
             let mut slot = lock(&shared.request);
@@ -740,14 +772,16 @@ fn preview_thread(
         };
         shared.busy.store(true, Ordering::Relaxed);
         let start = Instant::now();
-        let result = renderer.render(
-            &request.snapshot.scene,
-            &request.snapshot.project.render,
-            &request.view,
-            request.frame_index,
-            request.width,
-            request.height,
-        );
+        let result = on_pool(pool.as_ref(), || {
+            renderer.render(
+                &request.snapshot.scene,
+                &request.snapshot.project.render,
+                &request.view,
+                request.frame_index,
+                request.width,
+                request.height,
+            )
+        });
         let (image, hole_fraction, error) = match result {
             Ok(frame) => (
                 rgb_image(&frame.colour, usize::MAX),

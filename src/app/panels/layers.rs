@@ -156,7 +156,8 @@ impl StagePanel for LayersPanel {
             ui.checkbox(&mut self.show_inpainted, "Show after inpainting");
         });
         let n = snapshot.display.layers.len().max(1);
-        let columns = if n <= 2 { n } else { n.div_ceil(2) };
+        // One row up to four layers, then two rows.
+        let columns = if n <= 4 { n } else { n.div_ceil(2) };
         let cell_w = (ui.available_width() / columns as f32 - 12.0).max(80.0);
         egui::ScrollArea::vertical().show(ui, |ui| {
             egui::Grid::new("layers-grid")

@@ -117,10 +117,25 @@ pub fn motion_overlay(
     ColorImage::new([w, h], pixels)
 }
 
+/// An arrow from `p` along `v` with a head of at most `head` points.
+fn arrow_shape(painter: &Painter, p: egui::Pos2, v: egui::Vec2, head: f32, stroke: egui::Stroke) {
+    let len = v.length();
+    if len < 0.5 {
+        return;
+    }
+    let dir = v / len;
+    let normal = egui::vec2(-dir.y, dir.x);
+    let h = head.min(0.4 * len);
+    let tip = p + v;
+    painter.line_segment([p, tip], stroke);
+    painter.line_segment([tip, tip - dir * h + normal * 0.5 * h], stroke);
+    painter.line_segment([tip, tip - dir * h - normal * 0.5 * h], stroke);
+}
+
 fn draw_arrow(painter: &Painter, view: &ImageView, a: &Arrow, colour: Color32, width: f32) {
     let p = view.to_screen(a.start);
     let q = view.to_screen(a.end);
-    painter.arrow(p, q - p, egui::Stroke::new(width, colour));
+    arrow_shape(painter, p, q - p, 14.0, egui::Stroke::new(width, colour));
 }
 
 impl MotionPanel {
@@ -202,10 +217,12 @@ impl StagePanel for MotionPanel {
                 let p = view.to_screen(a.at);
                 let v = egui::vec2(a.velocity[0], a.velocity[1]) * k * view.scale();
                 let speed = a.velocity[0].hypot(a.velocity[1]) / snapshot.display.max_speed;
-                painter.arrow(
+                arrow_shape(
+                    &painter,
                     p,
                     v,
-                    egui::Stroke::new(1.5, turbo_colour(0.15 + 0.85 * speed)),
+                    5.0,
+                    egui::Stroke::new(1.5, turbo_colour(0.2 + 0.6 * speed)),
                 );
             }
         }
