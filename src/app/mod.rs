@@ -13,6 +13,8 @@
 //!   the CPU splatter now, the GPU splatter drawn through an `egui_wgpu` paint callback later)
 //!   and the zoomable image view the stage panels draw on.
 
+// The brief's file layout: app/app.rs holds the application itself.
+#[allow(clippy::module_inception)]
 mod app;
 pub mod history;
 pub mod images;

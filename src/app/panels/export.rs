@@ -125,8 +125,8 @@ impl StagePanel for ExportPanel {
                 }
             });
         }
-        if let (Some(w), Some(h)) = (out.width, out.height) {
-            if let Some(v) = committed(ui, "out-size", (w, h), |ui, v| {
+        if let (Some(w), Some(h)) = (out.width, out.height)
+            && let Some(v) = committed(ui, "out-size", (w, h), |ui, v| {
                 ui.horizontal(|ui| {
                     let a = ui.add(egui::DragValue::new(&mut v.0).range(16..=8192));
                     ui.label("×");
@@ -134,12 +134,12 @@ impl StagePanel for ExportPanel {
                     a.union(b)
                 })
                 .inner
-            }) {
-                cx.edit("Output size", |p| {
-                    p.output.width = Some(v.0);
-                    p.output.height = Some(v.1);
-                });
-            }
+            })
+        {
+            cx.edit("Output size", |p| {
+                p.output.width = Some(v.0);
+                p.output.height = Some(v.1);
+            });
         }
         if let Some(v) = committed(ui, "export-frames", out.frames, |ui, v| {
             ui.horizontal(|ui| {

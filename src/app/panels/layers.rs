@@ -294,11 +294,12 @@ impl StagePanel for LayersPanel {
         if let Some(s) = cx.snapshot {
             let t = s.scene.layers.thresholds.clone();
             let overrides = &cx.project.layers.params.overrides;
-            for i in 1..t.len().saturating_sub(1) {
+            let interior = t.len().saturating_sub(1);
+            for (i, &threshold) in t.iter().enumerate().take(interior).skip(1) {
                 let overridden = overrides.get(i).copied().flatten().is_some();
                 ui.horizontal(|ui| {
                     ui.label(format!("d{}", i + 1));
-                    if let Some(v) = committed(ui, &format!("thr{i}"), t[i], |ui, v| {
+                    if let Some(v) = committed(ui, &format!("thr{i}"), threshold, |ui, v| {
                         ui.add(egui::DragValue::new(v).speed(0.01).range(1e-3..=1e6))
                     }) {
                         cx.edit("Set layer threshold", |p| {

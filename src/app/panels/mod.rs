@@ -258,7 +258,7 @@ pub fn all_panels() -> Vec<Box<dyn StagePanel>> {
         Box::new(depth::DepthPanel::default()),
         Box::new(layers::LayersPanel::default()),
         Box::new(motion::MotionPanel::default()),
-        Box::new(camera::CameraPanel::default()),
+        Box::new(camera::CameraPanel),
         Box::new(preview::PreviewPanel::default()),
         Box::new(export::ExportPanel::default()),
     ]
@@ -326,4 +326,31 @@ pub fn turbo_colour(t: f32) -> egui::Color32 {
         crate::image_io::unit_to_u8(c[1]),
         crate::image_io::unit_to_u8(c[2]),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{Intrinsics, Pose};
+
+    #[test]
+    fn fly_camera_identity_keeps_the_view_and_offsets_move_in_camera_axes() {
+        let view = View {
+            intrinsics: Intrinsics::from_hfov(320, 200, 60.0),
+            world_from_camera: Pose::new(
+                glam::Quat::from_rotation_y(std::f32::consts::FRAC_PI_2),
+                glam::Vec3::new(1.0, 0.0, 0.0),
+            ),
+        };
+        let same = FlyCamera::default().apply(&view);
+        assert_eq!(same, view);
+        // Forward in the camera (+z) is world +x after a quarter turn about y.
+        let moved = FlyCamera {
+            offset: glam::Vec3::Z,
+            ..Default::default()
+        }
+        .apply(&view);
+        let t = moved.world_from_camera.translation;
+        assert!((t - glam::Vec3::new(2.0, 0.0, 0.0)).length() < 1e-5, "{t}");
+    }
 }
