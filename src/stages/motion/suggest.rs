@@ -4,32 +4,40 @@
 //! is an ordinary [`MotionSpec`] (strokes and arrows) that the user edits; nothing here is
 //! applied unless the caller decides to.
 //!
-//! - Sky: the given soft sky mask (`≥ ½`, e.g. from the depth stage), or a *skyline*
-//!   estimate: in each column the sky runs from the top down to the first long run of textured
-//!   (non-smooth) or dark (below [`DARK_FRACTION`] of the top rows' bright luma) pixels; the
-//!   skyline is median-filtered across columns. A sky darker on average than the rest of the
-//!   image is rejected (a canopy, not a sky). Holes in the sky (a dark cloud the depth stage
-//!   did not call sky) that touch no canvas edge, lie above the horizon and cover at most
-//!   [`MAX_SKY_HOLE_AREA`] of the canvas drift with it.
+//! - Sky: the given soft sky mask (`≥ ½`, e.g. from the depth stage) less the pixels it is
+//!   unsure of (below [`SKY_MASK_SURE`]) on sharp luma edges (thin posts and masts), or a
+//!   *skyline* estimate: in each column the sky runs from the top down to the first long run
+//!   of textured (non-smooth) or dark (below [`DARK_FRACTION`] of the top rows' bright luma)
+//!   pixels; the skyline is median-filtered across columns. A sky darker on average than the
+//!   rest of the image is rejected (a canopy, not a sky). Holes in the sky (a dark cloud the
+//!   depth stage did not call sky) that touch no canvas edge, lie above the horizon and cover
+//!   at most [`MAX_SKY_HOLE_AREA`] of the canvas drift with it; parts smaller than
+//!   [`MIN_SKY_PART`] stay still. Land rising into the sky (mountains, trees, the pier's
+//!   posts) is connected to the ground, so it is never a hole.
 //! - Horizon: the given row, or the [`HORIZON_QUANTILE`] over columns of the row below the
 //!   column's lowest sky pixel.
 //! - Water: pixels below the horizon and below every sky pixel of their column that are
 //!   smooth (box-mean luma gradient at most the [`WATER_SMOOTHNESS_QUANTILE`] of the pixels
 //!   below the horizon), sky-coloured (their colour, or a brightened copy of it as reflections
 //!   are darker, falls into a populated bin of the sky's 16³ colour histogram) and not dark
-//!   (luma at least [`WATER_MIN_LUMA`] of the sky's median: tree lines and mountains are
-//!   darker than a reflecting lake), cleaned by a box vote. Connected parts of at least
-//!   [`MIN_WATER_PART`] of the canvas are kept; a part that reaches up to the horizon through
-//!   a *neck* (a row covering less than [`WATER_NECK_FRACTION`] of the part's fullest row: a
-//!   level lake is wide, the glow between mountains reached through a gap in a tree line is
-//!   not) is cut below the neck. With a depth map, water nearer than [`FAR_WATER_FRACTION`] of
-//!   the depth of the lake's far quarter is dropped (the near shore, boats and the water
-//!   between them stay still). The water is kept when it covers [`MIN_WATER_AREA`] of the
-//!   canvas and spans [`MIN_WATER_WIDTH`] of its width.
+//!   (luma at least [`WATER_MIN_LUMA`] of the sky's median: tree lines, mountains and their
+//!   reflections are darker than a lake reflecting the sky), cleaned by a box vote.
+//!   Connected parts of at least [`MIN_WATER_PART`] of the canvas are kept; a part that
+//!   reaches up through a *neck* (a row covering less than [`WATER_NECK_FRACTION`] of the
+//!   part's fullest row) is cut below the neck, and, as a level lake has a flat far edge,
+//!   everything above the median top row of the largest part's columns (glow between hills
+//!   that the sky mask left out, a hill beside the lake) is dropped. With a depth map, rows
+//!   whose median water depth is below [`FAR_WATER_FRACTION`] of the water's median depth
+//!   are dropped (the near water between boats; whole rows, so that a noisy depth map does
+//!   not cut the lake along a ragged edge). Textured boats, pebbles and piers are never
+//!   candidates. The water is kept when it covers [`MIN_WATER_AREA`] of the canvas and spans
+//!   [`MIN_WATER_WIDTH`] of its width (a lake split by a pier counts as a whole).
 //! - Masks become horizontal brush strokes ([`mask_to_strokes_within`]) painted strictly
 //!   inside the mask: the suggested flow is exactly zero on every pixel outside the sky and
 //!   the water, whatever the brush's soft rim.
-//! - Speeds are a gentle drift that scales with the canvas width: the sky moves right at
+//! - Speeds are a gentle drift that scales with the canvas width `W` (on an outpainted
+//!   canvas that is wider than the photo, e.g. 1886 px around a 1280 px photo, so 1.47× the
+//!   figures below in canvas pixels, the same share of the picture): the sky moves right at
 //!   [`SKY_DRIFT_PER_WIDTH`]·W px/frame (0.3 px/frame at 1280 px); [`WATER_ARROW_COLUMNS`]
 //!   columns of two downward arrows each move the water at up to [`WATER_FLOW_PER_WIDTH`]·W
 //!   px/frame (0.375 px/frame at 1280 px) on its nearest rows, slower toward the horizon
@@ -81,8 +89,8 @@ pub const WATER_MIN_LUMA: f32 = 0.7;
 /// that row, is a neck: what lies above it is not the same water surface.
 pub const WATER_NECK_FRACTION: f32 = 0.25;
 
-/// With a depth map, water nearer than this fraction of the water's median depth is left
-/// still.
+/// With a depth map, rows of water whose median depth is below this fraction of the water's
+/// median depth are left still.
 pub const FAR_WATER_FRACTION: f32 = 0.5;
 
 /// The estimated horizon is this quantile over columns of the row below the lowest sky pixel.
@@ -91,6 +99,17 @@ pub const HORIZON_QUANTILE: f32 = 0.5;
 /// A pixel darker than this fraction of the bright top rows' luma (90th percentile) ends the
 /// sky in its column (sky estimate without a mask).
 pub const DARK_FRACTION: f32 = 0.35;
+
+/// A given soft sky mask is sure of the sky from this value on; below it (and from ½) a pixel
+/// is sky unless it lies on a sharp edge.
+pub const SKY_MASK_SURE: f32 = 0.95;
+
+/// Luma gradient (per pixel, central differences) of a sharp edge: an object, not a cloud.
+pub const SKY_EDGE_GRADIENT: f32 = 0.06;
+
+/// Parts of the sky smaller than this fraction of the canvas (specks of sky in a glow the
+/// mask mostly left out, gaps between leaves) stay still.
+pub const MIN_SKY_PART: f32 = 0.002;
 
 /// Enclosed holes of the sky mask up to this fraction of the canvas drift with the sky.
 pub const MAX_SKY_HOLE_AREA: f32 = 0.05;
@@ -134,13 +153,16 @@ pub fn suggest_motion(
     }
     let texture = texture(image);
     let sky_mask: MaskRaster = match sky {
-        Some(s) => s.map(|v| v >= 0.5),
+        Some(s) => given_sky(image, s),
         None => estimate_sky(image, &texture),
     };
     let has_sky = sky_mask.data().iter().any(|&s| s);
     let horizon = horizon_row.unwrap_or_else(|| estimate_horizon(&sky_mask));
     let sky_mask = if has_sky {
-        fill_sky_holes(&sky_mask, horizon)
+        drop_small_parts(
+            &fill_sky_holes(&sky_mask, horizon),
+            (MIN_SKY_PART * (w * h) as f32).ceil() as usize,
+        )
     } else {
         sky_mask
     };
@@ -181,6 +203,39 @@ pub fn suggest_motion(
         }
     }
     Ok(spec)
+}
+
+/// The sky of a given soft mask: `s ≥ ½`, less the pixels the mask is unsure of
+/// (`s <` [`SKY_MASK_SURE`]) that lie within a pixel of a sharp luma edge (gradient above
+/// [`SKY_EDGE_GRADIENT`]): thin objects against the sky (a ladder's posts, a mast) that the
+/// mask only half excludes. Such pixels inside a cloud come back as sky holes.
+fn given_sky(image: &RgbRaster, soft: &GrayRaster) -> MaskRaster {
+    let (w, h) = image.size();
+    let l = image.map(luma);
+    let sharp = Raster::from_fn(w, h, |x, y| {
+        let (x, y) = (x as isize, y as isize);
+        let gx = 0.5 * (l.at_clamped(x + 1, y) - l.at_clamped(x - 1, y));
+        let gy = 0.5 * (l.at_clamped(x, y + 1) - l.at_clamped(x, y - 1));
+        gx.hypot(gy) > SKY_EDGE_GRADIENT
+    });
+    let near_sharp = box_mean(&sharp.map(|s| if s { 1.0 } else { 0.0 }), 1);
+    Raster::from_fn(w, h, |x, y| {
+        let s = soft.at(x, y);
+        s >= 0.5 && (s >= SKY_MASK_SURE || near_sharp.at(x, y) == 0.0)
+    })
+}
+
+/// `mask` without its 4-connected parts smaller than `min_area` pixels.
+fn drop_small_parts(mask: &MaskRaster, min_area: usize) -> MaskRaster {
+    let mut out = MaskRaster::new(mask.width(), mask.height(), false);
+    for part in components(mask) {
+        if part.len() >= min_area {
+            for i in part {
+                out.data_mut()[i] = true;
+            }
+        }
+    }
+    out
 }
 
 /// For each column, the row below its lowest sky pixel (0 for a column without sky).
@@ -451,20 +506,28 @@ fn estimate_water(
             water.data_mut()[i] = true;
         }
     }
-    // Near water stays still: the near shore, boats and the water between them.
+    // Near water stays still: the near shore, boats and the water between them. A level
+    // surface's depth is a function of the row, so whole rows are judged (by their median
+    // depth), which keeps a noisy depth map from cutting the lake along a ragged vertical
+    // edge.
     if let Some(depth) = depth {
+        let valid = |d: f32| d.is_finite() && d > 0.0;
         let depths: Vec<f32> = water
             .data()
             .iter()
             .zip(depth.data())
-            .filter(|&(&m, d)| m && d.is_finite() && *d > 0.0)
+            .filter(|&(&m, &d)| m && valid(d))
             .map(|(_, &d)| d)
             .collect();
         let min_depth = FAR_WATER_FRACTION * quantile(&depths, 0.5).unwrap_or(0.0);
-        for (m, &d) in water.data_mut().iter_mut().zip(depth.data()) {
-            // `!(d >= …)` also drops NaN depths.
-            if !(d >= min_depth) {
-                *m = false;
+        for y in 0..h {
+            let row: Vec<f32> = (0..w)
+                .filter(|&x| water.at(x, y) && valid(depth.at(x, y)))
+                .map(|x| depth.at(x, y))
+                .collect();
+            // `!(d >= …)` also drops rows without a valid depth.
+            if !(quantile(&row, 0.5).unwrap_or(f32::NAN) >= min_depth) {
+                water.row_mut(y).fill(false);
             }
         }
     }
@@ -933,21 +996,28 @@ mod tests {
     }
 
     #[test]
-    fn sky_holes_drift_with_the_sky_but_land_does_not() {
-        // A dark cloud inside the sky mask's hole drifts; a mountain rising from the ground
-        // into the sky (a hole that touches the ground) does not.
+    fn sky_holes_drift_with_the_sky_but_land_and_posts_do_not() {
+        // A dark cloud in a hole of the sky mask drifts; a mountain rising from the ground
+        // into the sky (a hole that touches the ground) does not, nor does a thin post that
+        // the soft mask only half excludes (0.8), nor a speck of sky in the ground.
         let (w, h) = (200, 120);
         let cloud = |x: usize, y: usize| (60..90).contains(&x) && (15..30).contains(&y);
         let mountain = |x: usize, y: usize| (130..170).contains(&x) && y >= 30;
+        let post = |x: usize, y: usize| (40..43).contains(&x) && y >= 25;
+        let speck = |x: usize, y: usize| (100..104).contains(&x) && (90..94).contains(&y);
         let sky = Raster::from_fn(w, h, |x, y| {
-            if y < 60 && !cloud(x, y) && !mountain(x, y) {
+            if post(x, y) && y < 60 {
+                0.8
+            } else if (y < 60 && !cloud(x, y) && !mountain(x, y)) || speck(x, y) {
                 1.0
             } else {
                 0.0
             }
         });
         let image = Raster::from_fn(w, h, |x, y| {
-            if cloud(x, y) || mountain(x, y) || y >= 60 {
+            if post(x, y) {
+                [0.35; 3]
+            } else if cloud(x, y) || mountain(x, y) || y >= 60 && !speck(x, y) {
                 [0.3 + 0.3 * noise(x, y); 3]
             } else {
                 [0.5, 0.6, 0.9]
@@ -956,9 +1026,15 @@ mod tests {
         let spec = suggest_motion(&image, Some(&sky), None, None).unwrap();
         let field = flow_of(&spec, w, h);
         assert!(field.flow.at(75, 22)[0] > 0.0, "the cloud drifts");
-        for y in 30..h {
-            for x in 130..170 {
-                assert_eq!(field.flow.at(x, y), [0.0, 0.0], "mountain ({x}, {y})");
+        assert!(
+            field.flow.at(20, 40)[0] > 0.0,
+            "the sky beside the post drifts"
+        );
+        for y in 0..h {
+            for x in 0..w {
+                if mountain(x, y) || post(x, y) || speck(x, y) || y >= 60 {
+                    assert_eq!(field.flow.at(x, y), [0.0, 0.0], "({x}, {y})");
+                }
             }
         }
     }
