@@ -37,7 +37,7 @@ use crate::stages::layers::{
 use crate::stages::motion::displaced_positions;
 use crate::stages::motion::{FlowField, MotionLoop, prepare_motion};
 use crate::stages::outpaint::{CanvasLayout, CanvasSizing, DepthRange, canvas_from_views};
-use crate::stages::points::{LiftOptions, PointCloud};
+use crate::stages::points::PointCloud;
 use serde::Serialize;
 use std::hash::{Hash, Hasher};
 use std::sync::Arc;
@@ -572,7 +572,6 @@ fn apply_input_alpha(cloud: &mut PointCloud, alpha: &GrayRaster, layout: &Canvas
         }
     }
     // Fully transparent points make nothing: the renderer skips alpha 0.
-    let _ = LiftOptions::default();
 }
 
 /// Sizes the canvas from the path and completes colour and depth beyond the photo.
