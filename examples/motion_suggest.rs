@@ -1,7 +1,8 @@
 //! Inspect the automatic motion suggestion on a real canvas.
 //!
-//! `cargo run --release --example motion_suggest -- dump <photo> <dir> [WxH]` builds the scene
-//! the way `makeit4d render <photo> --preset swing --size WxH --frames 48` does and stores the
+//! `cargo run --release --example motion_suggest -- dump <photo> <dir> [WxH [preset]]` builds
+//! the scene the way `makeit4d render <photo> --preset swing --size WxH --frames 48` does (or
+//! with another camera preset) and stores the
 //! canvas (colour PNG, raw little-endian `f32` depth and sky with a `u32` width/height header)
 //! in `dir`.
 //!
@@ -43,7 +44,7 @@ fn read_f32(path: &Path) -> anyhow::Result<GrayRaster> {
     Raster::from_vec(w, h, data).context("bad raster")
 }
 
-fn dump(photo: &Path, dir: &Path, size: Option<&str>) -> anyhow::Result<()> {
+fn dump(photo: &Path, dir: &Path, size: Option<&str>, preset: &str) -> anyhow::Result<()> {
     let mut project = Project::new(photo);
     project.output.frames = 48;
     let (w, h) = size
@@ -52,7 +53,7 @@ fn dump(photo: &Path, dir: &Path, size: Option<&str>) -> anyhow::Result<()> {
         .context("size is WxH")?;
     project.output.width = Some(w.parse()?);
     project.output.height = Some(h.parse()?);
-    project.camera.path = CameraPath::Preset(Preset::new("swing".parse::<PresetKind>()?));
+    project.camera.path = CameraPath::Preset(Preset::new(preset.parse::<PresetKind>()?));
     let scene = SceneBuilder::new().build(&project, &Progress::none())?;
     std::fs::create_dir_all(dir)?;
     save_rgb_png(&dir.join("canvas.png"), &scene.canvas.image, false)?;
@@ -131,8 +132,11 @@ fn view(dir: &Path, photo: Option<&Path>) -> anyhow::Result<()> {
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     match args.iter().map(String::as_str).collect::<Vec<_>>()[..] {
-        ["dump", photo, dir] => dump(Path::new(photo), Path::new(dir), None),
-        ["dump", photo, dir, size] => dump(Path::new(photo), Path::new(dir), Some(size)),
+        ["dump", photo, dir] => dump(Path::new(photo), Path::new(dir), None, "swing"),
+        ["dump", photo, dir, size] => dump(Path::new(photo), Path::new(dir), Some(size), "swing"),
+        ["dump", photo, dir, size, preset] => {
+            dump(Path::new(photo), Path::new(dir), Some(size), preset)
+        }
         ["view", dir] => view(Path::new(dir), None),
         ["photo", photo, dir] => view(Path::new(dir), Some(Path::new(photo))),
         _ => bail!(

@@ -32,6 +32,12 @@
 //!   not cut the lake along a ragged edge). Textured boats, pebbles and piers are never
 //!   candidates. The water is kept when it covers [`MIN_WATER_AREA`] of the canvas and spans
 //!   [`MIN_WATER_WIDTH`] of its width (a lake split by a pier counts as a whole).
+//! - Thin parts: a region thinner along its motion than the loop's travel `N·v` (plus the
+//!   strokes' inset) is dropped, column by column for the water and row by row for the sky:
+//!   at phase `n` of the symmetric loop the forward cloud has pulled `n·v` away from the
+//!   region's upstream edge and the backward cloud `(N − n)·v` away from its downstream edge,
+//!   and in a thinner region the two gaps overlap, so neither cloud covers the middle (a strip
+//!   of water under a jetty opened holes this way).
 //! - Masks become horizontal brush strokes ([`mask_to_strokes_within`]) painted strictly
 //!   inside the mask: the suggested flow is exactly zero on every pixel outside the sky and
 //!   the water, whatever the brush's soft rim.
@@ -158,21 +164,25 @@ pub fn suggest_motion(
     };
     let has_sky = sky_mask.data().iter().any(|&s| s);
     let horizon = horizon_row.unwrap_or_else(|| estimate_horizon(&sky_mask));
+    let radius = stroke_radius(w, h);
+    let loop_travel = |speed_per_width: f32| spec.loop_frames as f32 * speed_per_width * w as f32;
     let sky_mask = if has_sky {
-        drop_small_parts(
+        let runs = drop_short_runs(
             &fill_sky_holes(&sky_mask, horizon),
-            (MIN_SKY_PART * (w * h) as f32).ceil() as usize,
-        )
+            min_run(loop_travel(SKY_DRIFT_PER_WIDTH), radius),
+            false,
+        );
+        drop_small_parts(&runs, (MIN_SKY_PART * (w * h) as f32).ceil() as usize)
     } else {
         sky_mask
     };
     let water = if has_sky {
-        estimate_water(image, &texture, &sky_mask, depth, horizon)
+        let min_run = min_run(loop_travel(WATER_FLOW_PER_WIDTH), radius);
+        estimate_water(image, &texture, &sky_mask, depth, horizon, min_run)
     } else {
         MaskRaster::new(w, h, false)
     };
     let sky_mask = Raster::from_fn(w, h, |x, y| sky_mask.at(x, y) && !water.at(x, y));
-    let radius = stroke_radius(w, h);
 
     let sky_strokes = mask_to_strokes_within(&sky_mask, radius);
     if !sky_strokes.is_empty() {
@@ -223,6 +233,45 @@ fn given_sky(image: &RgbRaster, soft: &GrayRaster) -> MaskRaster {
         let s = soft.at(x, y);
         s >= 0.5 && (s >= SKY_MASK_SURE || near_sharp.at(x, y) == 0.0)
     })
+}
+
+/// The shortest run of a moving region along its motion that the symmetric loop covers
+/// without holes: at phase `n` the forward cloud has moved `n·v` away from the region's
+/// upstream edge and the backward cloud `(N − n)·v` away from its downstream edge, so the two
+/// gaps overlap in a region thinner than the loop's travel `N·v`. The strokes of
+/// [`mask_to_strokes_within`] (brush `radius`) also stay up to `⌈r/2⌉ + 1 + round(r)` pixels
+/// inside each edge.
+fn min_run(travel: f32, radius: f32) -> usize {
+    let inset = (0.5 * radius).ceil() + 1.0 + radius.round();
+    (travel + 2.0 * inset).ceil() as usize
+}
+
+/// `mask` without its runs (vertical runs in each column, or horizontal ones in each row)
+/// shorter than `min_len` pixels.
+fn drop_short_runs(mask: &MaskRaster, min_len: usize, vertical: bool) -> MaskRaster {
+    let (w, h) = mask.size();
+    let mut out = mask.clone();
+    let (lines, len) = if vertical { (w, h) } else { (h, w) };
+    let index = |line: usize, k: usize| if vertical { k * w + line } else { line * w + k };
+    for line in 0..lines {
+        let mut k = 0;
+        while k < len {
+            if !mask.data()[index(line, k)] {
+                k += 1;
+                continue;
+            }
+            let start = k;
+            while k < len && mask.data()[index(line, k)] {
+                k += 1;
+            }
+            if k - start < min_len {
+                for j in start..k {
+                    out.data_mut()[index(line, j)] = false;
+                }
+            }
+        }
+    }
+    out
 }
 
 /// `mask` without its 4-connected parts smaller than `min_area` pixels.
@@ -430,6 +479,7 @@ fn estimate_water(
     sky: &MaskRaster,
     depth: Option<&GrayRaster>,
     horizon: f32,
+    min_run: usize,
 ) -> MaskRaster {
     let (w, h) = image.size();
     let empty = MaskRaster::new(w, h, false);
@@ -525,12 +575,14 @@ fn estimate_water(
                 .filter(|&x| water.at(x, y) && valid(depth.at(x, y)))
                 .map(|x| depth.at(x, y))
                 .collect();
-            // `!(d >= …)` also drops rows without a valid depth.
-            if !(quantile(&row, 0.5).unwrap_or(f32::NAN) >= min_depth) {
+            // Rows without a valid depth go too.
+            if quantile(&row, 0.5).is_none_or(|d| d < min_depth) {
                 water.row_mut(y).fill(false);
             }
         }
     }
+    // Water too thin along its flow for the loop's travel opens holes.
+    let water = drop_short_runs(&water, min_run, true);
     let mut kept = empty.clone();
     let (mut area, mut left, mut right) = (0, usize::MAX, 0);
     for part in components(&water) {
@@ -1062,6 +1114,48 @@ mod tests {
         // A part without a neck is kept whole.
         let whole: Vec<usize> = (0..200).collect();
         assert_eq!(cut_at_neck(&whole, w), whole);
+    }
+
+    #[test]
+    fn regions_thinner_than_the_loop_travel_stay_still() {
+        // Runs: a known answer per column / row.
+        let mask = Raster::from_fn(6, 10, |x, y| match x {
+            0 => y < 3,
+            1 => (2..9).contains(&y),
+            2 => true,
+            _ => false,
+        });
+        let vertical = drop_short_runs(&mask, 4, true);
+        assert!((0..10).all(|y| !vertical.at(0, y)));
+        assert!((2..9).all(|y| vertical.at(1, y)) && !vertical.at(1, 9));
+        assert!((0..10).all(|y| vertical.at(2, y)));
+        let horizontal = drop_short_runs(&mask, 3, false);
+        assert!(horizontal.at(0, 2) && horizontal.at(2, 2) && !horizontal.at(2, 9));
+        // The travel plus both insets of the strokes.
+        assert_eq!(min_run(30.0, 6.0), 30 + 2 * (3 + 1 + 6));
+        // A lake with a thin arm under a jetty: the lake flows, the arm does not.
+        let (w, h) = (320, 200);
+        let (mut image, _, _, _) = lake_scene(w, h);
+        let jetty = |x: usize, y: usize| x >= 200 && (84..140).contains(&y);
+        for y in 0..h {
+            for x in 0..w {
+                if jetty(x, y) {
+                    image.set(x, y, [0.2 + 0.3 * noise(x, y); 3]);
+                }
+            }
+        }
+        let spec = suggest_motion(&image, None, None, None).unwrap();
+        let field = flow_of(&spec, w, h);
+        assert!(field.flow.at(w / 6, 110)[1] > 0.0, "the lake flows");
+        // Below the jetty the lake is 150 − 140 = 10 rows deep: thinner than the travel
+        // (7.5 px) and the strokes' insets allow.
+        let travel = spec.loop_frames as f32 * WATER_FLOW_PER_WIDTH * w as f32;
+        assert!(10 < min_run(travel, stroke_radius(w, h)));
+        for y in 140..150 {
+            for x in 220..w {
+                assert_eq!(field.flow.at(x, y), [0.0, 0.0], "({x}, {y})");
+            }
+        }
     }
 
     #[test]
