@@ -44,11 +44,16 @@
 //! - Speeds are a gentle drift that scales with the canvas width `W` (on an outpainted
 //!   canvas that is wider than the photo, e.g. 1886 px around a 1280 px photo, so 1.47× the
 //!   figures below in canvas pixels, the same share of the picture): the sky moves right at
-//!   [`SKY_DRIFT_PER_WIDTH`]·W px/frame (0.3 px/frame at 1280 px); [`WATER_ARROW_COLUMNS`]
-//!   columns of two downward arrows each move the water at up to [`WATER_FLOW_PER_WIDTH`]·W
+//!   [`SKY_DRIFT_PER_WIDTH`]·W px/frame (0.3 px/frame at 1280 px); columns of downward arrows
+//!   every [`water_arrow_spacing`] pixels move the water at up to [`WATER_FLOW_PER_WIDTH`]·W
 //!   px/frame (0.375 px/frame at 1280 px) on its nearest rows, slower toward the horizon
 //!   (perspective: nearer water moves faster in the image), never below
 //!   [`WATER_FAR_SPEED_FRACTION`] of that.
+//! - Shore anchors: the lowest `2⌈r⌉` rows of every column of the water (its downstream
+//!   edge, against the boats or the near shore) are painted into the freeze mask, so the
+//!   harmonic flow ramps down to zero between the lowest arrows and the shore instead of
+//!   tearing the water away from it (in the backward cloud of the loop such a tear shows
+//!   whatever hidden layer lies behind the water).
 //! - Loop length [`SUGGESTED_LOOP_FRAMES`] (80): the symmetric loop renders a backward cloud
 //!   displaced by `F_{N−n}(−M)`, up to `N·speed`, so `N·speed` bounds how far any point ever
 //!   travels: 24 px for the sky and 30 px for the nearest water at 1280 px width, small enough
@@ -68,9 +73,6 @@ pub const WATER_FLOW_PER_WIDTH: f32 = 0.375 / 1280.0;
 
 /// The farthest water moves at least this fraction of [`WATER_FLOW_PER_WIDTH`].
 pub const WATER_FAR_SPEED_FRACTION: f32 = 0.4;
-
-/// Columns of water arrows (two arrows each), spread evenly over the water's columns.
-pub const WATER_ARROW_COLUMNS: usize = 8;
 
 /// Loop length `N` of a suggestion (see the module documentation).
 pub const SUGGESTED_LOOP_FRAMES: u32 = 80;
@@ -202,7 +204,15 @@ pub fn suggest_motion(
     }
     let water_strokes = mask_to_strokes_within(&water, radius);
     if !water_strokes.is_empty() {
-        let painted = rasterise_strokes(&water_strokes, w, h).map(|v| v >= 0.99);
+        let support = rasterise_strokes(&water_strokes, w, h);
+        // Shore anchors: the water's downstream (lower) edge is frozen, so the flow ramps down
+        // to zero toward it instead of tearing away from it.
+        let shore = downstream_edge(&support.map(|v| v > 0.0), 2 * radius.ceil() as usize);
+        let freeze = mask_to_strokes(&shore, radius);
+        let frozen = rasterise_strokes(&freeze, w, h);
+        let painted = Raster::from_fn(w, h, |x, y| {
+            support.at(x, y) >= 0.99 && frozen.at(x, y) == 0.0
+        });
         let arrows = water_arrows(&painted, horizon, WATER_FLOW_PER_WIDTH * w as f32);
         if !arrows.is_empty() {
             spec.regions.push(MotionRegion {
@@ -210,6 +220,7 @@ pub fn suggest_motion(
                 strokes: water_strokes,
                 arrows,
             });
+            spec.freeze = freeze;
         }
     }
     Ok(spec)
@@ -233,6 +244,25 @@ fn given_sky(image: &RgbRaster, soft: &GrayRaster) -> MaskRaster {
         let s = soft.at(x, y);
         s >= 0.5 && (s >= SKY_MASK_SURE || near_sharp.at(x, y) == 0.0)
     })
+}
+
+/// The lowest `rows` pixels of every vertical run of `mask`.
+fn downstream_edge(mask: &MaskRaster, rows: usize) -> MaskRaster {
+    let (w, h) = mask.size();
+    let mut out = MaskRaster::new(w, h, false);
+    for x in 0..w {
+        for y in 0..h {
+            let last = y + 1 == h || !mask.at(x, y + 1);
+            if mask.at(x, y) && last {
+                for k in y.saturating_sub(rows.max(1) - 1)..=y {
+                    if mask.at(x, k) {
+                        out.set(x, k, true);
+                    }
+                }
+            }
+        }
+    }
+    out
 }
 
 /// The shortest run of a moving region along its motion that the symmetric loop covers
@@ -795,44 +825,59 @@ fn row_arrow(mask: &MaskRaster, q: f32, speed: f32) -> Option<Arrow> {
     })
 }
 
-/// Downward arrows in [`WATER_ARROW_COLUMNS`] columns spread over the columns of `mask`:
-/// two per column, over the upper and lower halves of the column's longest run, at
+/// Downward arrows in columns every [`water_arrow_spacing`] pixels across `mask`: two per
+/// vertical run of at least 8 pixels, over 5–40 % and 45–75 % of the run (the rest of the run,
+/// toward the frozen shore below it, is where the flow ramps down to zero), at
 /// `max_speed·clamp((y − horizon)/(y_max − horizon), f, 1)` at each arrow's middle row `y`
 /// (`y_max` = the water's lowest row, `f` = [`WATER_FAR_SPEED_FRACTION`]).
 fn water_arrows(mask: &MaskRaster, horizon: f32, max_speed: f32) -> Vec<Arrow> {
     let (w, h) = mask.size();
     let columns: Vec<usize> = (0..w).filter(|&x| (0..h).any(|y| mask.at(x, y))).collect();
+    let (Some(&first), Some(&last)) = (columns.first(), columns.last()) else {
+        return Vec::new();
+    };
     let Some(y_max) = (0..h).rev().find(|&y| mask.row(y).contains(&true)) else {
         return Vec::new();
     };
     let range = (y_max as f32 - horizon).max(1.0);
+    let spacing = water_arrow_spacing(w);
     let mut arrows = Vec::new();
-    let mut last = None;
-    for k in 0..WATER_ARROW_COLUMNS {
-        let q = (k as f32 + 0.5) / WATER_ARROW_COLUMNS as f32;
-        let x = columns[((columns.len() as f32 * q) as usize).min(columns.len() - 1)];
-        if last == Some(x) {
-            continue;
+    let mut x = first + (((last - first) % spacing) / 2);
+    while x <= last {
+        let mut y = 0;
+        while y < h {
+            if !mask.at(x, y) {
+                y += 1;
+                continue;
+            }
+            let start = y;
+            while y < h && mask.at(x, y) {
+                y += 1;
+            }
+            let len = (y - 1 - start) as f32;
+            if len < 7.0 {
+                continue;
+            }
+            for (a, b) in [(0.05, 0.4), (0.45, 0.75)] {
+                let (y0, y1) = (start as f32 + a * len, start as f32 + b * len);
+                let nearness = (0.5 * (y0 + y1) - horizon) / range;
+                arrows.push(Arrow {
+                    start: [x as f32, y0],
+                    end: [x as f32, y1],
+                    speed: max_speed * nearness.clamp(WATER_FAR_SPEED_FRACTION, 1.0),
+                });
+            }
         }
-        last = Some(x);
-        let Some((start, end)) = longest_run((0..h).map(|y| mask.at(x, y))) else {
-            continue;
-        };
-        let len = (end - start) as f32;
-        if len < 4.0 {
-            continue;
-        }
-        for (a, b) in [(0.05, 0.45), (0.55, 0.95)] {
-            let (y0, y1) = (start as f32 + a * len, start as f32 + b * len);
-            let nearness = (0.5 * (y0 + y1) - horizon) / range;
-            arrows.push(Arrow {
-                start: [x as f32, y0],
-                end: [x as f32, y1],
-                speed: max_speed * nearness.clamp(WATER_FAR_SPEED_FRACTION, 1.0),
-            });
-        }
+        x += spacing;
     }
     arrows
+}
+
+/// Columns of water arrows are this many pixels apart: `W/80`, at least 8 (16 px at 1280 px),
+/// close enough that the flow is even across the lake although it is pinned to zero at the
+/// shore.
+pub fn water_arrow_spacing(width: usize) -> usize {
+    (width / 80).max(8)
 }
 
 /// `(first, last)` indices of the longest run of `true`.
@@ -987,11 +1032,15 @@ mod tests {
                 (v[0] - sky_speed).abs() < 1e-3 * sky_speed.max(1.0) && v[1].abs() < 1e-3,
                 "{case}: sky {v:?}"
             );
-            // The lake flows down (toward the camera), faster on nearer rows.
-            let (x, upper, lower) = (w / 6, (0.5 * h as f32) as usize, (0.7 * h as f32) as usize);
-            let (a, b) = (field.flow.at(x, upper), field.flow.at(x, lower));
+            // The lake flows down (toward the camera), faster on nearer rows, then slows to
+            // zero toward the frozen near shore.
+            let row = |f: f32| (f * h as f32) as usize;
+            let x = w / 6;
+            let (a, b) = (field.flow.at(x, row(0.47)), field.flow.at(x, row(0.62)));
             assert!(a[1] > 0.0 && b[1] > a[1], "{case}: lake {a:?} {b:?}");
             assert!(a[0].abs() < 0.1 * a[1] && b[0].abs() < 0.1 * b[1], "{case}");
+            let shore = field.flow.at(x, row(0.74));
+            assert!(shore[1] < 0.5 * b[1], "{case}: shore {shore:?}");
             // Beside the boat the lake moves too.
             let beside = field.flow.at(5 * w / 6, (0.62 * h as f32) as usize);
             assert!(beside[1] > 0.0, "{case}: beside the boat {beside:?}");
@@ -1013,9 +1062,9 @@ mod tests {
             (v[0] - SKY_DRIFT_PER_WIDTH * w as f32).abs() < 1e-3 && v[1].abs() < 1e-3,
             "{v:?}"
         );
-        // Water: downward, faster lower down.
-        let upper = field.flow.at(80, 58);
-        let lower = field.flow.at(80, 72);
+        // Water: downward, faster lower down (before it slows toward the shore).
+        let upper = field.flow.at(80, 56);
+        let lower = field.flow.at(80, 67);
         assert!(upper[1] > 0.0 && lower[1] > upper[1], "{upper:?} {lower:?}");
         assert!(upper[0].abs() < 1e-3);
         // Mountains and shore: still, all of them.
