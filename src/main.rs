@@ -582,6 +582,7 @@ fn render_one(
         project.motion = makeit4d::stages::motion::suggest_motion(
             &scene.canvas.image,
             Some(&scene.canvas.sky),
+            Some(&scene.canvas.depth),
             None,
         )?;
         scene = builder.build(&project, &progress.sub(0.0, 0.1))?;
