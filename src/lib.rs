@@ -3,9 +3,11 @@
 //! the editor are thin front ends over it.
 
 pub mod error;
+pub mod eval;
 pub mod export;
 pub mod geometry;
 pub mod image_io;
+pub mod metrics;
 pub mod ml;
 pub mod path;
 pub mod progress;

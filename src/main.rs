@@ -95,6 +95,65 @@ struct InpaintArgs {
 enum EvalCommand {
     /// Depth accuracy against ground-truth disparity (scale-and-shift aligned, MiDaS protocol).
     Depth(EvalDepthArgs),
+    /// Novel-view synthesis on a stereo pair: render the right view from the left image, with
+    /// the paper's ablations as rows.
+    Nvs(EvalNvsArgs),
+}
+
+#[derive(Args, Debug)]
+struct EvalNvsArgs {
+    /// The left image (the input).
+    #[arg(long)]
+    left: PathBuf,
+    /// The right image (the answer).
+    #[arg(long)]
+    right: PathBuf,
+    /// Ground-truth disparity of the left image (8/16-bit PNG or .npy), 0 = unknown.
+    #[arg(long)]
+    gt_disparity: PathBuf,
+    /// The disparity file holds disparity × this factor (e.g. 256 for aloe_disparity_q.png).
+    #[arg(long, default_value_t = 1.0)]
+    disparity_factor: f32,
+    /// Focal length, pixels (of the files as given).
+    #[arg(long)]
+    focal: f32,
+    /// Baseline: the right camera's translation along +x (depth comes out in its unit).
+    #[arg(long)]
+    baseline: f32,
+    /// Depth of the scene: the ground truth, or the depth stage's estimate aligned to it.
+    #[arg(long, value_enum, default_value = "oracle")]
+    depth: NvsDepthArg,
+    /// An ONNX depth model manifest for --depth estimated (default: the classical estimator).
+    #[arg(long)]
+    depth_model: Option<PathBuf>,
+    /// Resample the pair by this factor first, in (0, 1].
+    #[arg(long, default_value_t = 1.0)]
+    scale: f32,
+    /// Left border strip left out of the view score, pixels of the files as given (scaled
+    /// with --scale).
+    #[arg(long, default_value_t = 40)]
+    border: usize,
+    /// Steps from the left to the right camera (per-frame generation, consistency).
+    #[arg(long, default_value_t = 8)]
+    steps: usize,
+    /// Inpainting preset: draft, preview or final.
+    #[arg(long, default_value = "preview")]
+    inpaint_preset: String,
+    /// Layer-based depth on or off (default: off for oracle depth, on for estimated).
+    #[arg(long)]
+    layer_depth: Option<bool>,
+    /// Also write each row's right view into this folder.
+    #[arg(long)]
+    save: Option<PathBuf>,
+    /// Print JSON instead of a markdown table.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum NvsDepthArg {
+    Oracle,
+    Estimated,
 }
 
 #[derive(Args, Debug)]
@@ -127,6 +186,12 @@ enum BenchCommand {
     /// Renderers: frames/s and points/s for 0.5 M, 2 M and 8 M points at 720p and 1080p, GPU
     /// and CPU side by side, with the CPU bandwidth floor.
     Render,
+    /// Every stage for each inpainting preset on each photo: seconds, peak memory, quality
+    /// against the final preset; writes bench.md, bench.json and quality_vs_time.png.
+    Scene(BenchSceneArgs),
+    /// One case of `bench scene` (run in a child process for a clean peak memory); prints JSON.
+    #[command(hide = true)]
+    SceneCase(BenchSceneCaseArgs),
 }
 
 #[derive(Args, Debug)]
@@ -149,6 +214,36 @@ struct BenchMotionArgs {
     /// Loop length N.
     #[arg(long, default_value_t = 100)]
     frames: u32,
+}
+
+#[derive(Args, Debug)]
+struct BenchSceneArgs {
+    /// Output folder.
+    #[arg(long)]
+    out: PathBuf,
+    /// Photos (default: shared/data/photos/*.jpg above the working directory, else the
+    /// tests/data copies). Repeatable.
+    #[arg(long)]
+    photo: Vec<PathBuf>,
+    /// Presets to run, comma-separated.
+    #[arg(long, default_value = "draft,preview,final", value_delimiter = ',')]
+    presets: Vec<String>,
+    /// Run every case in this process (peak memory is then cumulative).
+    #[arg(long)]
+    in_process: bool,
+    /// Keep the rendered middle frames in OUT/frames (default: a temporary folder).
+    #[arg(long)]
+    keep_frames: bool,
+}
+
+#[derive(Args, Debug)]
+struct BenchSceneCaseArgs {
+    #[arg(long)]
+    image: PathBuf,
+    #[arg(long)]
+    preset: String,
+    #[arg(long)]
+    frame: PathBuf,
 }
 
 #[derive(Args, Debug)]
@@ -371,11 +466,14 @@ fn main() -> ExitCode {
         Command::Render(args) => render(*args, cancel),
         Command::Depth(args) => depth(args, cancel),
         Command::Eval(EvalCommand::Depth(args)) => eval_depth(args, cancel),
+        Command::Eval(EvalCommand::Nvs(args)) => eval_nvs(args, cancel),
         Command::Bench(BenchCommand::Depth(args)) => bench_depth(args),
         Command::Bench(BenchCommand::Inpaint(args)) => bench_inpaint(args, cancel),
         Command::Bench(BenchCommand::Motion(args)) => bench_motion(args),
         Command::Bench(BenchCommand::Render) => bench_render(),
         Command::Inpaint(args) => inpaint(args, cancel),
+        Command::Bench(BenchCommand::Scene(args)) => bench_scene(args, cancel),
+        Command::Bench(BenchCommand::SceneCase(args)) => bench_scene_case(args),
         Command::Doctor(args) => doctor(args),
     };
     match result {
@@ -699,6 +797,138 @@ fn bench_depth(args: BenchDepthArgs) -> anyhow::Result<()> {
     let image = makeit4d::image_io::load_image(&args.image)?;
     let bench = makeit4d::stages::depth::eval::bench_classical_depth(&image.rgb, args.runs.max(1))?;
     print!("{}", bench.to_markdown());
+    Ok(())
+}
+
+fn eval_nvs(args: EvalNvsArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::eval::nvs::{NvsDepth, NvsOptions, StereoPair, eval_nvs};
+    let pair = StereoPair::load(
+        &args.left,
+        &args.right,
+        &args.gt_disparity,
+        args.disparity_factor,
+        args.focal,
+        args.baseline,
+    )?
+    .scaled(args.scale)?;
+    let mut options = NvsOptions {
+        depth: match args.depth {
+            NvsDepthArg::Oracle => NvsDepth::Oracle,
+            NvsDepthArg::Estimated => NvsDepth::Estimated,
+        },
+        border_px: (args.border as f32 * args.scale).round() as usize,
+        steps: args.steps,
+        preset: args.inpaint_preset.parse()?,
+        layer_depth: args.layer_depth,
+        save_dir: args.save.clone(),
+        ..NvsOptions::default()
+    };
+
+    if let Some(m) = &args.depth_model {
+        options.depth_settings.method = makeit4d::stages::depth::DepthMethod::Onnx;
+        options.depth_settings.model = Some(m.clone());
+    }
+    let (bar, progress) = progress_bar(cancel);
+    let table = eval_nvs(&pair, &options, &progress);
+    bar.finish_and_clear();
+    let table = table?;
+    if args.json {
+        println!("{}", table.to_json()?);
+    } else {
+        print!("{}", table.to_markdown());
+    }
+    Ok(())
+}
+
+fn bench_scene(args: BenchSceneArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::eval::bench::default_photos;
+    use makeit4d::stages::inpaint::InpaintPreset;
+    let photos = if args.photo.is_empty() {
+        default_photos()
+    } else {
+        args.photo.clone()
+    };
+    if photos.is_empty() {
+        bail!("no photos to benchmark (pass --photo)");
+    }
+    let presets = args
+        .presets
+        .iter()
+        .map(|p| p.parse::<InpaintPreset>())
+        .collect::<Result<Vec<_>, _>>()?;
+    let frames_dir = if args.keep_frames {
+        args.out.join("frames")
+    } else {
+        std::env::temp_dir().join(format!("makeit4d-bench-{}", std::process::id()))
+    };
+    std::fs::create_dir_all(&frames_dir)
+        .with_context(|| format!("{}: cannot create folder", frames_dir.display()))?;
+    let result = bench_scene_cases(&args, &photos, &presets, &frames_dir, &cancel);
+    if !args.keep_frames {
+        let _ = std::fs::remove_dir_all(&frames_dir);
+    }
+    let report = result?;
+    print!("{}", report.to_markdown());
+    println!(
+        "wrote {} (bench.md, bench.json, quality_vs_time.png)",
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// Runs every case of `bench scene` (each in a child process unless `--in-process`), scores
+/// them and writes the report.
+fn bench_scene_cases(
+    args: &BenchSceneArgs,
+    photos: &[PathBuf],
+    presets: &[makeit4d::stages::inpaint::InpaintPreset],
+    frames_dir: &std::path::Path,
+    cancel: &AtomicBool,
+) -> anyhow::Result<makeit4d::eval::bench::SceneBenchReport> {
+    use makeit4d::eval::bench::{SceneBenchCase, run_scene_case, score_cases};
+    let exe = std::env::current_exe().context("locating the makeit4d executable")?;
+    let mut cases: Vec<SceneBenchCase> = Vec::new();
+    for photo in photos {
+        for &preset in presets {
+            if cancel.load(std::sync::atomic::Ordering::Relaxed) {
+                return Err(Error::Cancelled.into());
+            }
+            let stem = photo.file_stem().unwrap_or_default().to_string_lossy();
+            let frame = frames_dir.join(format!("{stem}_{preset}.png"));
+            eprintln!("bench: {} {preset}", photo.display());
+            let case = if args.in_process {
+                run_scene_case(photo, preset, &frame, &Progress::none())?
+            } else {
+                let out = std::process::Command::new(&exe)
+                    .args(["bench", "scene-case", "--preset", preset.name()])
+                    .arg("--image")
+                    .arg(photo)
+                    .arg("--frame")
+                    .arg(&frame)
+                    .output()
+                    .context("running a benchmark case")?;
+                if !out.status.success() {
+                    bail!(
+                        "benchmark case {} {preset} failed: {}",
+                        photo.display(),
+                        String::from_utf8_lossy(&out.stderr).trim()
+                    );
+                }
+                serde_json::from_slice(&out.stdout).context("reading a benchmark case")?
+            };
+            cases.push(case);
+        }
+    }
+    let report = score_cases(cases)?;
+    report.write(&args.out)?;
+    Ok(report)
+}
+
+fn bench_scene_case(args: BenchSceneCaseArgs) -> anyhow::Result<()> {
+    let preset = args.preset.parse()?;
+    let case =
+        makeit4d::eval::bench::run_scene_case(&args.image, preset, &args.frame, &Progress::none())?;
+    println!("{}", serde_json::to_string(&case)?);
     Ok(())
 }
 

@@ -176,6 +176,7 @@ pub struct SceneBuilder {
     cloud: Option<Slot<PointCloud>>,
     motion: Option<Slot<Option<Arc<PreparedMotion>>>>,
     runs: std::collections::BTreeMap<Stage, usize>,
+    seconds: std::collections::BTreeMap<Stage, f64>,
 }
 
 /// Hashes `parts` (serialised as JSON) together with the upstream key.
@@ -224,8 +225,15 @@ impl SceneBuilder {
         &self.runs
     }
 
-    fn ran(&mut self, stage: Stage) {
+    /// Wall time of each stage's most recent run, seconds (stages that never ran are absent;
+    /// a stage re-used from the cache keeps the time of the run that made its output).
+    pub fn last_run_seconds(&self) -> &std::collections::BTreeMap<Stage, f64> {
+        &self.seconds
+    }
+
+    fn ran(&mut self, stage: Stage, started: std::time::Instant) {
         *self.runs.entry(stage).or_insert(0) += 1;
+        self.seconds.insert(stage, started.elapsed().as_secs_f64());
     }
 
     /// Builds (or re-uses) every stage for `project`.
@@ -245,9 +253,10 @@ impl SceneBuilder {
         let input = match &self.load {
             Some(s) if s.key == key => s.value.clone(),
             _ => {
+                let started = std::time::Instant::now();
                 p.report(0.0, Stage::Load.name());
                 let v = Arc::new(load_image(&project.input)?);
-                self.ran(Stage::Load);
+                self.ran(Stage::Load, started);
                 self.load = Some(Slot {
                     key,
                     value: v.clone(),
@@ -265,6 +274,7 @@ impl SceneBuilder {
         let depth = match &self.depth {
             Some(s) if s.key == key => s.value.clone(),
             _ => {
+                let started = std::time::Instant::now();
                 p.report(0.0, Stage::Depth.name());
                 let v = Arc::new(run_depth_stage(
                     &project.depth,
@@ -272,7 +282,7 @@ impl SceneBuilder {
                     &intrinsics,
                     &p,
                 )?);
-                self.ran(Stage::Depth);
+                self.ran(Stage::Depth, started);
                 self.depth = Some(Slot {
                     key,
                     value: v.clone(),
@@ -305,6 +315,7 @@ impl SceneBuilder {
         let canvas = match &self.canvas {
             Some(s) if s.key == key => s.value.clone(),
             _ => {
+                let started = std::time::Instant::now();
                 p.report(0.0, Stage::Canvas.name());
                 let v = Arc::new(build_canvas(
                     project,
@@ -317,7 +328,7 @@ impl SceneBuilder {
                     inpainter.as_ref(),
                     &p,
                 )?);
-                self.ran(Stage::Canvas);
+                self.ran(Stage::Canvas, started);
                 self.canvas = Some(Slot {
                     key,
                     value: v.clone(),
@@ -341,9 +352,10 @@ impl SceneBuilder {
         let plan = match &self.layers {
             Some(s) if s.key == key => s.value.clone(),
             _ => {
+                let started = std::time::Instant::now();
                 p.report(0.0, Stage::Layers.name());
                 let v = Arc::new(plan_layers(&canvas.depth, &params, &p)?);
-                self.ran(Stage::Layers);
+                self.ran(Stage::Layers, started);
                 self.layers = Some(Slot {
                     key,
                     value: v.clone(),
@@ -358,6 +370,7 @@ impl SceneBuilder {
         let inpainted = match &self.inpaint {
             Some(s) if s.key == key => s.value.clone(),
             _ => {
+                let started = std::time::Instant::now();
                 p.report(0.0, Stage::Inpaint.name());
                 let v = if project.layers.inpaint && plan.regions.len() > 1 {
                     inpaint_layers(
@@ -371,7 +384,7 @@ impl SceneBuilder {
                     uninpainted_layers(&canvas.image, &plan)
                 };
                 let v = Arc::new(v);
-                self.ran(Stage::Inpaint);
+                self.ran(Stage::Inpaint, started);
                 self.inpaint = Some(Slot {
                     key,
                     value: v.clone(),
@@ -386,6 +399,7 @@ impl SceneBuilder {
         let layered = match &self.layer_depth {
             Some(s) if s.key == key => s.value.clone(),
             _ => {
+                let started = std::time::Instant::now();
                 let v = if project.layers.layer_depth
                     && project.layers.inpaint
                     && inpainted.layers.len() > 1
@@ -403,7 +417,7 @@ impl SceneBuilder {
                 } else {
                     inpainted.clone()
                 };
-                self.ran(Stage::LayerDepth);
+                self.ran(Stage::LayerDepth, started);
                 self.layer_depth = Some(Slot {
                     key,
                     value: v.clone(),
@@ -418,6 +432,7 @@ impl SceneBuilder {
         let cloud = match &self.cloud {
             Some(s) if s.key == key => s.value.clone(),
             _ => {
+                let started = std::time::Instant::now();
                 p.report(0.0, Stage::Cloud.name());
                 let mut c = layered.point_cloud(&canvas.intrinsics)?;
                 // Outpainted pixels count as synthesised content too.
@@ -434,7 +449,7 @@ impl SceneBuilder {
                     apply_input_alpha(&mut c, alpha, &canvas.layout);
                 }
                 let v = Arc::new(c);
-                self.ran(Stage::Cloud);
+                self.ran(Stage::Cloud, started);
                 self.cloud = Some(Slot {
                     key,
                     value: v.clone(),
@@ -449,6 +464,7 @@ impl SceneBuilder {
         let motion = match &self.motion {
             Some(s) if s.key == key => (*s.value).clone(),
             _ => {
+                let started = std::time::Instant::now();
                 let v = if project.motion.is_still() {
                     None
                 } else {
@@ -462,7 +478,7 @@ impl SceneBuilder {
                     )?;
                     Some(Arc::new(PreparedMotion { field, motion_loop }))
                 };
-                self.ran(Stage::Motion);
+                self.ran(Stage::Motion, started);
                 self.motion = Some(Slot {
                     key,
                     value: Arc::new(v.clone()),

@@ -10,7 +10,6 @@ pub mod bench;
 pub mod command;
 mod common;
 pub mod harmonic;
-mod metrics;
 pub mod onnx;
 pub mod patchmatch;
 

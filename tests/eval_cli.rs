@@ -1,0 +1,164 @@
+//! `makeit4d eval nvs` and `makeit4d bench scene` end to end on the small copies in tests/data.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn exe() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_makeit4d"))
+}
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+fn nvs(extra: &[&str]) -> Output {
+    exe()
+        .args(["eval", "nvs", "--left"])
+        .arg(data("aloe_left_q.jpg"))
+        .arg("--right")
+        .arg(data("aloe_right_q.jpg"))
+        .arg("--gt-disparity")
+        .arg(data("aloe_disparity_q.png"))
+        // Quarter size: f = 3740/4 px, disparities stored ×256.
+        .args([
+            "--disparity-factor",
+            "256",
+            "--focal",
+            "935",
+            "--baseline",
+            "160",
+        ])
+        .args([
+            "--border",
+            "10",
+            "--steps",
+            "2",
+            "--inpaint-preset",
+            "draft",
+        ])
+        .args(extra)
+        .output()
+        .expect("spawn makeit4d")
+}
+
+fn row<'a>(json: &'a serde_json::Value, name: &str) -> &'a serde_json::Value {
+    json["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["method"] == name)
+        .unwrap_or_else(|| panic!("no row {name}: {json}"))
+}
+
+#[test]
+fn eval_nvs_on_quarter_aloe_with_oracle_depth() {
+    let out = nvs(&["--json"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["rows"].as_array().unwrap().len(), 6, "{json}");
+    assert_eq!(json["width"], 320);
+    for r in json["rows"].as_array().unwrap() {
+        for key in [
+            "psnr_db",
+            "ssim",
+            "ssim_luma",
+            "psnr_known_db",
+            "ssim_known",
+            "seconds",
+        ] {
+            let v = r[key].as_f64().unwrap_or(f64::NAN);
+            assert!(v.is_finite(), "{key} of {}: {v}", r["name"]);
+        }
+    }
+    let full = row(&json, "full");
+    let noop = row(&json, "no_op");
+    let per_frame = row(&json, "per_frame");
+    // Quality gates with margin (measured: full ≈ 24.8 dB, known ≈ 27.9 dB, no-op ≈ 15.6 dB).
+    let psnr = |r: &serde_json::Value, k: &str| r[k].as_f64().unwrap();
+    assert!(
+        psnr(full, "psnr_db") > psnr(noop, "psnr_db") + 6.0,
+        "{json}"
+    );
+    assert!(psnr(full, "psnr_known_db") > 26.0, "{json}");
+    assert!(psnr(full, "ssim") > 0.7, "{json}");
+    assert!(psnr(full, "hole_percent") < 0.5, "{json}");
+    // Per-frame generation drifts: worse consistency than the one-scene method.
+    assert!(
+        psnr(per_frame, "consistency") > psnr(full, "consistency"),
+        "{json}"
+    );
+    assert!(noop["consistency"].is_null());
+
+    // The markdown form has the same rows.
+    let md = nvs(&[]);
+    let text = String::from_utf8_lossy(&md.stdout);
+    assert!(md.status.success());
+    for name in [
+        "full",
+        "w/o outpainting",
+        "w/o layer inpainting",
+        "per-frame",
+        "naive",
+    ] {
+        assert!(text.contains(name), "{text}");
+    }
+}
+
+#[test]
+fn eval_nvs_refuses_bad_inputs_with_one_line() {
+    // The disparity of another size than the images.
+    let out = exe()
+        .args(["eval", "nvs", "--left"])
+        .arg(data("aloe_left_q.jpg"))
+        .arg("--right")
+        .arg(data("aloe_right_q.jpg"))
+        .arg("--gt-disparity")
+        .arg(data("ssim_a.png"))
+        .args(["--focal", "935", "--baseline", "160"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+    assert!(stderr.contains("one size"), "{stderr}");
+    // A bad focal length and a bad scale.
+    for extra in [["--focal", "-1"], ["--scale", "2"]] {
+        let out = nvs(&extra);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{stderr}");
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+    }
+}
+
+#[test]
+fn bench_scene_writes_table_json_and_plot() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("bench");
+    let out = exe()
+        .args(["bench", "scene", "--presets", "draft,final", "--photo"])
+        .arg(data("starry_night_320.jpg"))
+        .arg("--out")
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let md = std::fs::read_to_string(out_dir.join("bench.md")).unwrap();
+    assert!(md.contains("| starry_night_320.jpg |"), "{md}");
+    assert!(md.contains("| draft |") && md.contains("reference"), "{md}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("bench.json")).unwrap())
+            .unwrap();
+    let rows = json["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 2);
+    // A clean per-process peak memory, and a finite quality figure for draft.
+    assert!(rows[0]["peak_memory_mib"].as_f64().unwrap() > 1.0);
+    assert!(rows[0]["psnr_vs_final_db"].as_f64().unwrap().is_finite());
+    let png = image::open(out_dir.join("quality_vs_time.png")).unwrap();
+    assert_eq!((png.width(), png.height()), (900, 520));
+    // The frames went to a temporary folder, not into the output.
+    assert!(!out_dir.join("frames").exists());
+}
