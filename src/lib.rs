@@ -2,6 +2,7 @@
 //! ACM MM 2023). This library holds the whole method with no GUI in it; the command line and
 //! the editor are thin front ends over it.
 
+pub mod app;
 pub mod error;
 pub mod eval;
 pub mod export;

@@ -29,12 +29,15 @@ const EXIT_CANCELLED: u8 = 130;
     about = "One still photo to a consistent, living fly-through video (Make-It-4D)."
 )]
 struct Cli {
+    /// Without a subcommand the editor opens.
     #[command(subcommand)]
-    command: Command,
+    command: Option<Command>,
 }
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Open the editor (the default), optionally with a photo or a project file.
+    Edit(EditArgs),
     /// Render a photo (or a project) to a folder of PNG frames.
     Render(Box<RenderArgs>),
     /// Estimate the depth of a photo on its own (16-bit disparity PNG + JSON sidecar).
@@ -49,6 +52,12 @@ enum Command {
     Bench(BenchCommand),
     /// Print what this machine offers: GPU adapter, ONNX Runtime, models, ffmpeg.
     Doctor(DoctorArgs),
+}
+
+#[derive(Args, Debug)]
+struct EditArgs {
+    /// A photo or a project file (.json) to open.
+    path: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -462,7 +471,11 @@ fn main() -> ExitCode {
             }
         });
     }
-    let result = match cli.command {
+    let result = match cli
+        .command
+        .unwrap_or(Command::Edit(EditArgs { path: None }))
+    {
+        Command::Edit(args) => makeit4d::app::run(args.path),
         Command::Render(args) => render(*args, cancel),
         Command::Depth(args) => depth(args, cancel),
         Command::Eval(EvalCommand::Depth(args)) => eval_depth(args, cancel),

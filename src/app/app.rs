@@ -1,0 +1,1308 @@
+//! The editor window: layout, documents, undo, shortcuts, persistence, and the glue between
+//! the panels and the workers.
+
+use super::STORAGE_KEY;
+use super::history::History;
+use super::images::Textures;
+use super::panels::{
+    CameraInfo, FlyCamera, PanelContext, PanelMessage, PreviewInfo, Probe, Request, StagePanel,
+    Tab, all_panels,
+};
+use super::timeline::{TimelineState, timeline_ui};
+use super::viewport::{CpuPreview, PreviewRenderer};
+use super::worker::{
+    Command, Event, JobKind, JobStatus, PreviewRequest, PreviewWorker, SceneSnapshot, SceneWorker,
+};
+use crate::geometry::{Intrinsics, View};
+use crate::path::{CameraPath, Keyframe};
+use crate::project::Project;
+use crate::scene::Stage;
+use eframe::egui::{self, Color32, Key, KeyboardShortcut, Modifiers, RichText};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::mpsc::{Receiver, sync_channel};
+use std::time::{Duration, Instant};
+
+/// How many recent files the File menu lists.
+const MAX_RECENT: usize = 10;
+/// Messages disappear after this long (errors stay until dismissed).
+const NOTICE_SECS: f64 = 8.0;
+/// Frame-time samples kept.
+const FRAME_SAMPLES: usize = 600;
+
+/// How the editor starts.
+#[derive(Default)]
+pub struct EditorOptions {
+    /// An image or project to open.
+    pub open: Option<PathBuf>,
+    /// The preview renderer (default: [`CpuPreview`]).
+    pub renderer: Option<Box<dyn PreviewRenderer>>,
+    /// Do not read or write the persisted settings (tests).
+    pub ephemeral: bool,
+}
+
+/// Settings kept between sessions (eframe storage, key [`STORAGE_KEY`]).
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+struct Persisted {
+    recent: Vec<PathBuf>,
+    tab: Tab,
+    preview_side: usize,
+}
+
+impl Default for Persisted {
+    fn default() -> Self {
+        Self {
+            recent: Vec::new(),
+            tab: Tab::Input,
+            preview_side: 360,
+        }
+    }
+}
+
+/// The open project.
+struct Document {
+    project: Project,
+    /// The project file, once saved or when opened from one.
+    file: Option<PathBuf>,
+    /// Counts edits; a scene carries the generation it was built from.
+    generation: u64,
+    saved_generation: u64,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum Level {
+    Info,
+    Error,
+}
+
+struct Notice {
+    text: String,
+    level: Level,
+    at: Instant,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum DialogKind {
+    Open,
+    SaveAs,
+    ExportFolder,
+}
+
+/// UI frame durations (time spent in [`eframe::App::ui`]), to check the UI stays responsive
+/// while stages recompute.
+#[derive(Default)]
+pub struct FrameTimes {
+    samples: std::collections::VecDeque<(f32, bool)>,
+}
+
+impl FrameTimes {
+    fn push(&mut self, ms: f32, busy: bool) {
+        if self.samples.len() == FRAME_SAMPLES {
+            self.samples.pop_front();
+        }
+        self.samples.push_back((ms, busy));
+    }
+
+    /// `(count, mean ms, max ms)` over the kept frames drawn while a job ran (`busy`) or not.
+    pub fn stats(&self, busy: bool) -> (usize, f32, f32) {
+        let v: Vec<f32> = self
+            .samples
+            .iter()
+            .filter(|s| s.1 == busy)
+            .map(|s| s.0)
+            .collect();
+        let max = v.iter().copied().fold(0.0, f32::max);
+        let mean = v.iter().sum::<f32>() / v.len().max(1) as f32;
+        (v.len(), mean, max)
+    }
+}
+
+/// The editor application.
+pub struct EditorApp {
+    doc: Option<Document>,
+    history: History,
+    scene_worker: Option<SceneWorker>,
+    preview_worker: Option<PreviewWorker>,
+    snapshot: Option<Arc<SceneSnapshot>>,
+    build_error: Option<(u64, String)>,
+    textures: Textures,
+    panels: Vec<Box<dyn StagePanel>>,
+    tab: Tab,
+    timeline: TimelineState,
+    camera: CameraInfo,
+    camera_key: Option<String>,
+    preview: PreviewInfo,
+    preview_id: u64,
+    preview_key: Option<(u64, usize, String, usize)>,
+    notices: Vec<Notice>,
+    persisted: Persisted,
+    ephemeral: bool,
+    adapter: String,
+    ort: String,
+    ffmpeg: bool,
+    probe: Probe,
+    frame_times: FrameTimes,
+    frame_log: bool,
+    dialog: Option<(DialogKind, Receiver<Option<PathBuf>>, Instant)>,
+    typed_path: String,
+    job: JobStatus,
+    open_on_start: Option<PathBuf>,
+    last_build_stages: Vec<Stage>,
+    last_export: Option<String>,
+}
+
+impl EditorApp {
+    /// Creates the editor (eframe's creation hook).
+    pub fn new(cc: &eframe::CreationContext<'_>, options: EditorOptions) -> Self {
+        let ctx = cc.egui_ctx.clone();
+        let persisted = if options.ephemeral {
+            Persisted::default()
+        } else {
+            cc.storage
+                .and_then(|s| eframe::get_value::<Persisted>(s, STORAGE_KEY))
+                .unwrap_or_default()
+        };
+        let adapter = match &cc.wgpu_render_state {
+            Some(rs) => {
+                let info = rs.adapter.get_info();
+                format!("{} ({:?})", info.name, info.backend)
+            }
+            None => "no GPU adapter".to_string(),
+        };
+        let mut notices = Vec::new();
+        let scene_worker = match SceneWorker::start(ctx.clone()) {
+            Ok(w) => Some(w),
+            Err(e) => {
+                notices.push(Notice {
+                    text: format!("cannot start the scene worker thread: {e}"),
+                    level: Level::Error,
+                    at: Instant::now(),
+                });
+                None
+            }
+        };
+        let renderer = options
+            .renderer
+            .unwrap_or_else(|| Box::new(CpuPreview::default()));
+        let preview_worker = match PreviewWorker::start(ctx.clone(), renderer) {
+            Ok(w) => Some(w),
+            Err(e) => {
+                notices.push(Notice {
+                    text: format!("cannot start the preview thread: {e}"),
+                    level: Level::Error,
+                    at: Instant::now(),
+                });
+                None
+            }
+        };
+        let ort = {
+            let s = crate::ml::ort_status();
+            match &s.found {
+                Some((_, version)) => format!("ONNX Runtime {version}"),
+                None => "ONNX Runtime not found (classical depth, PatchMatch)".to_string(),
+            }
+        };
+        let ffmpeg = std::process::Command::new(
+            crate::export::VideoOptions::new(crate::export::VideoFormat::Mp4).ffmpeg,
+        )
+        .arg("-version")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+        let renderer_name = preview_worker.as_ref().map_or_else(
+            || "no preview".to_string(),
+            |p| p.renderer_name().to_string(),
+        );
+        Self {
+            doc: None,
+            history: History::default(),
+            scene_worker,
+            preview_worker,
+            snapshot: None,
+            build_error: None,
+            textures: Textures::default(),
+            panels: all_panels(),
+            tab: persisted.tab,
+            timeline: TimelineState {
+                looping: true,
+                ..Default::default()
+            },
+            camera: CameraInfo::default(),
+            camera_key: None,
+            preview: PreviewInfo {
+                texture: None,
+                size: [0, 0],
+                frame_index: 0,
+                hole_fraction: 0.0,
+                seconds: 0.0,
+                view: None,
+                fly: FlyCamera::default(),
+                max_side: persisted.preview_side,
+                renderer: renderer_name,
+            },
+            preview_id: 0,
+            preview_key: None,
+            notices,
+            ephemeral: options.ephemeral,
+            persisted,
+            adapter,
+            ort,
+            ffmpeg,
+            probe: Probe::default(),
+            frame_times: FrameTimes::default(),
+            frame_log: std::env::var_os("MAKEIT4D_FRAME_LOG").is_some(),
+            dialog: None,
+            job: JobStatus::default(),
+            open_on_start: options.open,
+            last_build_stages: Vec::new(),
+            typed_path: String::new(),
+            last_export: None,
+        }
+    }
+
+    // ---- Queries (used by the tests and the status bar) ----
+
+    /// The project being edited.
+    pub fn project(&self) -> Option<&Project> {
+        self.doc.as_ref().map(|d| &d.project)
+    }
+
+    /// The edit generation of the project (0 before anything is open).
+    pub fn generation(&self) -> u64 {
+        self.doc.as_ref().map_or(0, |d| d.generation)
+    }
+
+    /// The scene on screen, if any.
+    pub fn snapshot(&self) -> Option<&Arc<SceneSnapshot>> {
+        self.snapshot.as_ref()
+    }
+
+    /// True when the scene on screen belongs to the current project and nothing is running.
+    pub fn is_idle(&self) -> bool {
+        let current = self
+            .snapshot
+            .as_ref()
+            .is_some_and(|s| Some(s.generation) == self.doc.as_ref().map(|d| d.generation));
+        let failed = self
+            .build_error
+            .as_ref()
+            .is_some_and(|(g, _)| Some(*g) == self.doc.as_ref().map(|d| d.generation));
+        (current || failed)
+            && self.job.kind.is_none()
+            && !self
+                .scene_worker
+                .as_ref()
+                .is_some_and(|w| w.has_pending_build())
+    }
+
+    /// The running job, if any.
+    pub fn job(&self) -> &JobStatus {
+        &self.job
+    }
+
+    /// Where things were drawn in the last frame.
+    pub fn probe(&self) -> &Probe {
+        &self.probe
+    }
+
+    /// The selected tab.
+    pub fn tab(&self) -> Tab {
+        self.tab
+    }
+
+    /// Selects a tab.
+    pub fn select_tab(&mut self, tab: Tab) {
+        self.tab = tab;
+    }
+
+    /// The current frame.
+    pub fn frame(&self) -> usize {
+        self.timeline.frame
+    }
+
+    /// Hole fractions of the rendered preview frames.
+    pub fn hole_fractions(&self) -> &std::collections::BTreeMap<usize, f32> {
+        &self.timeline.hole_fractions
+    }
+
+    /// The messages on screen, oldest first.
+    pub fn notices(&self) -> Vec<String> {
+        self.notices.iter().map(|n| n.text.clone()).collect()
+    }
+
+    /// Dismisses every message.
+    pub fn clear_notices(&mut self) {
+        self.notices.clear();
+    }
+
+    /// UI frame durations.
+    pub fn frame_times(&self) -> &FrameTimes {
+        &self.frame_times
+    }
+
+    /// Jumps to output frame `frame`.
+    pub fn seek(&mut self, frame: usize) {
+        self.timeline.seek(frame);
+    }
+
+    /// The stages the last finished build ran (the rest came from the cache).
+    pub fn last_build_stages(&self) -> &[Stage] {
+        &self.last_build_stages
+    }
+
+    /// Sets the export folder (what the Browse… dialog does).
+    pub fn set_export_folder(&mut self, dir: &Path) {
+        let m = PanelMessage::ExportFolder(dir.to_path_buf());
+        for p in &mut self.panels {
+            p.on_message(&m);
+        }
+    }
+
+    /// The last export's summary line, once one finished.
+    pub fn last_export(&self) -> Option<&str> {
+        self.last_export.as_deref()
+    }
+
+    /// True when there is an edit to undo.
+    pub fn can_undo(&self) -> bool {
+        self.history.undo_label().is_some()
+    }
+
+    // ---- Documents ----
+
+    fn notify(&mut self, text: impl Into<String>) {
+        self.notices.push(Notice {
+            text: text.into(),
+            level: Level::Info,
+            at: Instant::now(),
+        });
+    }
+
+    fn error(&mut self, text: impl Into<String>) {
+        self.notices.push(Notice {
+            text: text.into(),
+            level: Level::Error,
+            at: Instant::now(),
+        });
+    }
+
+    /// Opens an image (a new project with default settings) or a project file (`.json`).
+    pub fn open(&mut self, path: &Path) {
+        let is_project = path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("json"));
+        let (project, file) = if is_project {
+            match Project::load(path) {
+                Ok(p) => (p, Some(path.to_path_buf())),
+                Err(e) => {
+                    self.error(format!("cannot open {}: {e:#}", path.display()));
+                    return;
+                }
+            }
+        } else if !path.is_file() {
+            self.error(format!("cannot open {}: no such file", path.display()));
+            return;
+        } else {
+            (Project::new(path), None)
+        };
+        self.set_document(project, file);
+        self.persisted.recent.retain(|p| p != path);
+        self.persisted.recent.insert(0, path.to_path_buf());
+        self.persisted.recent.truncate(MAX_RECENT);
+    }
+
+    /// Replaces the document with `project` (no undo across documents).
+    pub fn set_document(&mut self, project: Project, file: Option<PathBuf>) {
+        let generation = self.generation() + 1;
+        self.history.clear();
+        self.snapshot = None;
+        self.build_error = None;
+        self.timeline = TimelineState {
+            looping: true,
+            ..Default::default()
+        };
+        self.preview.texture = None;
+        self.preview.fly = FlyCamera::default();
+        self.preview_key = None;
+        self.camera_key = None;
+        self.camera = CameraInfo::default();
+        if let Some(w) = &mut self.scene_worker {
+            w.build(generation, &project);
+        }
+        self.doc = Some(Document {
+            project,
+            file,
+            generation,
+            saved_generation: generation,
+        });
+    }
+
+    /// Applies an edit: records the current project for undo, then rebuilds.
+    pub fn apply_edit(&mut self, label: &str, project: Project) {
+        let Some(doc) = &mut self.doc else { return };
+        if project == doc.project {
+            return;
+        }
+        let before = std::mem::replace(&mut doc.project, project);
+        self.history.record(label, before);
+        self.rebuild();
+    }
+
+    fn rebuild(&mut self) {
+        let Some(doc) = &mut self.doc else { return };
+        doc.generation += 1;
+        if let Some(w) = &mut self.scene_worker {
+            w.build(doc.generation, &doc.project);
+        }
+    }
+
+    /// Undoes the last edit.
+    pub fn undo(&mut self) {
+        let Some(doc) = &mut self.doc else { return };
+        if let Some((label, project)) = self.history.undo(&doc.project) {
+            doc.project = project;
+            self.rebuild();
+            self.notify(format!("undid: {label}"));
+        }
+    }
+
+    /// Redoes the last undone edit.
+    pub fn redo(&mut self) {
+        let Some(doc) = &mut self.doc else { return };
+        if let Some((label, project)) = self.history.redo(&doc.project) {
+            doc.project = project;
+            self.rebuild();
+            self.notify(format!("redid: {label}"));
+        }
+    }
+
+    /// Saves the project to `path`.
+    pub fn save_to(&mut self, path: &Path) {
+        let Some(doc) = &mut self.doc else { return };
+        match doc.project.save(path) {
+            Ok(()) => {
+                doc.file = Some(path.to_path_buf());
+                doc.saved_generation = doc.generation;
+                self.persisted.recent.retain(|p| p != path);
+                self.persisted.recent.insert(0, path.to_path_buf());
+                self.persisted.recent.truncate(MAX_RECENT);
+                self.notify(format!("saved {}", path.display()));
+            }
+            Err(e) => self.error(format!("cannot save {}: {e:#}", path.display())),
+        }
+    }
+
+    fn save(&mut self) {
+        match self.doc.as_ref().and_then(|d| d.file.clone()) {
+            Some(file) => self.save_to(&file),
+            None if self.doc.is_some() => self.start_dialog(DialogKind::SaveAs),
+            None => {}
+        }
+    }
+
+    /// Runs a file dialog on its own thread (the portal call blocks) and picks the answer up
+    /// in a later frame.
+    fn start_dialog(&mut self, kind: DialogKind) {
+        if self.dialog.is_some() {
+            return;
+        }
+        let (tx, rx) = sync_channel(1);
+        let start_dir = self
+            .doc
+            .as_ref()
+            .and_then(|d| d.project.input.parent().map(Path::to_path_buf));
+        let spawned = std::thread::Builder::new()
+            .name("makeit4d-dialog".into())
+            .spawn(move || {
+                let mut dialog = rfd::FileDialog::new();
+                if let Some(dir) = start_dir {
+                    dialog = dialog.set_directory(dir);
+                }
+                let picked = match kind {
+                    DialogKind::Open => dialog
+                        .add_filter("photo or project", &["jpg", "jpeg", "png", "json"])
+                        .pick_file(),
+                    DialogKind::SaveAs => dialog
+                        .add_filter("project", &["json"])
+                        .set_file_name("project.json")
+                        .save_file(),
+                    DialogKind::ExportFolder => dialog.pick_folder(),
+                };
+                let _ = tx.send(picked);
+            });
+        match spawned {
+            Ok(_) => self.dialog = Some((kind, rx, Instant::now())),
+            Err(e) => self.error(format!("cannot open a file dialog: {e}")),
+        }
+    }
+
+    fn poll_dialog(&mut self) {
+        let Some((kind, rx, started)) = &self.dialog else {
+            return;
+        };
+        let (kind, started) = (*kind, *started);
+        let answer = match rx.try_recv() {
+            Ok(a) => a,
+            Err(std::sync::mpsc::TryRecvError::Empty) => return,
+            Err(std::sync::mpsc::TryRecvError::Disconnected) => {
+                self.dialog = None;
+                self.error("the file dialog failed (no desktop portal?): type the path instead");
+                return;
+            }
+        };
+        self.dialog = None;
+        let Some(path) = answer else {
+            // An answer within a moment means no dialog could be shown at all.
+            if started.elapsed() < Duration::from_millis(700) {
+                self.error(
+                    "no file dialog could be shown (it needs xdg-desktop-portal or zenity): type the path instead",
+                );
+            }
+            return;
+        };
+        match kind {
+            DialogKind::Open => self.open(&path),
+            DialogKind::SaveAs => {
+                let path = if path.extension().is_none() {
+                    path.with_extension("json")
+                } else {
+                    path
+                };
+                self.save_to(&path);
+            }
+            DialogKind::ExportFolder => {
+                let message = PanelMessage::ExportFolder(path);
+                for p in &mut self.panels {
+                    p.on_message(&message);
+                }
+            }
+        }
+    }
+
+    /// Adds a keyframe at the current frame with the current preview view (a preset becomes
+    /// keys first). A key already at this frame is moved instead.
+    pub fn add_keyframe(&mut self) {
+        let Some(doc) = &self.doc else { return };
+        let frame = self.timeline.frame;
+        let (Some(path_view), Some(snapshot)) = (self.camera.views.get(frame), &self.snapshot)
+        else {
+            self.error("cannot add a keyframe yet: the scene is still building");
+            return;
+        };
+        let view = self.preview.fly.apply(path_view);
+        let (w, _) = self.camera.output_size;
+        let mut keys = match &doc.project.camera.path {
+            CameraPath::Keyframes(k) => k.clone(),
+            preset => match preset.to_keyframes(
+                &self.camera.views[0].intrinsics,
+                w,
+                &snapshot.scene.scale,
+                doc.project.output.frames,
+            ) {
+                Ok(k) => k,
+                Err(e) => {
+                    self.error(format!("cannot turn the preset into keyframes: {e:#}"));
+                    return;
+                }
+            },
+        };
+        let hfov = f64::from(view.intrinsics.hfov_deg(w.max(1)));
+        let key = Keyframe::new(frame as f64, &view.world_from_camera).with_hfov(hfov);
+        let index = match keys
+            .keys
+            .iter()
+            .position(|k| (k.frame - frame as f64).abs() < 0.5)
+        {
+            Some(i) => {
+                keys.keys[i] = Keyframe {
+                    interpolation: keys.keys[i].interpolation,
+                    ease: keys.keys[i].ease,
+                    ..key
+                };
+                i
+            }
+            None => {
+                keys.keys.push(key);
+                keys.keys.len() - 1
+            }
+        };
+        let mut project = doc.project.clone();
+        project.camera.path = CameraPath::Keyframes(keys);
+        self.apply_edit("Add keyframe", project);
+        self.timeline.selected_key = Some(index);
+        self.preview.fly = FlyCamera::default();
+    }
+
+    // ---- Per-frame work ----
+
+    fn handle_events(&mut self) {
+        let Some(worker) = &self.scene_worker else {
+            return;
+        };
+        let mut events = Vec::new();
+        while let Some(e) = worker.try_event() {
+            events.push(e);
+        }
+        self.job = worker.status();
+        let latest = worker.scene();
+        for event in events {
+            match event {
+                Event::SceneReady {
+                    generation,
+                    stages_run,
+                    seconds,
+                } => {
+                    if let Some(s) = &latest
+                        && s.generation == generation
+                    {
+                        let scene_changed = self.snapshot.as_ref().is_none_or(|old| {
+                            !Arc::ptr_eq(&old.scene.cloud, &s.scene.cloud)
+                                || old.project.motion != s.project.motion
+                        });
+                        if scene_changed {
+                            self.timeline.hole_fractions.clear();
+                        }
+                        self.snapshot = Some(s.clone());
+                        self.preview_key = None;
+                        self.camera_key = None;
+                    }
+                    if self
+                        .build_error
+                        .as_ref()
+                        .is_some_and(|(g, _)| *g <= generation)
+                    {
+                        self.build_error = None;
+                    }
+                    self.last_build_stages = stages_run.clone();
+                    if !stages_run.is_empty() {
+                        let names: Vec<&str> = stages_run.iter().map(|s| s.name()).collect();
+                        self.notify(format!("rebuilt {} in {seconds:.1} s", names.join(", ")));
+                    }
+                }
+                Event::BuildFailed {
+                    generation,
+                    message,
+                } => {
+                    self.error(format!("the scene could not be built: {message}"));
+                    self.build_error = Some((generation, message));
+                }
+                Event::Suggestion(spec) => {
+                    if spec.regions.is_empty() {
+                        self.notify("no sky or water found to suggest motion for");
+                    } else {
+                        self.notify(
+                            "motion suggested (magenta): accept or reject it in the inspector",
+                        );
+                    }
+                    let m = PanelMessage::Suggestion(spec);
+                    for p in &mut self.panels {
+                        p.on_message(&m);
+                    }
+                }
+                Event::ExportDone(summary) => {
+                    let mut text = summary.to_string();
+                    for w in &summary.warnings {
+                        text.push_str(&format!("\nwarning: {w}"));
+                    }
+                    for &(f, h) in &summary.hole_fractions {
+                        self.timeline.hole_fractions.insert(f, h);
+                    }
+                    self.notify(format!("export finished: {}", summary));
+                    self.last_export = Some(summary.to_string());
+                    let m = PanelMessage::ExportResult(text);
+                    for p in &mut self.panels {
+                        p.on_message(&m);
+                    }
+                }
+                Event::ExportFailed(message) => {
+                    self.last_export = Some(format!("failed: {message}"));
+                    self.error(format!("export failed: {message}"));
+                    let m = PanelMessage::ExportResult(format!("export failed: {message}"));
+                    for p in &mut self.panels {
+                        p.on_message(&m);
+                    }
+                }
+                Event::Cancelled(kind) => {
+                    self.notify(format!("{} cancelled", kind.name()));
+                    if kind == JobKind::Export {
+                        let m = PanelMessage::ExportResult(
+                            "export cancelled: the frames written so far are complete".into(),
+                        );
+                        for p in &mut self.panels {
+                            p.on_message(&m);
+                        }
+                    }
+                }
+                Event::Error(message) => self.error(message),
+            }
+        }
+    }
+
+    /// Recomputes the path's views when the camera, the output or the scene scale changed.
+    fn update_camera(&mut self) {
+        let (Some(doc), Some(snapshot)) = (&self.doc, &self.snapshot) else {
+            return;
+        };
+        let p = &doc.project;
+        let scale = snapshot.scene.scale;
+        let (iw, ih) = snapshot.scene.input.rgb.size();
+        let key = serde_json::to_string(&(
+            &p.camera,
+            &p.output,
+            scale.median_depth,
+            scale.near_depth,
+            iw,
+            ih,
+        ))
+        .unwrap_or_default();
+        if self.camera_key.as_ref() == Some(&key) {
+            return;
+        }
+        self.camera_key = Some(key);
+        let (ow, oh) = match (p.output.width, p.output.height) {
+            (Some(w), Some(h)) => (w, h),
+            _ => (iw, ih),
+        };
+        let k = Intrinsics::from_hfov(iw, ih, p.camera.hfov_deg)
+            .scaled(ow as f32 / iw as f32, oh as f32 / ih as f32);
+        self.camera = match p.camera.path.views(&k, ow, &scale, p.output.frames) {
+            Ok(views) => CameraInfo {
+                views,
+                output_size: (ow, oh),
+                error: None,
+            },
+            Err(e) => CameraInfo {
+                views: Vec::new(),
+                output_size: (ow, oh),
+                error: Some(format!("{e:#}")),
+            },
+        };
+        self.timeline.frame = self.timeline.frame.min(p.output.frames.saturating_sub(1));
+    }
+
+    /// Sends a preview request when the frame, the view or the scene changed.
+    fn update_preview(&mut self, ctx: &egui::Context) {
+        let (Some(worker), Some(snapshot)) = (&self.preview_worker, &self.snapshot) else {
+            return;
+        };
+        if let Some(frame) = worker.take_frame() {
+            if let Some(e) = &frame.error {
+                self.notices.push(Notice {
+                    text: format!("preview failed: {e}"),
+                    level: Level::Error,
+                    at: Instant::now(),
+                });
+            } else {
+                let texture = self
+                    .textures
+                    .get(ctx, "preview", frame.id, || frame.image.clone());
+                self.preview.texture = Some(texture.id());
+                self.preview.size = frame.image.size;
+                self.preview.frame_index = frame.frame_index;
+                self.preview.hole_fraction = frame.hole_fraction;
+                self.preview.seconds = frame.seconds;
+                if frame.generation == snapshot.generation {
+                    self.timeline
+                        .hole_fractions
+                        .insert(frame.frame_index, frame.hole_fraction);
+                }
+            }
+        }
+        let frame = self.timeline.frame;
+        let Some(path_view) = self.camera.views.get(frame) else {
+            return;
+        };
+        let view = self.preview.fly.apply(path_view);
+        self.preview.view = Some(view);
+        let wanted = matches!(self.tab, Tab::Preview | Tab::Camera) || self.timeline.playing;
+        if !wanted {
+            return;
+        }
+        let side = self.preview.max_side.max(32);
+        let key = (snapshot.generation, frame, format!("{:?}", view), side);
+        if self.preview_key.as_ref() == Some(&key) {
+            return;
+        }
+        let (ow, oh) = self.camera.output_size;
+        let (pw, ph) = super::images::fit_size(ow, oh, side);
+        if pw == 0 || ph == 0 {
+            return;
+        }
+        self.preview_key = Some(key);
+        self.preview_id += 1;
+        worker.request(PreviewRequest {
+            id: self.preview_id,
+            snapshot: snapshot.clone(),
+            view: View {
+                intrinsics: view
+                    .intrinsics
+                    .scaled(pw as f32 / ow as f32, ph as f32 / oh as f32),
+                world_from_camera: view.world_from_camera,
+            },
+            frame_index: frame,
+            width: pw,
+            height: ph,
+        });
+    }
+
+    fn handle_shortcuts(&mut self, ctx: &egui::Context) {
+        let shortcut = |m: Modifiers, k: Key| {
+            ctx.input_mut(|i| i.consume_shortcut(&KeyboardShortcut::new(m, k)))
+        };
+        if shortcut(Modifiers::COMMAND | Modifiers::SHIFT, Key::Z)
+            || shortcut(Modifiers::COMMAND, Key::Y)
+        {
+            self.redo();
+        }
+        if shortcut(Modifiers::COMMAND, Key::Z) {
+            self.undo();
+        }
+        if shortcut(Modifiers::COMMAND, Key::O) {
+            self.start_dialog(DialogKind::Open);
+        }
+        if shortcut(Modifiers::COMMAND | Modifiers::SHIFT, Key::S) {
+            self.start_dialog(DialogKind::SaveAs);
+        }
+        if shortcut(Modifiers::COMMAND, Key::S) {
+            self.save();
+        }
+        if ctx.egui_wants_keyboard_input() {
+            return;
+        }
+        if shortcut(Modifiers::NONE, Key::I) {
+            self.add_keyframe();
+        }
+        if shortcut(Modifiers::NONE, Key::Space) {
+            self.timeline.playing = !self.timeline.playing;
+            self.timeline.clock = self.timeline.frame as f64;
+        }
+        if shortcut(Modifiers::NONE, Key::Delete)
+            && let Some(i) = self.timeline.selected_key
+            && let Some(doc) = &self.doc
+            && let CameraPath::Keyframes(k) = &doc.project.camera.path
+            && i < k.keys.len()
+        {
+            let mut project = doc.project.clone();
+            if let CameraPath::Keyframes(k) = &mut project.camera.path {
+                k.keys.remove(i);
+                if k.keys.is_empty() {
+                    project.camera.path = CameraPath::default();
+                }
+            }
+            self.timeline.selected_key = None;
+            self.apply_edit("Delete keyframe", project);
+        }
+        for (i, tab) in Tab::ALL.iter().enumerate() {
+            let key = [
+                Key::Num1,
+                Key::Num2,
+                Key::Num3,
+                Key::Num4,
+                Key::Num5,
+                Key::Num6,
+                Key::Num7,
+                Key::Num8,
+            ][i];
+            if shortcut(Modifiers::NONE, key) {
+                self.tab = *tab;
+            }
+        }
+    }
+
+    fn handle_dropped_files(&mut self, ctx: &egui::Context) {
+        let dropped: Vec<PathBuf> = ctx.input(|i| {
+            i.raw
+                .dropped_files
+                .iter()
+                .map(|f| f.path().to_path_buf())
+                .filter(|p| !p.as_os_str().is_empty())
+                .collect()
+        });
+        if let Some(path) = dropped.first() {
+            self.open(path);
+        }
+    }
+
+    fn handle_request(&mut self, request: Request) {
+        match request {
+            Request::SuggestMotion => self.send(Command::SuggestMotion),
+            Request::Export {
+                out_dir,
+                options,
+                project,
+            } => {
+                if self.project() != Some(&project) {
+                    self.apply_edit("Export settings", (*project).clone());
+                }
+                self.send(Command::Export {
+                    project,
+                    out_dir,
+                    options,
+                });
+            }
+            Request::CancelJob => {
+                if let Some(w) = &self.scene_worker {
+                    w.cancel();
+                }
+            }
+            Request::PickExportFolder => self.start_dialog(DialogKind::ExportFolder),
+            Request::AddKeyframe => self.add_keyframe(),
+            Request::Notify(text) => self.notify(text),
+        }
+    }
+
+    fn send(&mut self, command: Command) {
+        let result = match &mut self.scene_worker {
+            Some(w) => w.send(command),
+            None => Err("the scene worker is not running".into()),
+        };
+        if let Err(e) = result {
+            self.error(e);
+        }
+    }
+
+    // ---- Layout ----
+
+    fn menu_ui(&mut self, ui: &mut egui::Ui) {
+        egui::MenuBar::new().ui(ui, |ui| {
+            ui.menu_button("File", |ui| {
+                if ui.button("Open…  (Ctrl+O)").clicked() {
+                    self.start_dialog(DialogKind::Open);
+                }
+                let has_doc = self.doc.is_some();
+                if ui
+                    .add_enabled(has_doc, egui::Button::new("Save  (Ctrl+S)"))
+                    .clicked()
+                {
+                    self.save();
+                }
+                if ui
+                    .add_enabled(has_doc, egui::Button::new("Save as…  (Ctrl+Shift+S)"))
+                    .clicked()
+                {
+                    self.start_dialog(DialogKind::SaveAs);
+                }
+                ui.separator();
+                ui.label(RichText::new("Recent").weak());
+                let recent = self.persisted.recent.clone();
+                if recent.is_empty() {
+                    ui.label(RichText::new("(none)").weak());
+                }
+                for path in recent {
+                    if ui.button(path.display().to_string()).clicked() {
+                        self.open(&path);
+                    }
+                }
+                ui.separator();
+                if ui.button("Quit").clicked() {
+                    ui.ctx().send_viewport_cmd(egui::ViewportCommand::Close);
+                }
+            });
+            ui.menu_button("Edit", |ui| {
+                let undo = self.history.undo_label().map(str::to_string);
+                let redo = self.history.redo_label().map(str::to_string);
+                if ui
+                    .add_enabled(
+                        undo.is_some(),
+                        egui::Button::new(format!(
+                            "Undo {}  (Ctrl+Z)",
+                            undo.as_deref().unwrap_or("")
+                        )),
+                    )
+                    .clicked()
+                {
+                    self.undo();
+                }
+                if ui
+                    .add_enabled(
+                        redo.is_some(),
+                        egui::Button::new(format!(
+                            "Redo {}  (Ctrl+Shift+Z)",
+                            redo.as_deref().unwrap_or("")
+                        )),
+                    )
+                    .clicked()
+                {
+                    self.redo();
+                }
+            });
+            if let Some(doc) = &self.doc {
+                ui.separator();
+                let name = doc
+                    .file
+                    .as_ref()
+                    .unwrap_or(&doc.project.input)
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default();
+                let dirty = if doc.generation != doc.saved_generation {
+                    " (modified)"
+                } else {
+                    ""
+                };
+                ui.label(format!("{name}{dirty}"));
+            }
+        });
+    }
+
+    fn tabs_ui(&mut self, ui: &mut egui::Ui) {
+        ui.horizontal(|ui| {
+            for (i, panel) in self.panels.iter().enumerate() {
+                let selected = self.tab == panel.tab();
+                let text = RichText::new(format!("{} {}", i + 1, panel.title())).size(15.0);
+                if ui.selectable_label(selected, text).clicked() {
+                    self.tab = panel.tab();
+                }
+            }
+        });
+    }
+
+    fn status_ui(&mut self, ui: &mut egui::Ui) {
+        ui.horizontal(|ui| {
+            match self.job.kind {
+                Some(kind) => {
+                    ui.spinner();
+                    ui.label(format!("{}: {}", kind.name(), self.job.stage));
+                    ui.add(
+                        egui::ProgressBar::new(self.job.fraction)
+                            .desired_width(180.0)
+                            .show_percentage(),
+                    );
+                    if ui.small_button("Cancel").clicked()
+                        && let Some(w) = &self.scene_worker
+                    {
+                        w.cancel();
+                    }
+                }
+                None => {
+                    let text = match (&self.snapshot, &self.build_error) {
+                        (_, Some((_, e))) => format!("build failed: {e}"),
+                        (Some(s), None) => format!(
+                            "ready · {} layer(s) · {} points",
+                            s.scene.layers.layers.len(),
+                            s.scene.cloud.len()
+                        ),
+                        (None, None) if self.doc.is_some() => "waiting…".to_string(),
+                        (None, None) => "no photo open".to_string(),
+                    };
+                    ui.label(text);
+                }
+            }
+            ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
+                let (_, mean, max) = self.frame_times.stats(self.job.kind.is_some());
+                ui.label(RichText::new(format!("UI {mean:.1} ms (max {max:.0})")).weak())
+                    .on_hover_text("Time spent laying out and drawing the window per frame");
+                ui.separator();
+                ui.label(&self.ort);
+                ui.separator();
+                ui.label(format!("{} · {}", self.adapter, self.preview.renderer))
+                    .on_hover_text("The window's GPU adapter; the preview renderer");
+            });
+        });
+    }
+
+    fn notices_ui(&mut self, ui: &mut egui::Ui) {
+        let now = Instant::now();
+        self.notices.retain(|n| {
+            n.level == Level::Error || now.duration_since(n.at).as_secs_f64() < NOTICE_SECS
+        });
+        if self.notices.len() > 6 {
+            let drop = self.notices.len() - 6;
+            self.notices.drain(..drop);
+        }
+        let mut dismiss = None;
+        for (i, n) in self.notices.iter().enumerate() {
+            let (fill, text) = match n.level {
+                Level::Error => (Color32::from_rgb(120, 30, 30), Color32::WHITE),
+                Level::Info => (ui.visuals().window_fill, ui.visuals().text_color()),
+            };
+            egui::Frame::new()
+                .fill(fill)
+                .stroke(ui.visuals().window_stroke)
+                .inner_margin(6.0)
+                .corner_radius(4.0)
+                .show(ui, |ui| {
+                    ui.set_max_width(520.0);
+                    ui.horizontal(|ui| {
+                        ui.colored_label(text, &n.text);
+                        if ui.small_button("x").clicked() {
+                            dismiss = Some(i);
+                        }
+                    });
+                });
+        }
+        if let Some(i) = dismiss {
+            self.notices.remove(i);
+        }
+        if !self.notices.is_empty() {
+            ui.ctx().request_repaint_after(Duration::from_secs(1));
+        }
+    }
+
+    fn welcome_ui(&mut self, ui: &mut egui::Ui) {
+        ui.vertical_centered(|ui| {
+            ui.add_space(ui.available_height() * 0.2);
+            ui.heading("makeit4d");
+            ui.label("One photo to a consistent, living fly-through video.");
+            ui.add_space(12.0);
+            if ui
+                .button(RichText::new("Open a photo or project…").size(18.0))
+                .clicked()
+            {
+                self.start_dialog(DialogKind::Open);
+            }
+            ui.label(
+                RichText::new("or drop a file on the window (Ctrl+O), or type its path:").weak(),
+            );
+            ui.horizontal(|ui| {
+                ui.add_space((ui.available_width() - 520.0).max(0.0) / 2.0);
+                let field = ui.add(
+                    egui::TextEdit::singleline(&mut self.typed_path)
+                        .hint_text("photo.jpg or project.json")
+                        .desired_width(420.0),
+                );
+                let enter = field.lost_focus() && ui.input(|i| i.key_pressed(Key::Enter));
+                if (ui.button("Open").clicked() || enter) && !self.typed_path.trim().is_empty() {
+                    let path = PathBuf::from(self.typed_path.trim());
+                    self.open(&path);
+                }
+            });
+            let recent = self.persisted.recent.clone();
+            if !recent.is_empty() {
+                ui.add_space(12.0);
+                ui.label(RichText::new("Recent").strong());
+                for path in recent {
+                    if ui.link(path.display().to_string()).clicked() {
+                        self.open(&path);
+                    }
+                }
+            }
+        });
+    }
+}
+
+impl eframe::App for EditorApp {
+    fn logic(&mut self, ctx: &egui::Context, _frame: &mut eframe::Frame) {
+        if let Some(path) = self.open_on_start.take() {
+            self.open(&path);
+        }
+        if let Some(w) = &mut self.scene_worker {
+            w.flush();
+        }
+        self.handle_events();
+        self.poll_dialog();
+        self.handle_dropped_files(ctx);
+        let frames = self.doc.as_ref().map_or(1, |d| d.project.output.frames);
+        let fps = self
+            .doc
+            .as_ref()
+            .map_or(25.0, |d| f64::from(d.project.output.fps));
+        let dt = ctx.input(|i| f64::from(i.stable_dt)).min(0.25);
+        self.timeline.advance(dt, fps, frames);
+        if self.timeline.playing {
+            ctx.request_repaint();
+        }
+        if self.job.kind.is_some() || self.dialog.is_some() {
+            ctx.request_repaint_after(Duration::from_millis(100));
+        }
+    }
+
+    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+        let start = Instant::now();
+        let ctx = ui.ctx().clone();
+        self.handle_shortcuts(&ctx);
+        self.update_camera();
+        self.update_preview(&ctx);
+
+        egui::Panel::top("menu").show(ui, |ui| {
+            self.menu_ui(ui);
+            if self.doc.is_some() {
+                self.tabs_ui(ui);
+            }
+        });
+        egui::Panel::bottom("status").show(ui, |ui| self.status_ui(ui));
+
+        let mut pending_edit = None;
+        let mut requests = Vec::new();
+        if let Some(doc) = &self.doc {
+            let index = self
+                .panels
+                .iter()
+                .position(|p| p.tab() == self.tab)
+                .unwrap_or(0);
+            let mut cx = PanelContext {
+                project: &doc.project,
+                snapshot: self.snapshot.as_ref(),
+                textures: &mut self.textures,
+                pending_edit: &mut pending_edit,
+                requests: &mut requests,
+                timeline: &mut self.timeline,
+                camera: &self.camera,
+                preview: &mut self.preview,
+                job: &self.job,
+                ffmpeg: self.ffmpeg,
+                probe: &mut self.probe,
+            };
+            let panel = &mut self.panels[index];
+            egui::Panel::bottom("timeline")
+                .resizable(false)
+                .show(ui, |ui| {
+                    ui.add_space(2.0);
+                    timeline_ui(ui, &mut cx);
+                    ui.add_space(2.0);
+                });
+            egui::Panel::right("inspector")
+                .resizable(true)
+                .default_size(340.0)
+                .min_size(260.0)
+                .show(ui, |ui| {
+                    egui::ScrollArea::vertical().show(ui, |ui| {
+                        panel.inspector_ui(ui, &mut cx);
+                    });
+                });
+            egui::CentralPanel::default().show(ui, |ui| {
+                panel.view_ui(ui, &mut cx);
+            });
+        } else {
+            egui::CentralPanel::default().show(ui, |ui| {
+                self.welcome_ui(ui);
+            });
+        }
+        if let Some((label, project)) = pending_edit {
+            self.apply_edit(&label, project);
+        }
+        for r in requests {
+            self.handle_request(r);
+        }
+        // Messages float in the bottom right corner of the view, above the timeline.
+        egui::Area::new(egui::Id::unique("notices"))
+            .anchor(egui::Align2::RIGHT_BOTTOM, egui::vec2(-360.0, -96.0))
+            .interactable(true)
+            .show(&ctx, |ui| self.notices_ui(ui));
+
+        let ms = start.elapsed().as_secs_f32() * 1000.0;
+        let busy = self.job.kind.is_some();
+        self.frame_times.push(ms, busy);
+        if self.frame_log {
+            // Repaint continuously so `dt` is the real frame time (layout, tessellation,
+            // rendering and presenting), not the gap between input events.
+            ctx.request_repaint();
+            let dt = ctx.input(|i| i.unstable_dt) * 1000.0;
+            eprintln!(
+                "frame ui_ms={ms:.2} dt_ms={dt:.1} busy={busy} stage={}",
+                self.job.stage
+            );
+        }
+    }
+
+    fn save(&mut self, storage: &mut dyn eframe::Storage) {
+        if self.ephemeral {
+            return;
+        }
+        self.persisted.tab = self.tab;
+        self.persisted.preview_side = self.preview.max_side;
+        eframe::set_value(storage, STORAGE_KEY, &self.persisted);
+    }
+}

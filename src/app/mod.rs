@@ -1,0 +1,60 @@
+//! The editor: an egui (eframe, wgpu back end) front end over the library.
+//!
+//! - [`EditorApp`] (app.rs) lays out the window: stage tabs, the central view, an inspector for
+//!   the selected stage, the timeline and the status bar. It owns the project, the undo history
+//!   and the worker handles, and turns every edit into a new project snapshot.
+//! - Each stage has one panel (panels/), all behind the [`panels::StagePanel`] trait.
+//! - Work never runs on the UI thread (worker.rs): a named scene thread owns the one
+//!   [`crate::scene::SceneBuilder`] (so editing a threshold re-runs layers onward only) and runs
+//!   exports; a named preview thread renders the newest preview request with the last good
+//!   scene. The UI sends commands over a bounded channel and reads results from latest-value
+//!   slots.
+//! - viewport.rs holds the seam for the renderer behind the preview ([`viewport::PreviewRenderer`];
+//!   the CPU splatter now, the GPU splatter drawn through an `egui_wgpu` paint callback later)
+//!   and the zoomable image view the stage panels draw on.
+
+// The brief's file layout: app/app.rs holds the application itself.
+#[allow(clippy::module_inception)]
+mod app;
+pub mod history;
+pub mod images;
+pub mod panels;
+pub mod timeline;
+pub mod viewport;
+pub mod worker;
+
+pub use app::{EditorApp, EditorOptions};
+
+use std::path::PathBuf;
+
+/// The key under which the editor stores its settings (recent files, …); the number changes
+/// when the stored layout does, and old data then falls back to defaults.
+pub const STORAGE_KEY: &str = "makeit4d-editor-v1";
+
+/// Opens the editor window, optionally with an image or a project file, and returns when the
+/// window closes.
+pub fn run(path: Option<PathBuf>) -> anyhow::Result<()> {
+    let options = eframe::NativeOptions {
+        viewport: eframe::egui::ViewportBuilder::default()
+            .with_title("makeit4d")
+            .with_inner_size([1400.0, 900.0])
+            .with_min_inner_size([800.0, 500.0])
+            .with_drag_and_drop(true),
+        renderer: eframe::Renderer::Wgpu,
+        ..Default::default()
+    };
+    eframe::run_native(
+        "makeit4d",
+        options,
+        Box::new(move |cc| {
+            Ok(Box::new(EditorApp::new(
+                cc,
+                EditorOptions {
+                    open: path,
+                    ..Default::default()
+                },
+            )))
+        }),
+    )
+    .map_err(|e| anyhow::anyhow!("cannot open the editor window: {e}"))
+}

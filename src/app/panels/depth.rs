@@ -1,0 +1,276 @@
+//! Depth of the photo as a colour map, the sky mask, a draggable horizon, and the depth brush.
+
+use super::{PanelContext, StagePanel, Tab, committed, scene_image_ui};
+use crate::app::viewport::{ImageView, ViewTransform};
+use crate::stages::depth::DepthMethod;
+use crate::stages::depth::paint::{DepthStroke, DepthStrokeKind};
+use eframe::egui::{self, Color32, Rect, Sense, Stroke, Ui, pos2};
+
+/// What a drag on the depth view does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DepthTool {
+    /// Drag the horizon line.
+    Horizon,
+    /// Paint depth.
+    Brush(DepthStrokeKind),
+}
+
+/// The Depth tab.
+pub struct DepthPanel {
+    transform: ViewTransform,
+    show_sky: bool,
+    tool: DepthTool,
+    radius_px: f32,
+    strength: f32,
+    stroke: Vec<[f32; 2]>,
+    horizon_drag: Option<f32>,
+}
+
+impl Default for DepthPanel {
+    fn default() -> Self {
+        Self {
+            transform: ViewTransform::default(),
+            show_sky: true,
+            tool: DepthTool::Horizon,
+            radius_px: 20.0,
+            strength: 0.3,
+            stroke: Vec::new(),
+            horizon_drag: None,
+        }
+    }
+}
+
+/// Screen y of the horizon at `fraction` of the photo height.
+fn horizon_y(view: &ImageView, fraction: f32) -> f32 {
+    view.to_screen([0.0, fraction * (view.size[1] - 1.0)]).y
+}
+
+impl StagePanel for DepthPanel {
+    fn tab(&self) -> Tab {
+        Tab::Depth
+    }
+
+    fn title(&self) -> &'static str {
+        "Depth"
+    }
+
+    fn view_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>) {
+        let Some((response, view)) = scene_image_ui(
+            ui,
+            cx,
+            "depth",
+            &mut self.transform,
+            Sense::click_and_drag(),
+            |s| {
+                let (w, h) = s.scene.input.rgb.size();
+                [w, h]
+            },
+            |s| &s.display.depth,
+        ) else {
+            return;
+        };
+        let Some(snapshot) = cx.snapshot else { return };
+        let painter = ui.painter_at(response.rect);
+        if self.show_sky
+            && let Some((sky, _)) = cx.scene_texture(ui.ctx(), "sky", |s| &s.display.sky)
+        {
+            painter.image(
+                sky,
+                view.rect,
+                Rect::from_min_max(pos2(0.0, 0.0), pos2(1.0, 1.0)),
+                Color32::WHITE,
+            );
+        }
+        let classical = &cx.project.depth.classical;
+        let auto = snapshot
+            .display
+            .detected_horizon
+            .unwrap_or(classical.default_horizon);
+        let horizon = self.horizon_drag.or(classical.horizon).unwrap_or(auto);
+        let y = horizon_y(&view, horizon);
+        let primary = response.dragged_by(egui::PointerButton::Primary);
+        match self.tool {
+            DepthTool::Horizon => {
+                let near_line = response.hover_pos().is_some_and(|p| (p.y - y).abs() < 8.0);
+                if near_line || self.horizon_drag.is_some() {
+                    ui.ctx().set_cursor_icon(egui::CursorIcon::ResizeVertical);
+                }
+                let pressed_near_line = ui
+                    .input(|i| i.pointer.press_origin())
+                    .is_some_and(|p| (p.y - y).abs() < 10.0);
+                if response.drag_started_by(egui::PointerButton::Primary) && pressed_near_line {
+                    self.horizon_drag = Some(horizon);
+                }
+                if primary
+                    && self.horizon_drag.is_some()
+                    && let Some(p) = response.interact_pointer_pos()
+                {
+                    let row = view.to_image(p)[1];
+                    self.horizon_drag = Some((row / (view.size[1] - 1.0).max(1.0)).clamp(0.0, 1.0));
+                }
+                if response.drag_stopped()
+                    && let Some(v) = self.horizon_drag.take()
+                {
+                    cx.edit("Move horizon", |p| p.depth.classical.horizon = Some(v));
+                }
+            }
+            DepthTool::Brush(kind) => {
+                if response.drag_started_by(egui::PointerButton::Primary)
+                    && let Some(p) = ui.input(|i| i.pointer.press_origin())
+                {
+                    self.stroke = vec![view.to_image(p)];
+                }
+                if primary && let Some(p) = response.interact_pointer_pos() {
+                    let q = view.to_image(p);
+                    if self
+                        .stroke
+                        .last()
+                        .is_none_or(|l| (l[0] - q[0]).hypot(l[1] - q[1]) > 1.0)
+                    {
+                        self.stroke.push(q);
+                    }
+                }
+                if response.clicked()
+                    && self.stroke.is_empty()
+                    && let Some(p) = response.interact_pointer_pos().or(response.hover_pos())
+                {
+                    self.stroke.push(view.to_image(p));
+                }
+                if (response.drag_stopped() || response.clicked()) && !self.stroke.is_empty() {
+                    let stroke = DepthStroke {
+                        kind,
+                        points: std::mem::take(&mut self.stroke),
+                        radius_px: self.radius_px,
+                        strength: self.strength,
+                    };
+                    cx.edit("Depth stroke", |p| p.depth.strokes.push(stroke));
+                }
+                let r = self.radius_px * view.scale();
+                let colour = Color32::from_rgba_unmultiplied(255, 255, 255, 160);
+                if let Some(p) = response.hover_pos() {
+                    painter.circle_stroke(p, r, Stroke::new(1.5, colour));
+                }
+                if self.stroke.len() > 1 {
+                    let pts = self.stroke.iter().map(|q| view.to_screen(*q)).collect();
+                    painter.add(egui::Shape::line(
+                        pts,
+                        Stroke::new(
+                            (2.0 * r).max(1.0),
+                            Color32::from_rgba_unmultiplied(255, 255, 255, 50),
+                        ),
+                    ));
+                }
+            }
+        }
+        // The horizon line and its handle.
+        let overridden = self.horizon_drag.is_some() || classical.horizon.is_some();
+        let colour = if overridden {
+            Color32::from_rgb(255, 220, 0)
+        } else {
+            Color32::from_rgba_unmultiplied(255, 255, 255, 180)
+        };
+        painter.line_segment(
+            [pos2(view.rect.left(), y), pos2(view.rect.right(), y)],
+            Stroke::new(2.0, colour),
+        );
+        let handle = pos2(view.rect.right() - 14.0, y);
+        painter.circle_filled(handle, 7.0, colour);
+        painter.text(
+            pos2(view.rect.left() + 6.0, y - 4.0),
+            egui::Align2::LEFT_BOTTOM,
+            if overridden {
+                "horizon"
+            } else {
+                "horizon (auto)"
+            },
+            egui::FontId::proportional(13.0),
+            colour,
+        );
+    }
+
+    fn inspector_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>) {
+        ui.heading("Estimator");
+        let mut method = cx.project.depth.method;
+        ui.horizontal(|ui| {
+            ui.selectable_value(&mut method, DepthMethod::Classical, "classical");
+            ui.selectable_value(&mut method, DepthMethod::Horizon, "ground plane");
+            if cx.project.depth.model.is_some() {
+                ui.selectable_value(&mut method, DepthMethod::Onnx, "learned (ONNX)");
+            }
+        });
+        if method != cx.project.depth.method {
+            cx.edit("Depth method", |p| p.depth.method = method);
+        }
+        ui.checkbox(&mut self.show_sky, "Show the sky mask");
+        ui.separator();
+        ui.heading("Horizon");
+        match cx.project.depth.classical.horizon {
+            Some(h) => {
+                ui.label(format!("set to {:.1} % of the height", 100.0 * h));
+                if ui.button("Back to automatic").clicked() {
+                    cx.edit("Automatic horizon", |p| p.depth.classical.horizon = None);
+                }
+            }
+            None => {
+                ui.label("automatic (detected from the sky)");
+            }
+        }
+        ui.label(egui::RichText::new("Drag the line in the view to move it.").weak());
+        ui.separator();
+        ui.heading("Depth brush");
+        ui.horizontal_wrapped(|ui| {
+            ui.selectable_value(&mut self.tool, DepthTool::Horizon, "horizon");
+            for (kind, name) in [
+                (DepthStrokeKind::Push, "push (farther)"),
+                (DepthStrokeKind::Pull, "pull (nearer)"),
+                (DepthStrokeKind::Smooth, "smooth"),
+                (DepthStrokeKind::Flatten, "flatten"),
+            ] {
+                ui.selectable_value(&mut self.tool, DepthTool::Brush(kind), name);
+            }
+        });
+        ui.add(
+            egui::Slider::new(&mut self.radius_px, 2.0..=200.0)
+                .text("size px")
+                .logarithmic(true),
+        );
+        let max = match self.tool {
+            DepthTool::Brush(DepthStrokeKind::Push | DepthStrokeKind::Pull) => 1.5,
+            _ => 1.0,
+        };
+        self.strength = self.strength.min(max);
+        ui.add(egui::Slider::new(&mut self.strength, 0.0..=max).text("strength"));
+        let n = cx.project.depth.strokes.len();
+        ui.horizontal(|ui| {
+            ui.label(format!("{n} stroke(s)"));
+            if ui
+                .add_enabled(n > 0, egui::Button::new("Clear strokes"))
+                .clicked()
+            {
+                cx.edit("Clear depth strokes", |p| p.depth.strokes.clear());
+            }
+        });
+        ui.separator();
+        ui.heading("Classical estimator");
+        let c = &cx.project.depth.classical;
+        if let Some(v) = committed(ui, "cam-height", c.camera_height_m, |ui, v| {
+            ui.add(
+                egui::Slider::new(v, 0.2..=50.0)
+                    .logarithmic(true)
+                    .text("camera height m"),
+            )
+        }) {
+            cx.edit("Camera height", |p| p.depth.classical.camera_height_m = v);
+        }
+        if let Some(v) = committed(ui, "haze", c.haze_weight, |ui, v| {
+            ui.add(egui::Slider::new(v, 0.0..=1.0).text("haze cue"))
+        }) {
+            cx.edit("Haze weight", |p| p.depth.classical.haze_weight = v);
+        }
+        if let Some(v) = committed(ui, "objects", c.object_weight, |ui, v| {
+            ui.add(egui::Slider::new(v, 0.0..=1.0).text("object cue"))
+        }) {
+            cx.edit("Object weight", |p| p.depth.classical.object_weight = v);
+        }
+    }
+}

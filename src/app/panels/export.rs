@@ -1,0 +1,214 @@
+//! Export: folder, PNG bit depth, size, fps, frame range, passes, video; progress and cancel.
+//! Runs the command line's `render_sequence` on the scene thread.
+
+use super::{PanelContext, PanelMessage, Request, StagePanel, Tab, committed, placeholder_ui};
+use crate::app::worker::JobKind;
+use crate::export::{ExportOptions, Passes, VideoFormat, VideoOptions};
+use eframe::egui::{self, Ui};
+use std::path::PathBuf;
+
+/// The Export tab.
+pub struct ExportPanel {
+    out_dir: String,
+    sixteen_bit: bool,
+    range_on: bool,
+    range: (usize, usize),
+    passes: Passes,
+    video: Option<VideoFormat>,
+    last_result: Option<String>,
+}
+
+impl Default for ExportPanel {
+    fn default() -> Self {
+        Self {
+            out_dir: String::new(),
+            sixteen_bit: false,
+            range_on: false,
+            range: (0, 10),
+            passes: Passes::default(),
+            video: None,
+            last_result: None,
+        }
+    }
+}
+
+impl ExportPanel {
+    /// The export options the panel describes for a path of `frames` frames.
+    pub fn options(&self, frames: usize) -> ExportOptions {
+        ExportOptions {
+            sixteen_bit: self.sixteen_bit,
+            passes: self.passes,
+            range: self.range_on.then(|| {
+                (
+                    self.range.0.min(frames.saturating_sub(1)),
+                    self.range.1.min(frames).max(self.range.0 + 1),
+                )
+            }),
+            video: self.video.map(VideoOptions::new),
+            ..Default::default()
+        }
+    }
+}
+
+impl StagePanel for ExportPanel {
+    fn tab(&self) -> Tab {
+        Tab::Export
+    }
+
+    fn title(&self) -> &'static str {
+        "Export"
+    }
+
+    fn on_message(&mut self, message: &PanelMessage) {
+        match message {
+            PanelMessage::ExportFolder(dir) => self.out_dir = dir.display().to_string(),
+            PanelMessage::ExportResult(text) => self.last_result = Some(text.clone()),
+            PanelMessage::Suggestion(_) => {}
+        }
+    }
+
+    fn view_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>) {
+        if cx.job.kind == Some(JobKind::Export) {
+            ui.vertical_centered(|ui| {
+                ui.add_space(40.0);
+                ui.heading("Exporting…");
+                ui.add(
+                    egui::ProgressBar::new(cx.job.fraction)
+                        .show_percentage()
+                        .desired_width(ui.available_width() * 0.6),
+                );
+                ui.label(&cx.job.stage);
+                if ui.button("Cancel export").clicked() {
+                    cx.requests.push(Request::CancelJob);
+                }
+            });
+        } else if let Some(r) = &self.last_result {
+            ui.vertical_centered(|ui| {
+                ui.add_space(40.0);
+                ui.label(r);
+            });
+        } else {
+            placeholder_ui(ui, "Set the folder and press Export.");
+        }
+    }
+
+    fn inspector_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>) {
+        ui.heading("Folder");
+        ui.horizontal(|ui| {
+            ui.add(
+                egui::TextEdit::singleline(&mut self.out_dir)
+                    .hint_text("output folder")
+                    .desired_width(ui.available_width() - 80.0),
+            );
+            if ui.button("Browse…").clicked() {
+                cx.requests.push(Request::PickExportFolder);
+            }
+        });
+        ui.separator();
+        ui.heading("Frames");
+        ui.horizontal(|ui| {
+            ui.label("PNG");
+            ui.radio_value(&mut self.sixteen_bit, false, "8-bit");
+            ui.radio_value(&mut self.sixteen_bit, true, "16-bit");
+        });
+        let out = cx.project.output;
+        let mut input_size = out.width.is_none();
+        if ui.checkbox(&mut input_size, "Size of the photo").changed() {
+            let (w, h) = cx.camera.output_size;
+            cx.edit("Output size", |p| {
+                if input_size {
+                    p.output.width = None;
+                    p.output.height = None;
+                } else {
+                    p.output.width = Some(w.max(1));
+                    p.output.height = Some(h.max(1));
+                }
+            });
+        }
+        if let (Some(w), Some(h)) = (out.width, out.height)
+            && let Some(v) = committed(ui, "out-size", (w, h), |ui, v| {
+                ui.horizontal(|ui| {
+                    let a = ui.add(egui::DragValue::new(&mut v.0).range(16..=8192));
+                    ui.label("×");
+                    let b = ui.add(egui::DragValue::new(&mut v.1).range(16..=8192));
+                    a.union(b)
+                })
+                .inner
+            })
+        {
+            cx.edit("Output size", |p| {
+                p.output.width = Some(v.0);
+                p.output.height = Some(v.1);
+            });
+        }
+        if let Some(v) = committed(ui, "export-frames", out.frames, |ui, v| {
+            ui.horizontal(|ui| {
+                ui.label("frames");
+                ui.add(egui::DragValue::new(v).range(1..=10_000))
+            })
+            .inner
+        }) {
+            cx.edit("Frame count", |p| p.output.frames = v);
+        }
+        if let Some(v) = committed(ui, "export-fps", out.fps, |ui, v| {
+            ui.horizontal(|ui| {
+                ui.label("fps");
+                ui.add(egui::DragValue::new(v).range(1.0..=120.0))
+            })
+            .inner
+        }) {
+            cx.edit("Frame rate", |p| p.output.fps = v);
+        }
+        ui.checkbox(&mut self.range_on, "Only a range of frames");
+        if self.range_on {
+            ui.horizontal(|ui| {
+                ui.add(egui::DragValue::new(&mut self.range.0).range(0..=out.frames - 1));
+                ui.label("..");
+                ui.add(egui::DragValue::new(&mut self.range.1).range(1..=out.frames));
+                ui.label("(end exclusive)");
+            });
+        }
+        ui.separator();
+        ui.heading("Passes");
+        ui.checkbox(&mut self.passes.depth, "Depth (16-bit + depth.json)");
+        ui.checkbox(&mut self.passes.coverage, "Coverage (16-bit alpha)");
+        ui.separator();
+        ui.heading("Video");
+        ui.add_enabled_ui(cx.ffmpeg, |ui| {
+            ui.horizontal(|ui| {
+                ui.radio_value(&mut self.video, None, "none");
+                ui.radio_value(&mut self.video, Some(VideoFormat::Mp4), "mp4");
+                ui.radio_value(&mut self.video, Some(VideoFormat::Webm), "webm");
+            });
+        });
+        if !cx.ffmpeg {
+            self.video = None;
+            ui.label(egui::RichText::new("ffmpeg not found: PNG sequences only").weak());
+        }
+        ui.separator();
+        let busy = cx.job.kind == Some(JobKind::Export);
+        let dir = self.out_dir.trim().to_string();
+        ui.horizontal(|ui| {
+            if ui
+                .add_enabled(!busy && !dir.is_empty(), egui::Button::new("Export"))
+                .clicked()
+            {
+                cx.requests.push(Request::Export {
+                    out_dir: PathBuf::from(&dir),
+                    options: self.options(out.frames),
+                    project: Box::new(cx.current().clone()),
+                });
+                self.last_result = None;
+            }
+            if busy && ui.button("Cancel").clicked() {
+                cx.requests.push(Request::CancelJob);
+            }
+        });
+        if busy {
+            ui.add(egui::ProgressBar::new(cx.job.fraction).show_percentage());
+        }
+        if let Some(r) = &self.last_result {
+            ui.label(r);
+        }
+    }
+}

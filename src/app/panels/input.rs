@@ -1,0 +1,102 @@
+//! The photo and the settings every stage shares: field of view, output size and timing,
+//! inpainting quality.
+
+use super::{PanelContext, StagePanel, Tab, committed, scene_image_ui};
+use crate::app::viewport::ViewTransform;
+use crate::stages::inpaint::InpaintPreset;
+use eframe::egui::{self, Sense, Ui};
+
+/// The Input tab.
+#[derive(Default)]
+pub struct InputPanel {
+    transform: ViewTransform,
+}
+
+impl StagePanel for InputPanel {
+    fn tab(&self) -> Tab {
+        Tab::Input
+    }
+
+    fn title(&self) -> &'static str {
+        "Input"
+    }
+
+    fn view_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>) {
+        scene_image_ui(
+            ui,
+            cx,
+            "input",
+            &mut self.transform,
+            Sense::hover(),
+            |s| {
+                let (w, h) = s.scene.input.rgb.size();
+                [w, h]
+            },
+            |s| &s.display.input,
+        );
+    }
+
+    fn inspector_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>) {
+        ui.heading("Photo");
+        ui.label(cx.project.input.display().to_string());
+        if let Some(s) = cx.snapshot {
+            let (w, h) = s.scene.input.rgb.size();
+            ui.label(format!("{w} × {h} px"));
+        }
+        ui.separator();
+        ui.heading("Camera");
+        if let Some(v) = committed(ui, "hfov", cx.project.camera.hfov_deg, |ui, v| {
+            ui.add(egui::Slider::new(v, 20.0..=120.0).text("field of view °"))
+        }) {
+            cx.edit("Field of view", |p| p.camera.hfov_deg = v);
+        }
+        ui.separator();
+        ui.heading("Output");
+        if let Some(v) = committed(ui, "frames", cx.project.output.frames, |ui, v| {
+            ui.horizontal(|ui| {
+                ui.label("frames");
+                ui.add(egui::DragValue::new(v).range(1..=10_000))
+            })
+            .inner
+        }) {
+            cx.edit("Frame count", |p| p.output.frames = v);
+        }
+        if let Some(v) = committed(ui, "fps", cx.project.output.fps, |ui, v| {
+            ui.horizontal(|ui| {
+                ui.label("fps");
+                ui.add(egui::DragValue::new(v).range(1.0..=120.0))
+            })
+            .inner
+        }) {
+            cx.edit("Frame rate", |p| p.output.fps = v);
+        }
+        ui.separator();
+        ui.heading("Inpainting");
+        let mut preset = cx.project.inpaint.preset;
+        ui.horizontal(|ui| {
+            for p in InpaintPreset::ALL {
+                ui.selectable_value(&mut preset, p, p.name());
+            }
+        });
+        if preset != cx.project.inpaint.preset {
+            cx.edit("Inpaint quality", |p| p.inpaint.preset = preset);
+        }
+        if let Some(v) = committed(ui, "seed", cx.project.inpaint.seed, |ui, v| {
+            ui.horizontal(|ui| {
+                ui.label("seed");
+                ui.add(egui::DragValue::new(v))
+            })
+            .inner
+        }) {
+            cx.edit("Inpaint seed", |p| p.inpaint.seed = v);
+        }
+        if let Some(s) = cx.snapshot {
+            ui.separator();
+            ui.label(format!("depth: {}", s.scene.depth_estimator));
+            ui.label(format!("inpainter: {}", s.scene.inpainter));
+            for w in &s.scene.warnings {
+                ui.colored_label(ui.visuals().warn_fg_color, w);
+            }
+        }
+    }
+}

@@ -1,0 +1,306 @@
+//! The timeline under the views: play/pause, scrubbing, loop, keyframe markers (select,
+//! delete, interpolation and ease per key) and a strip coloured by each frame's hole fraction.
+
+use super::panels::{PanelContext, Request};
+use crate::path::{CameraPath, Ease, Interpolation};
+use eframe::egui::{self, Color32, Sense, Stroke, Ui, pos2, vec2};
+use std::collections::BTreeMap;
+
+/// Playback and frame selection.
+#[derive(Clone, Debug, Default)]
+pub struct TimelineState {
+    /// The current output frame.
+    pub frame: usize,
+    /// Playing.
+    pub playing: bool,
+    /// Wrap around at the end while playing.
+    pub looping: bool,
+    /// Fractional frame clock while playing.
+    pub clock: f64,
+    /// The selected keyframe (index into the path's keys).
+    pub selected_key: Option<usize>,
+    /// Hole fraction of every rendered preview frame, by frame (reset with each new scene).
+    pub hole_fractions: BTreeMap<usize, f32>,
+}
+
+impl TimelineState {
+    /// Advances playback by `dt` seconds at `fps` over `frames` frames. Returns true when the
+    /// frame changed.
+    pub fn advance(&mut self, dt: f64, fps: f64, frames: usize) -> bool {
+        if !self.playing || frames == 0 {
+            return false;
+        }
+        let before = self.frame;
+        self.clock += dt * fps;
+        let mut f = self.clock.floor().max(0.0) as usize;
+        if f >= frames {
+            if self.looping {
+                self.clock %= frames as f64;
+                f = self.clock.floor() as usize % frames;
+            } else {
+                f = frames - 1;
+                self.clock = f as f64;
+                self.playing = false;
+            }
+        }
+        self.frame = f;
+        f != before
+    }
+
+    /// Jumps to `frame` (stops the clock there).
+    pub fn seek(&mut self, frame: usize) {
+        self.frame = frame;
+        self.clock = frame as f64;
+    }
+}
+
+/// Key frames of the path (none for a preset).
+pub fn key_frames(path: &CameraPath) -> Vec<f64> {
+    match path {
+        CameraPath::Keyframes(k) => k.keys.iter().map(|k| k.frame).collect(),
+        CameraPath::Preset(_) => Vec::new(),
+    }
+}
+
+/// Draws the timeline.
+pub fn timeline_ui(ui: &mut Ui, cx: &mut PanelContext<'_>) {
+    let frames = cx.project.output.frames.max(1);
+    let fps = cx.project.output.fps;
+    ui.horizontal(|ui| {
+        let play = if cx.timeline.playing { "Pause" } else { "Play" };
+        if ui
+            .button(play)
+            .on_hover_text("Play or pause the preview (Space)")
+            .clicked()
+        {
+            toggle_play(cx, frames);
+        }
+        if ui.button("|<").on_hover_text("First frame").clicked() {
+            cx.timeline.seek(0);
+        }
+        ui.checkbox(&mut cx.timeline.looping, "Loop");
+        let mut f = cx.timeline.frame;
+        ui.label("Frame");
+        if ui
+            .add(egui::DragValue::new(&mut f).range(0..=frames - 1))
+            .changed()
+        {
+            cx.timeline.seek(f);
+        }
+        ui.label(format!(
+            "/ {}  ·  {:.2} s at {fps} fps",
+            frames - 1,
+            f as f32 / fps
+        ));
+        ui.separator();
+        if ui
+            .button("Add key (I)")
+            .on_hover_text("Add a keyframe at this frame with the current preview view (I)")
+            .clicked()
+        {
+            cx.requests.push(Request::AddKeyframe);
+        }
+        keyframe_controls_ui(ui, cx);
+    });
+    scrub_bar_ui(ui, cx, frames);
+    hole_strip_ui(ui, cx, frames);
+}
+
+fn toggle_play(cx: &mut PanelContext<'_>, frames: usize) {
+    let t = &mut *cx.timeline;
+    t.playing = !t.playing;
+    if t.playing && t.frame + 1 >= frames && !t.looping {
+        t.seek(0);
+    }
+    t.clock = t.frame as f64;
+}
+
+/// Delete / interpolation / ease of the selected key.
+fn keyframe_controls_ui(ui: &mut Ui, cx: &mut PanelContext<'_>) {
+    let CameraPath::Keyframes(path) = &cx.project.camera.path else {
+        return;
+    };
+    let Some(i) = cx.timeline.selected_key.filter(|&i| i < path.keys.len()) else {
+        return;
+    };
+    let key = path.keys[i];
+    ui.separator();
+    ui.label(format!("key {} at frame {}", i + 1, key.frame));
+    let mut interpolation = key.interpolation;
+    egui::ComboBox::from_id_salt("key-interpolation")
+        .selected_text(interpolation.name())
+        .show_ui(ui, |ui| {
+            for v in Interpolation::ALL {
+                ui.selectable_value(&mut interpolation, v, v.name());
+            }
+        });
+    let mut ease = key.ease;
+    egui::ComboBox::from_id_salt("key-ease")
+        .selected_text(ease.name())
+        .show_ui(ui, |ui| {
+            for v in Ease::ALL {
+                ui.selectable_value(&mut ease, v, v.name());
+            }
+        });
+    if interpolation != key.interpolation {
+        cx.edit("Key interpolation", |p| {
+            set_key(p, i, |k| k.interpolation = interpolation)
+        });
+    }
+    if ease != key.ease {
+        cx.edit("Key ease", |p| set_key(p, i, |k| k.ease = ease));
+    }
+    if ui.button("Delete key").clicked() {
+        delete_key(cx, i);
+    }
+}
+
+/// Deletes key `i` (a path needs one key at least: deleting the last one goes back to the
+/// default preset).
+pub fn delete_key(cx: &mut PanelContext<'_>, i: usize) {
+    cx.edit("Delete keyframe", |p| {
+        if let CameraPath::Keyframes(path) = &mut p.camera.path
+            && i < path.keys.len()
+        {
+            path.keys.remove(i);
+            if path.keys.is_empty() {
+                p.camera.path = CameraPath::default();
+            }
+        }
+    });
+    cx.timeline.selected_key = None;
+}
+
+fn set_key(p: &mut crate::project::Project, i: usize, f: impl FnOnce(&mut crate::path::Keyframe)) {
+    if let CameraPath::Keyframes(path) = &mut p.camera.path
+        && let Some(k) = path.keys.get_mut(i)
+    {
+        f(k);
+    }
+}
+
+/// The frame ruler with keyframe diamonds and the playhead; click or drag to scrub.
+fn scrub_bar_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, frames: usize) {
+    let (rect, response) =
+        ui.allocate_exact_size(vec2(ui.available_width(), 26.0), Sense::click_and_drag());
+    let painter = ui.painter_at(rect);
+    let visuals = ui.visuals();
+    painter.rect_filled(rect, 3.0, visuals.extreme_bg_color);
+    let x_of = |f: f64| {
+        rect.left() + 8.0 + (rect.width() - 16.0) * (f / (frames.max(2) - 1) as f64) as f32
+    };
+    let frame_of = |x: f32| {
+        (((x - rect.left() - 8.0) / (rect.width() - 16.0)).clamp(0.0, 1.0)
+            * (frames.max(2) - 1) as f32)
+            .round() as usize
+    };
+    // Ticks every 10 frames (or coarser).
+    let step = [1, 5, 10, 25, 50, 100, 250, 500, 1000]
+        .into_iter()
+        .find(|s| (rect.width() / (frames as f32 / *s as f32)) > 30.0)
+        .unwrap_or(5000);
+    for f in (0..frames).step_by(step) {
+        let x = x_of(f as f64);
+        painter.line_segment(
+            [pos2(x, rect.bottom() - 6.0), pos2(x, rect.bottom())],
+            Stroke::new(1.0, visuals.weak_text_color()),
+        );
+    }
+    // Keyframes.
+    let keys = key_frames(&cx.project.camera.path);
+    let mut clicked_key = None;
+    for (i, &k) in keys.iter().enumerate() {
+        let centre = pos2(x_of(k), rect.center().y);
+        let selected = cx.timeline.selected_key == Some(i);
+        let r = if selected { 7.0 } else { 5.5 };
+        let diamond = vec![
+            centre + vec2(0.0, -r),
+            centre + vec2(r, 0.0),
+            centre + vec2(0.0, r),
+            centre + vec2(-r, 0.0),
+        ];
+        let fill = if selected {
+            Color32::from_rgb(255, 200, 60)
+        } else {
+            Color32::from_rgb(230, 170, 40)
+        };
+        painter.add(egui::Shape::convex_polygon(
+            diamond,
+            fill,
+            Stroke::new(1.0, Color32::BLACK),
+        ));
+        if let Some(p) = response.interact_pointer_pos()
+            && response.clicked()
+            && (p - centre).length() <= r + 3.0
+        {
+            clicked_key = Some(i);
+        }
+    }
+    // Playhead.
+    let x = x_of(cx.timeline.frame as f64);
+    painter.line_segment(
+        [pos2(x, rect.top()), pos2(x, rect.bottom())],
+        Stroke::new(2.0, Color32::from_rgb(255, 80, 80)),
+    );
+    if let Some(i) = clicked_key {
+        cx.timeline.selected_key = Some(i);
+        cx.timeline.seek(keys[i].round().max(0.0) as usize);
+    } else if let Some(p) = response.interact_pointer_pos()
+        && (response.dragged() || response.clicked())
+    {
+        cx.timeline.seek(frame_of(p.x).min(frames - 1));
+    }
+}
+
+/// One cell per frame, red by hole fraction (grey: not rendered yet).
+fn hole_strip_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, frames: usize) {
+    let (rect, response) = ui.allocate_exact_size(vec2(ui.available_width(), 8.0), Sense::hover());
+    let painter = ui.painter_at(rect);
+    painter.rect_filled(rect, 0.0, Color32::from_gray(60));
+    let inner_left = rect.left() + 8.0;
+    let inner_width = rect.width() - 16.0;
+    let cell = inner_width / frames as f32;
+    for (&f, &h) in &cx.timeline.hole_fractions {
+        if f >= frames {
+            continue;
+        }
+        let t = (h / 0.05).clamp(0.0, 1.0);
+        let colour = Color32::from_rgb(
+            (60.0 + 195.0 * t) as u8,
+            (170.0 * (1.0 - t) + 40.0) as u8,
+            60,
+        );
+        let x = inner_left + f as f32 * cell;
+        painter.rect_filled(
+            egui::Rect::from_min_max(pos2(x, rect.top()), pos2(x + cell.max(1.0), rect.bottom())),
+            0.0,
+            colour,
+        );
+    }
+    response.on_hover_ui(|ui| {
+        ui.label("Hole fraction of each rendered preview frame: green none, red ≥ 5 %, grey not rendered yet.");
+    });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn playback_wraps_or_stops() {
+        let mut t = TimelineState {
+            playing: true,
+            looping: true,
+            ..Default::default()
+        };
+        assert!(t.advance(0.5, 10.0, 8));
+        assert_eq!(t.frame, 5);
+        t.advance(0.5, 10.0, 8);
+        assert_eq!(t.frame, 2);
+        t.looping = false;
+        t.advance(10.0, 10.0, 8);
+        assert_eq!(t.frame, 7);
+        assert!(!t.playing);
+        assert!(!t.advance(1.0, 10.0, 8));
+    }
+}

@@ -1,0 +1,192 @@
+//! The preview renderer seam and the zoomable image view the stage panels draw on.
+//!
+//! # Renderer seam
+//!
+//! [`PreviewRenderer`] is what the preview thread calls. Today it is [`CpuPreview`] (the
+//! reference splatter at a reduced size; the frame comes back as a texture). The GPU splatter
+//! (render/gpu.rs, wgpu 30, the version egui-wgpu 0.37 uses) plugs in at one of two depths:
+//!
+//! 1. as another `PreviewRenderer` that renders offscreen and reads back (no UI change); or
+//! 2. drawn straight into the window: create its pipelines once from
+//!    `CreationContext::wgpu_render_state` into `callback_resources`, and in
+//!    [`crate::app::panels`]' preview view replace the texture with
+//!    `egui_wgpu::Callback::new_paint_callback(rect, SplatCallback { view, frame_index })`,
+//!    whose `prepare` renders into its own colour + depth targets and whose `paint` only
+//!    composites (egui has no depth buffer). [`ImageView`] already gives the screen rect.
+
+use crate::geometry::View;
+use crate::render::cpu::CpuRenderer;
+use crate::render::{Frame, FrameRenderer, SplatSettings};
+use crate::scene::Scene;
+use crate::stages::points::PointCloud;
+use eframe::egui::{self, Pos2, Rect, Response, Sense, TextureId, Ui, Vec2, pos2, vec2};
+use std::sync::Arc;
+
+/// Renders preview frames of a scene (on the preview thread).
+pub trait PreviewRenderer: Send {
+    /// Name for the status bar.
+    fn name(&self) -> String;
+
+    /// Renders output frame `frame_index` of `scene` from `view` at `width × height`.
+    fn render(
+        &mut self,
+        scene: &Scene,
+        settings: &SplatSettings,
+        view: &View,
+        frame_index: usize,
+        width: usize,
+        height: usize,
+    ) -> crate::Result<Frame>;
+}
+
+/// The CPU reference splatter as a preview renderer.
+#[derive(Default)]
+pub struct CpuPreview {
+    renderer: CpuRenderer,
+    cloud: Option<Arc<PointCloud>>,
+}
+
+impl PreviewRenderer for CpuPreview {
+    fn name(&self) -> String {
+        "CPU preview".into()
+    }
+
+    fn render(
+        &mut self,
+        scene: &Scene,
+        settings: &SplatSettings,
+        view: &View,
+        frame_index: usize,
+        width: usize,
+        height: usize,
+    ) -> crate::Result<Frame> {
+        if !self
+            .cloud
+            .as_ref()
+            .is_some_and(|c| Arc::ptr_eq(c, &scene.cloud))
+        {
+            self.renderer.set_cloud(scene.cloud.clone())?;
+            self.cloud = Some(scene.cloud.clone());
+        }
+        self.renderer.settings = *settings;
+        scene.render_frame(&mut self.renderer, view, frame_index, width, height)
+    }
+}
+
+/// Zoom and pan of one image view (kept by the panel that owns the view).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewTransform {
+    /// 1 = fit to the area.
+    pub zoom: f32,
+    /// Offset of the image centre from the area centre, points.
+    pub pan: Vec2,
+}
+
+impl Default for ViewTransform {
+    fn default() -> Self {
+        Self {
+            zoom: 1.0,
+            pan: Vec2::ZERO,
+        }
+    }
+}
+
+/// Where an image was drawn: maps between image pixels and the screen.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ImageView {
+    /// Screen rectangle of the whole image.
+    pub rect: Rect,
+    /// Image size in pixels (of the raster the coordinates refer to).
+    pub size: [f32; 2],
+}
+
+impl ImageView {
+    /// The screen position of image pixel `p` (pixel centres at integers).
+    pub fn to_screen(&self, p: [f32; 2]) -> Pos2 {
+        pos2(
+            self.rect.min.x + (p[0] + 0.5) / self.size[0] * self.rect.width(),
+            self.rect.min.y + (p[1] + 0.5) / self.size[1] * self.rect.height(),
+        )
+    }
+
+    /// The image pixel under screen position `pos`.
+    pub fn to_image(&self, pos: Pos2) -> [f32; 2] {
+        [
+            (pos.x - self.rect.min.x) / self.rect.width() * self.size[0] - 0.5,
+            (pos.y - self.rect.min.y) / self.rect.height() * self.size[1] - 0.5,
+        ]
+    }
+
+    /// Screen points per image pixel.
+    pub fn scale(&self) -> f32 {
+        self.rect.width() / self.size[0].max(1.0)
+    }
+}
+
+/// Allocates the whole available area, draws `texture` fitted into it (zoomed and panned by
+/// `transform`: scroll to zoom about the pointer, middle- or right-drag to pan, double-click
+/// to fit) and returns the response plus the pixel mapping for an image of `size` pixels.
+pub fn image_view_ui(
+    ui: &mut Ui,
+    texture: TextureId,
+    size: [usize; 2],
+    transform: &mut ViewTransform,
+    sense: Sense,
+) -> (Response, ImageView) {
+    let (area, response) = ui.allocate_exact_size(ui.available_size(), sense | Sense::hover());
+    let size_f = [size[0].max(1) as f32, size[1].max(1) as f32];
+    let fit = (area.width() / size_f[0]).min(area.height() / size_f[1]);
+    if response.hovered() {
+        let scroll = ui.input(|i| i.smooth_scroll_delta.y);
+        if scroll != 0.0 {
+            let factor = (scroll / 200.0).exp();
+            let new_zoom = (transform.zoom * factor).clamp(0.25, 32.0);
+            if let Some(p) = response.hover_pos() {
+                // Keep the pixel under the pointer in place.
+                let centre = area.center() + transform.pan;
+                let k = new_zoom / transform.zoom;
+                transform.pan = (centre - p) * k + (p - area.center());
+            }
+            transform.zoom = new_zoom;
+        }
+    }
+    if response.dragged_by(egui::PointerButton::Middle)
+        || response.dragged_by(egui::PointerButton::Secondary)
+    {
+        transform.pan += response.drag_delta();
+    }
+    if response.double_clicked() {
+        *transform = ViewTransform::default();
+    }
+    let scale = fit * transform.zoom;
+    let rect = Rect::from_center_size(
+        area.center() + transform.pan,
+        vec2(size_f[0] * scale, size_f[1] * scale),
+    );
+    let painter = ui.painter_at(area);
+    painter.image(
+        texture,
+        rect,
+        Rect::from_min_max(pos2(0.0, 0.0), pos2(1.0, 1.0)),
+        egui::Color32::WHITE,
+    );
+    (response, ImageView { rect, size: size_f })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn image_view_round_trips() {
+        let v = ImageView {
+            rect: Rect::from_min_size(pos2(10.0, 20.0), vec2(200.0, 100.0)),
+            size: [400.0, 200.0],
+        };
+        for p in [[0.0, 0.0], [399.0, 199.0], [123.5, 77.25]] {
+            let q = v.to_image(v.to_screen(p));
+            assert!((q[0] - p[0]).abs() < 1e-3 && (q[1] - p[1]).abs() < 1e-3);
+        }
+        assert!((v.scale() - 0.5).abs() < 1e-6);
+    }
+}

@@ -1,0 +1,834 @@
+//! Work off the UI thread.
+//!
+//! - The **scene thread** (`makeit4d-scene`) owns the one [`SceneBuilder`] of the session, so
+//!   an edit re-runs only the stages it invalidates (a threshold: layers onward; a depth
+//!   stroke: depth onward). It takes [`Command`]s from a bounded channel; of several queued
+//!   builds only the newest runs, and a new build cancels the one in flight. Each finished
+//!   scene goes into a latest-value slot as a [`SceneSnapshot`] with its display images
+//!   already made, so the UI only uploads textures. Exports run here too, through exactly the
+//!   command line's [`render_sequence`].
+//! - The **preview thread** (`makeit4d-preview`) renders the newest [`PreviewRequest`] (a
+//!   request replaces any pending one) with the last good scene, so the preview stays live
+//!   while a stage recomputes.
+//!
+//! Progress and one-off results come back as [`Event`]s on a second bounded channel, drained
+//! once per frame; each message is followed by a repaint request.
+
+use super::images::{DISPLAY_MAX_SIDE, mask_overlay, masked_rgb, rgb_image};
+use super::viewport::PreviewRenderer;
+use crate::export::{ExportOptions, RenderSummary, render_sequence};
+use crate::geometry::View;
+use crate::progress::Progress;
+use crate::project::Project;
+use crate::raster::GrayRaster;
+use crate::render::cpu::CpuRenderer;
+use crate::scene::{Scene, SceneBuilder, Stage};
+use crate::stages::depth::preview::depth_preview;
+use crate::stages::motion::MotionSpec;
+use eframe::egui::{self, Color32, ColorImage};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::Instant;
+
+/// Capacity of the command channel (builds are coalesced, so a few slots suffice).
+const COMMAND_CAPACITY: usize = 8;
+/// Capacity of the event channel.
+const EVENT_CAPACITY: usize = 64;
+/// Bins of the depth histogram shown under the layer thresholds.
+pub const HISTOGRAM_BINS: usize = 160;
+/// Flow arrows are drawn on a grid with about this many cells across the canvas.
+const FLOW_GRID_CELLS: usize = 36;
+
+/// A request to the scene thread.
+pub enum Command {
+    /// Build (or update) the scene for `project`; `generation` identifies the edit.
+    Build {
+        /// The edit counter the scene will carry.
+        generation: u64,
+        /// The project to build.
+        project: Box<Project>,
+    },
+    /// Suggest motion for the canvas of the current scene.
+    SuggestMotion,
+    /// Render the project's frames into a folder (building the scene first if needed).
+    Export {
+        /// The project to render.
+        project: Box<Project>,
+        /// Where the frames go.
+        out_dir: PathBuf,
+        /// What to write.
+        options: ExportOptions,
+    },
+}
+
+/// What a running job is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum JobKind {
+    /// Building the scene.
+    Build,
+    /// Suggesting motion.
+    Suggest,
+    /// Exporting frames.
+    Export,
+}
+
+impl JobKind {
+    /// A word for the status bar.
+    pub fn name(self) -> &'static str {
+        match self {
+            JobKind::Build => "building",
+            JobKind::Suggest => "suggesting motion",
+            JobKind::Export => "exporting",
+        }
+    }
+}
+
+/// The running job and its progress (a latest-value slot).
+#[derive(Clone, Debug, Default)]
+pub struct JobStatus {
+    /// The running job, if any.
+    pub kind: Option<JobKind>,
+    /// The stage it reports.
+    pub stage: String,
+    /// Its progress in `[0, 1]`.
+    pub fraction: f32,
+}
+
+/// One-off results from the scene thread.
+#[derive(Debug)]
+pub enum Event {
+    /// A scene is in the slot.
+    SceneReady {
+        /// Its generation.
+        generation: u64,
+        /// Stages that ran (the rest came from the cache).
+        stages_run: Vec<Stage>,
+        /// Build time.
+        seconds: f64,
+    },
+    /// A build failed; the previous scene stays.
+    BuildFailed {
+        /// The generation that failed.
+        generation: u64,
+        /// Why, one line.
+        message: String,
+    },
+    /// The suggested motion (never applied by the worker).
+    Suggestion(MotionSpec),
+    /// An export finished.
+    ExportDone(RenderSummary),
+    /// An export failed or was cancelled.
+    ExportFailed(String),
+    /// A job was cancelled.
+    Cancelled(JobKind),
+    /// Something failed outside a job.
+    Error(String),
+}
+
+/// Per layer: the layer before and after inpainting.
+pub struct LayerImages {
+    /// Own pixels only (what the canvas shows of this layer).
+    pub before: ColorImage,
+    /// Own plus inpainted hidden pixels.
+    pub after: ColorImage,
+    /// Depth interval `[d_i, d_{i+1}]`.
+    pub interval: [f32; 2],
+    /// Own pixel count.
+    pub pixels: usize,
+    /// Inpainted pixel count.
+    pub hidden_pixels: usize,
+}
+
+/// A flow arrow for display: canvas pixel and velocity (pixels per frame).
+#[derive(Clone, Copy, Debug)]
+pub struct FlowArrow {
+    /// Canvas pixel.
+    pub at: [f32; 2],
+    /// `M(at)`, pixels per frame.
+    pub velocity: [f32; 2],
+}
+
+/// Display data of a scene, made on the scene thread.
+pub struct DisplayImages {
+    /// The input photo.
+    pub input: ColorImage,
+    /// The outpainted canvas.
+    pub canvas: ColorImage,
+    /// Synthesised canvas pixels as a translucent overlay.
+    pub synthesised: ColorImage,
+    /// Depth of the photo through the turbo colour map (sky dark blue).
+    pub depth: ColorImage,
+    /// The photo's sky mask as a translucent overlay.
+    pub sky: ColorImage,
+    /// Horizon detected from the sky, fraction of the photo height from the top.
+    pub detected_horizon: Option<f32>,
+    /// Histogram of the canvas disparity `1/Z`: `[bin centre, fraction of pixels]`.
+    pub histogram: Vec<[f64; 2]>,
+    /// The layers, nearest first.
+    pub layers: Vec<LayerImages>,
+    /// The motion mask as an overlay, when the scene moves.
+    pub motion_mask: Option<ColorImage>,
+    /// Subsampled flow, when the scene moves.
+    pub flow: Vec<FlowArrow>,
+    /// Largest speed among [`DisplayImages::flow`], pixels per frame.
+    pub max_speed: f32,
+}
+
+/// A built scene with the project it was built from.
+pub struct SceneSnapshot {
+    /// The edit generation it belongs to.
+    pub generation: u64,
+    /// The project it was built from.
+    pub project: Project,
+    /// The scene.
+    pub scene: Scene,
+    /// Display images.
+    pub display: DisplayImages,
+}
+
+struct Shared {
+    status: Mutex<JobStatus>,
+    cancel: Mutex<Option<(JobKind, Arc<AtomicBool>)>>,
+    scene: Mutex<Option<Arc<SceneSnapshot>>>,
+}
+
+/// Locks a mutex, recovering the data of a poisoned one (a panicked worker must not take the
+/// UI down with it).
+pub(crate) fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// The UI's handle on the scene thread.
+pub struct SceneWorker {
+    commands: Option<SyncSender<Command>>,
+    events: Receiver<Event>,
+    shared: Arc<Shared>,
+    pending_build: Option<Command>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl SceneWorker {
+    /// Starts the scene thread; `ctx` is asked to repaint whenever something arrives.
+    pub fn start(ctx: egui::Context) -> std::io::Result<Self> {
+        let (commands, command_rx) = sync_channel(COMMAND_CAPACITY);
+        let (event_tx, events) = sync_channel(EVENT_CAPACITY);
+        let shared = Arc::new(Shared {
+            status: Mutex::new(JobStatus::default()),
+            cancel: Mutex::new(None),
+            scene: Mutex::new(None),
+        });
+        let thread = {
+            let shared = shared.clone();
+            std::thread::Builder::new()
+                .name("makeit4d-scene".into())
+                .spawn(move || scene_thread(command_rx, event_tx, shared, ctx))?
+        };
+        Ok(Self {
+            commands: Some(commands),
+            events,
+            shared,
+            pending_build: None,
+            thread: Some(thread),
+        })
+    }
+
+    /// Asks for a build of `project`; a build in flight is cancelled (newest request wins).
+    pub fn build(&mut self, generation: u64, project: &Project) {
+        self.cancel_if(JobKind::Build);
+        self.pending_build = Some(Command::Build {
+            generation,
+            project: Box::new(project.clone()),
+        });
+        self.flush();
+    }
+
+    /// Sends a command other than a build. Errors when the queue is full (the UI says so).
+    pub fn send(&mut self, command: Command) -> Result<(), String> {
+        let Some(tx) = &self.commands else {
+            return Err("the scene worker has stopped".into());
+        };
+        match tx.try_send(command) {
+            Ok(()) => Ok(()),
+            Err(TrySendError::Full(_)) => Err("the scene worker is busy; try again".into()),
+            Err(TrySendError::Disconnected(_)) => Err("the scene worker has stopped".into()),
+        }
+    }
+
+    /// Retries a build that did not fit into the queue; call once per frame.
+    pub fn flush(&mut self) {
+        if let (Some(cmd), Some(tx)) = (self.pending_build.take(), &self.commands) {
+            match tx.try_send(cmd) {
+                Ok(()) => {}
+                Err(TrySendError::Full(cmd)) => self.pending_build = Some(cmd),
+                Err(TrySendError::Disconnected(_)) => {}
+            }
+        }
+    }
+
+    /// True while a build waits to be queued.
+    pub fn has_pending_build(&self) -> bool {
+        self.pending_build.is_some()
+    }
+
+    /// The next event, if any (never blocks).
+    pub fn try_event(&self) -> Option<Event> {
+        self.events.try_recv().ok()
+    }
+
+    /// The running job's progress.
+    pub fn status(&self) -> JobStatus {
+        lock(&self.shared.status).clone()
+    }
+
+    /// The latest scene.
+    pub fn scene(&self) -> Option<Arc<SceneSnapshot>> {
+        lock(&self.shared.scene).clone()
+    }
+
+    /// Cancels the running job.
+    pub fn cancel(&self) {
+        if let Some((_, flag)) = &*lock(&self.shared.cancel) {
+            flag.store(true, Ordering::Relaxed);
+        }
+    }
+
+    /// Cancels the running job when it is of `kind`.
+    pub fn cancel_if(&self, kind: JobKind) {
+        if let Some((k, flag)) = &*lock(&self.shared.cancel)
+            && *k == kind
+        {
+            flag.store(true, Ordering::Relaxed);
+        }
+    }
+}
+
+impl Drop for SceneWorker {
+    fn drop(&mut self) {
+        self.cancel();
+        self.commands = None;
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// A thread pool for the stages that leaves one core to the UI (the library's loops use
+/// rayon; on the global pool a build would take every core and the window would stutter).
+fn stage_pool(name: &'static str) -> Option<rayon::ThreadPool> {
+    let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(cores.saturating_sub(1).max(1))
+        .thread_name(move |i| format!("{name}-{i}"))
+        .build()
+        .ok()
+}
+
+/// Runs `work` on `pool` (or here, without one).
+fn on_pool<T: Send>(pool: Option<&rayon::ThreadPool>, work: impl FnOnce() -> T + Send) -> T {
+    match pool {
+        Some(p) => p.install(work),
+        None => work(),
+    }
+}
+
+/// Runs one job with a fresh cancel flag published in `shared`, on `pool`.
+fn job<T: Send>(
+    shared: &Arc<Shared>,
+    ctx: &egui::Context,
+    kind: JobKind,
+    pool: Option<&rayon::ThreadPool>,
+    work: impl FnOnce(&Progress) -> T + Send,
+) -> T {
+    let flag = Arc::new(AtomicBool::new(false));
+    *lock(&shared.cancel) = Some((kind, flag.clone()));
+    *lock(&shared.status) = JobStatus {
+        kind: Some(kind),
+        stage: kind.name().into(),
+        fraction: 0.0,
+    };
+    ctx.request_repaint();
+    let progress = {
+        let ctx = ctx.clone();
+        let shared = shared.clone();
+        Progress::new(move |fraction, stage| {
+            {
+                let mut s = lock(&shared.status);
+                s.fraction = fraction;
+                if s.stage != stage {
+                    s.stage = stage.to_string();
+                }
+            }
+            ctx.request_repaint();
+        })
+        .with_cancel_flag(flag)
+    };
+    let out = on_pool(pool, || work(&progress));
+    *lock(&shared.cancel) = None;
+    *lock(&shared.status) = JobStatus::default();
+    ctx.request_repaint();
+    out
+}
+
+/// One line for an error shown in the window.
+fn one_line(e: &crate::Error) -> String {
+    format!("{e:#}").replace('\n', " ")
+}
+
+fn scene_thread(
+    commands: Receiver<Command>,
+    events: SyncSender<Event>,
+    shared: Arc<Shared>,
+    ctx: egui::Context,
+) {
+    let mut builder = SceneBuilder::new();
+    let pool = stage_pool("makeit4d-stage");
+    let pool = pool.as_ref();
+    let mut queue: std::collections::VecDeque<Command> = Default::default();
+    let send = |event: Event| -> bool {
+        let ok = events.send(event).is_ok();
+        ctx.request_repaint();
+        ok
+    };
+    let is_build = |c: &Command| matches!(c, Command::Build { .. });
+    loop {
+        if queue.is_empty() {
+            match commands.recv() {
+                Ok(c) => queue.push_back(c),
+                Err(_) => return,
+            }
+        }
+        while let Ok(c) = commands.try_recv() {
+            queue.push_back(c);
+        }
+        // Of the queued builds only the newest runs (in its place in the queue).
+        if let Some(last) = queue.iter().rposition(is_build) {
+            let mut i = 0;
+            queue.retain(|c| {
+                let keep = !is_build(c) || i == last;
+                i += 1;
+                keep
+            });
+        }
+        let Some(command) = queue.pop_front() else {
+            continue;
+        };
+        let alive = match command {
+            Command::Build {
+                generation,
+                project,
+            } => run_build(
+                &mut builder,
+                &shared,
+                &ctx,
+                pool,
+                generation,
+                *project,
+                &send,
+            ),
+            Command::SuggestMotion => {
+                let snapshot = lock(&shared.scene).clone();
+                match snapshot {
+                    None => send(Event::Error(
+                        "no scene yet: wait for the build to finish, then ask again".into(),
+                    )),
+                    Some(s) => {
+                        let result = job(&shared, &ctx, JobKind::Suggest, pool, |_| {
+                            crate::stages::motion::suggest_motion(
+                                &s.scene.canvas.image,
+                                Some(&s.scene.canvas.sky),
+                                None,
+                            )
+                        });
+                        match result {
+                            Ok(spec) => send(Event::Suggestion(spec)),
+                            Err(e) => send(Event::Error(format!(
+                                "motion suggestion failed: {}",
+                                one_line(&e)
+                            ))),
+                        }
+                    }
+                }
+            }
+            Command::Export {
+                project,
+                out_dir,
+                options,
+            } => {
+                let result = job(&shared, &ctx, JobKind::Export, pool, |progress| {
+                    let scene = builder.build(&project, &progress.sub(0.0, 0.1))?;
+                    let mut renderer = CpuRenderer::new(project.render);
+                    render_sequence(
+                        &project,
+                        &scene,
+                        &mut renderer,
+                        &out_dir,
+                        &options,
+                        &progress.sub(0.1, 1.0),
+                    )
+                });
+                match result {
+                    Ok(summary) => send(Event::ExportDone(summary)),
+                    Err(crate::Error::Cancelled) => send(Event::Cancelled(JobKind::Export)),
+                    Err(e) => send(Event::ExportFailed(one_line(&e))),
+                }
+            }
+        };
+        if !alive {
+            return;
+        }
+    }
+}
+
+/// Builds the scene, publishes it with its display images, and reports.
+fn run_build(
+    builder: &mut SceneBuilder,
+    shared: &Arc<Shared>,
+    ctx: &egui::Context,
+    pool: Option<&rayon::ThreadPool>,
+    generation: u64,
+    project: Project,
+    send: &impl Fn(Event) -> bool,
+) -> bool {
+    let before = builder.runs().clone();
+    let start = Instant::now();
+    let result = job(shared, ctx, JobKind::Build, pool, |progress| {
+        let scene = builder.build(&project, progress)?;
+        progress.report(1.0, "display");
+        let display = display_images(&scene);
+        Ok::<_, crate::Error>((scene, display))
+    });
+    match result {
+        Ok((scene, display)) => {
+            let stages_run = builder
+                .runs()
+                .iter()
+                .filter(|(stage, n)| before.get(stage) != Some(n))
+                .map(|(stage, _)| *stage)
+                .collect();
+            *lock(&shared.scene) = Some(Arc::new(SceneSnapshot {
+                generation,
+                project,
+                scene,
+                display,
+            }));
+            send(Event::SceneReady {
+                generation,
+                stages_run,
+                seconds: start.elapsed().as_secs_f64(),
+            })
+        }
+        Err(crate::Error::Cancelled) => true,
+        Err(e) => send(Event::BuildFailed {
+            generation,
+            message: one_line(&e),
+        }),
+    }
+}
+
+/// Makes every display image of `scene`.
+pub fn display_images(scene: &Scene) -> DisplayImages {
+    let canvas = &scene.canvas;
+    let depth = &scene.depth.estimate;
+    let layers = scene
+        .layers
+        .layers
+        .iter()
+        .map(|l| {
+            let covered =
+                crate::raster::Raster::from_fn(l.mask.width(), l.mask.height(), |x, y| {
+                    l.covers(x, y)
+                });
+            LayerImages {
+                before: masked_rgb(&canvas.image, &l.mask, DISPLAY_MAX_SIDE / 2),
+                after: masked_rgb(&l.image, &covered, DISPLAY_MAX_SIDE / 2),
+                interval: l.interval,
+                pixels: l.mask.data().iter().filter(|&&m| m).count(),
+                hidden_pixels: l.inpainted.data().iter().filter(|&&m| m).count(),
+            }
+        })
+        .collect();
+    let (motion_mask, flow, max_speed) = match &scene.motion {
+        Some(m) => {
+            let (flow, max_speed) = flow_arrows(&m.field.flow);
+            (
+                Some(mask_overlay(
+                    &m.field.mask,
+                    Color32::from_rgb(60, 200, 255),
+                    0.45,
+                    DISPLAY_MAX_SIDE,
+                )),
+                flow,
+                max_speed,
+            )
+        }
+        None => (None, Vec::new(), 0.0),
+    };
+    DisplayImages {
+        input: rgb_image(&scene.input.rgb, DISPLAY_MAX_SIDE),
+        canvas: rgb_image(&canvas.image, DISPLAY_MAX_SIDE),
+        synthesised: mask_overlay(
+            &canvas.synthesised.map(|s| if s { 1.0 } else { 0.0 }),
+            Color32::from_rgb(255, 140, 0),
+            0.25,
+            DISPLAY_MAX_SIDE,
+        ),
+        depth: rgb_image(
+            &depth_preview(&depth.depth, Some(&depth.sky)),
+            DISPLAY_MAX_SIDE,
+        ),
+        sky: mask_overlay(
+            &depth.sky,
+            Color32::from_rgb(120, 200, 255),
+            0.5,
+            DISPLAY_MAX_SIDE,
+        ),
+        detected_horizon: crate::stages::depth::classical::horizon_from_sky(&depth.sky),
+        histogram: disparity_histogram(&canvas.depth, HISTOGRAM_BINS),
+        layers,
+        motion_mask,
+        flow,
+        max_speed,
+    }
+}
+
+/// Histogram of `1/Z` over the finite positive depths: `[bin centre, fraction]`.
+pub fn disparity_histogram(depth: &GrayRaster, bins: usize) -> Vec<[f64; 2]> {
+    let disparity: Vec<f64> = depth
+        .data()
+        .iter()
+        .filter(|z| z.is_finite() && **z > 0.0)
+        .map(|&z| 1.0 / z as f64)
+        .collect();
+    if disparity.is_empty() || bins == 0 {
+        return Vec::new();
+    }
+    let lo = disparity.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = disparity.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let width = ((hi - lo) / bins as f64).max(1e-12);
+    let mut counts = vec![0usize; bins];
+    for d in &disparity {
+        let i = (((d - lo) / width) as usize).min(bins - 1);
+        counts[i] += 1;
+    }
+    let n = disparity.len() as f64;
+    counts
+        .iter()
+        .enumerate()
+        .map(|(i, &c)| [lo + (i as f64 + 0.5) * width, c as f64 / n])
+        .collect()
+}
+
+/// The flow on a coarse grid (cells of equal size), skipping still cells.
+fn flow_arrows(flow: &crate::raster::Raster<[f32; 2]>) -> (Vec<FlowArrow>, f32) {
+    let (w, h) = flow.size();
+    if w == 0 || h == 0 {
+        return (Vec::new(), 0.0);
+    }
+    let step = (w.max(h) / FLOW_GRID_CELLS).max(1);
+    let mut out = Vec::new();
+    let mut max_speed = 0.0f32;
+    for y in (step / 2..h).step_by(step) {
+        for x in (step / 2..w).step_by(step) {
+            let v = flow.at(x, y);
+            let speed = (v[0] * v[0] + v[1] * v[1]).sqrt();
+            if speed.is_finite() && speed > 1e-4 {
+                max_speed = max_speed.max(speed);
+                out.push(FlowArrow {
+                    at: [x as f32, y as f32],
+                    velocity: v,
+                });
+            }
+        }
+    }
+    (out, max_speed)
+}
+
+/// A preview to render: the scene, the view and the size.
+pub struct PreviewRequest {
+    /// Identifies the request.
+    pub id: u64,
+    /// The scene to render (the last good one).
+    pub snapshot: Arc<SceneSnapshot>,
+    /// The camera.
+    pub view: View,
+    /// Output frame index (selects the motion phase).
+    pub frame_index: usize,
+    /// Size in pixels.
+    pub width: usize,
+    /// Size in pixels.
+    pub height: usize,
+}
+
+/// A rendered preview.
+pub struct PreviewFrame {
+    /// The request it answers.
+    pub id: u64,
+    /// The scene generation it shows.
+    pub generation: u64,
+    /// Output frame index.
+    pub frame_index: usize,
+    /// The picture.
+    pub image: ColorImage,
+    /// Fraction of hole pixels (coverage < 0.5).
+    pub hole_fraction: f32,
+    /// Render time.
+    pub seconds: f64,
+    /// Set when the render failed.
+    pub error: Option<String>,
+}
+
+struct PreviewShared {
+    request: Mutex<Option<PreviewRequest>>,
+    wake: Condvar,
+    frame: Mutex<Option<PreviewFrame>>,
+    stop: AtomicBool,
+    busy: AtomicBool,
+}
+
+/// The UI's handle on the preview thread.
+pub struct PreviewWorker {
+    shared: Arc<PreviewShared>,
+    renderer_name: String,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl PreviewWorker {
+    /// Starts the preview thread with `renderer`.
+    pub fn start(ctx: egui::Context, renderer: Box<dyn PreviewRenderer>) -> std::io::Result<Self> {
+        let shared = Arc::new(PreviewShared {
+            request: Mutex::new(None),
+            wake: Condvar::new(),
+            frame: Mutex::new(None),
+            stop: AtomicBool::new(false),
+            busy: AtomicBool::new(false),
+        });
+        let renderer_name = renderer.name();
+        let thread = {
+            let shared = shared.clone();
+            std::thread::Builder::new()
+                .name("makeit4d-preview".into())
+                .spawn(move || preview_thread(shared, renderer, ctx))?
+        };
+        Ok(Self {
+            shared,
+            renderer_name,
+            thread: Some(thread),
+        })
+    }
+
+    /// The renderer's name.
+    pub fn renderer_name(&self) -> &str {
+        &self.renderer_name
+    }
+
+    /// Replaces any pending request with `request` (newest request wins).
+    pub fn request(&self, request: PreviewRequest) {
+        *lock(&self.shared.request) = Some(request);
+        self.shared.wake.notify_one();
+    }
+
+    /// The newest finished frame, once.
+    pub fn take_frame(&self) -> Option<PreviewFrame> {
+        lock(&self.shared.frame).take()
+    }
+
+    /// True while rendering or holding a request.
+    pub fn is_busy(&self) -> bool {
+        self.shared.busy.load(Ordering::Relaxed) || lock(&self.shared.request).is_some()
+    }
+}
+
+impl Drop for PreviewWorker {
+    fn drop(&mut self) {
+        self.shared.stop.store(true, Ordering::Relaxed);
+        self.shared.wake.notify_all();
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+fn preview_thread(
+    shared: Arc<PreviewShared>,
+    mut renderer: Box<dyn PreviewRenderer>,
+    ctx: egui::Context,
+) {
+    let pool = stage_pool("makeit4d-preview-worker");
+    loop {
+        let request = {
+            let mut slot = lock(&shared.request);
+            loop {
+                if shared.stop.load(Ordering::Relaxed) {
+                    return;
+                }
+                if let Some(r) = slot.take() {
+                    break r;
+                }
+                slot = shared.wake.wait(slot).unwrap_or_else(|e| e.into_inner());
+            }
+        };
+        shared.busy.store(true, Ordering::Relaxed);
+        let start = Instant::now();
+        let result = on_pool(pool.as_ref(), || {
+            renderer.render(
+                &request.snapshot.scene,
+                &request.snapshot.project.render,
+                &request.view,
+                request.frame_index,
+                request.width,
+                request.height,
+            )
+        });
+        let (image, hole_fraction, error) = match result {
+            Ok(frame) => (
+                rgb_image(&frame.colour, usize::MAX),
+                frame.hole_fraction(),
+                None,
+            ),
+            Err(e) => (
+                ColorImage::filled([1, 1], Color32::BLACK),
+                0.0,
+                Some(one_line(&e)),
+            ),
+        };
+        *lock(&shared.frame) = Some(PreviewFrame {
+            id: request.id,
+            generation: request.snapshot.generation,
+            frame_index: request.frame_index,
+            image,
+            hole_fraction,
+            seconds: start.elapsed().as_secs_f64(),
+            error,
+        });
+        shared.busy.store(false, Ordering::Relaxed);
+        ctx.request_repaint();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn histogram_sums_to_one_and_spans_the_disparity() {
+        let depth = GrayRaster::from_vec(4, 1, vec![1.0, 2.0, 4.0, f32::NAN]).unwrap();
+        let h = disparity_histogram(&depth, 3);
+        assert_eq!(h.len(), 3);
+        let total: f64 = h.iter().map(|b| b[1]).sum();
+        assert!((total - 1.0).abs() < 1e-12);
+        assert!(h[0][0] > 0.25 && h[2][0] < 1.0);
+        assert!(disparity_histogram(&GrayRaster::new(2, 2, f32::NAN), 8).is_empty());
+    }
+
+    #[test]
+    fn flow_arrows_skip_still_cells() {
+        let mut flow = crate::raster::Raster::new(72, 72, [0.0f32; 2]);
+        flow.set(1, 1, [3.0, 4.0]);
+        let (arrows, max) = flow_arrows(&flow);
+        assert_eq!(arrows.len(), 1);
+        assert_eq!(max, 5.0);
+    }
+}

@@ -1,0 +1,217 @@
+//! The editor, driven headless through egui_kittest on the wgpu back end (lavapipe in CI): open
+//! the sample, move a layer threshold, paint a motion mask, add and undo a keyframe, export.
+//!
+//! Without a wgpu adapter these tests are skipped with a message — except when `CI` is set,
+//! where a missing adapter fails them (the renderer must really run in CI).
+
+use eframe::egui;
+use egui_kittest::Harness;
+use egui_kittest::kittest::Queryable;
+use makeit4d::app::panels::Tab;
+use makeit4d::app::{EditorApp, EditorOptions};
+use makeit4d::path::CameraPath;
+use makeit4d::project::Project;
+use makeit4d::scene::Stage;
+use makeit4d::stages::inpaint::InpaintPreset;
+use makeit4d::stages::layers::LayerCount;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+fn sample() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/evening_glow_320.jpg")
+}
+
+/// A small, fast project for the sample photo.
+fn fast_project(dir: &Path) -> PathBuf {
+    let mut p = Project::new(sample());
+    p.inpaint.preset = InpaintPreset::Draft;
+    p.output.frames = 3;
+    p.layers.params.mode = LayerCount::Count(3);
+    let file = dir.join("project.json");
+    p.save(&file).expect("save the test project");
+    file
+}
+
+/// The harness, or `None` (skip) when there is no wgpu adapter outside CI.
+fn harness(open: PathBuf) -> Option<Harness<'static, EditorApp>> {
+    let built = std::panic::catch_unwind(move || {
+        Harness::builder()
+            .with_size(egui::vec2(1280.0, 800.0))
+            .wgpu()
+            .build_eframe(move |cc| {
+                EditorApp::new(
+                    cc,
+                    EditorOptions {
+                        open: Some(open),
+                        ephemeral: true,
+                        ..Default::default()
+                    },
+                )
+            })
+    });
+    match built {
+        Ok(h) => Some(h),
+        Err(_) if std::env::var_os("CI").is_some() => {
+            panic!(
+                "CI is set but the wgpu harness could not start (no adapter? install mesa-vulkan-drivers)"
+            )
+        }
+        Err(_) => {
+            eprintln!("skipping: no wgpu adapter (install mesa-vulkan-drivers for lavapipe)");
+            None
+        }
+    }
+}
+
+/// Steps the UI until the app is idle (scene current, no job), or panics after `limit`.
+fn wait_idle(h: &mut Harness<'_, EditorApp>, limit: Duration) {
+    let start = Instant::now();
+    // Let at least one frame pass so requests are sent.
+    h.step();
+    while !h.state().is_idle() {
+        assert!(
+            start.elapsed() < limit,
+            "the editor did not become idle within {limit:?}; job {:?}; messages {:?}",
+            h.state().job(),
+            h.state().notices()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+        h.step();
+    }
+    h.step();
+    h.step();
+}
+
+fn layer_count(h: &Harness<'_, EditorApp>) -> usize {
+    h.state()
+        .snapshot()
+        .map_or(0, |s| s.scene.layers.layers.len())
+}
+
+fn drag(h: &mut Harness<'_, EditorApp>, from: egui::Pos2, to: egui::Pos2) {
+    h.hover_at(from);
+    h.step();
+    h.drag_at(from);
+    h.step();
+    for i in 1..=8 {
+        let t = i as f32 / 8.0;
+        h.hover_at(from + (to - from) * t);
+        h.step();
+    }
+    h.drop_at(to);
+    h.step();
+    h.step();
+}
+
+#[test]
+fn editor_end_to_end() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(mut h) = harness(fast_project(dir.path())) else {
+        return;
+    };
+    let limit = Duration::from_secs(600);
+    wait_idle(&mut h, limit);
+    assert!(h.state().snapshot().is_some(), "{:?}", h.state().notices());
+    let layers_before = layer_count(&h);
+    assert_eq!(layers_before, 3, "the project asks for 3 layers");
+
+    // Layers: drag the first interior threshold to the near end of the histogram. Its interval
+    // empties, so one layer fewer; only layers onward re-run.
+    h.get_by_label("4 Layers").click();
+    h.step();
+    h.step();
+    assert_eq!(h.state().tab(), Tab::Layers);
+    let handles = h.state().probe().threshold_handles.clone();
+    assert_eq!(handles.len(), 2, "3 layers have 2 interior thresholds");
+    let right = handles[1].x.max(handles[0].x) + 2000.0;
+    let target = egui::pos2(right.min(1280.0 - 340.0 - 20.0), handles[0].y);
+    drag(&mut h, handles[0], target);
+    assert!(
+        h.state()
+            .project()
+            .unwrap()
+            .layers
+            .params
+            .overrides
+            .iter()
+            .any(Option::is_some),
+        "the drag set an override"
+    );
+    wait_idle(&mut h, limit);
+    assert!(
+        layer_count(&h) < layers_before,
+        "layers: {} → {}",
+        layers_before,
+        layer_count(&h)
+    );
+    let ran = h.state().last_build_stages().to_vec();
+    assert!(ran.contains(&Stage::Layers), "{ran:?}");
+    assert!(
+        !ran.contains(&Stage::Depth) && !ran.contains(&Stage::Canvas),
+        "a threshold must not re-run depth or canvas: {ran:?}"
+    );
+
+    // Motion: paint one mask stroke across the sky.
+    h.get_by_label("5 Motion").click();
+    h.step();
+    h.step();
+    let view = h
+        .state()
+        .probe()
+        .view
+        .expect("the motion view draws the canvas");
+    let a = view.rect.lerp_inside(egui::vec2(0.3, 0.2));
+    let b = view.rect.lerp_inside(egui::vec2(0.7, 0.25));
+    drag(&mut h, a, b);
+    let motion = &h.state().project().unwrap().motion;
+    assert_eq!(motion.regions.len(), 1);
+    assert_eq!(motion.regions[0].strokes.len(), 1);
+    assert!(motion.regions[0].strokes[0].points.len() >= 2);
+    wait_idle(&mut h, limit);
+
+    // Camera: a keyframe at frame 1 with I, then undo it.
+    h.get_by_label("7 Preview").click();
+    h.state_mut().seek(1);
+    h.step();
+    h.step();
+    h.key_press(egui::Key::I);
+    h.step();
+    let CameraPath::Keyframes(keys) = &h.state().project().unwrap().camera.path else {
+        panic!("I made a keyframe path");
+    };
+    assert!(keys.keys.iter().any(|k| k.frame == 1.0), "{keys:?}");
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
+    h.step();
+    let p = h.state().project().unwrap();
+    assert!(
+        matches!(p.camera.path, CameraPath::Preset(_)),
+        "undo removed the key"
+    );
+    assert_eq!(p.motion.regions.len(), 1, "undo went back one edit only");
+    wait_idle(&mut h, limit);
+
+    // Export the 3 frames through the Export tab.
+    let out = dir.path().join("frames");
+    h.get_by_label("8 Export").click();
+    h.step();
+    h.state_mut().set_export_folder(&out);
+    h.step();
+    h.get_by_label("Export").click();
+    h.step();
+    let start = Instant::now();
+    while h.state().last_export().is_none() {
+        assert!(start.elapsed() < limit, "export did not finish");
+        std::thread::sleep(Duration::from_millis(20));
+        h.step();
+    }
+    let summary = h.state().last_export().unwrap().to_string();
+    assert!(!summary.starts_with("failed"), "{summary}");
+    for i in 0..3 {
+        let f = out.join(format!("frame_{i:04}.png"));
+        let img = image::open(&f).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+        assert_eq!((img.width(), img.height()), (320, 200), "{}", f.display());
+    }
+    assert!(!out.join("frame_0003.png").exists());
+    // The export's hole fractions feed the timeline strip.
+    assert!(h.state().hole_fractions().len() >= 3);
+}
