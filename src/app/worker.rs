@@ -439,6 +439,7 @@ fn scene_thread(
                             crate::stages::motion::suggest_motion(
                                 &s.scene.canvas.image,
                                 Some(&s.scene.canvas.sky),
+                                Some(&s.scene.canvas.depth),
                                 None,
                             )
                         });
