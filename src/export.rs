@@ -12,13 +12,26 @@
 //! out/depth/frame_0000.png …      depth pass: 16-bit grey, depth = value × scale (depth.json)
 //! out/depth/depth.json            {"scale": …, "encoding": …}
 //! out/coverage/frame_0000.png …   coverage (alpha) pass: 16-bit grey, coverage = value / 65535
+//! out/layer0/frame_0000.png …     layers pass: layer k (0 = nearest) alone, RGBA (8- or 16-bit
+//! out/layer1/…                    as the colour), alpha = its coverage; layer{k}/layer.json
+//! out/motion/frame_0000.png …     motion pass: forward flow to the next frame, 16-bit RGB,
+//!                                 flow = (RG − 32768) × scale px, B = known (motion.json)
+//! out/camera/camera.json          camera pass: every path frame's intrinsics and pose
+//! out/camera/camera.py            the same camera for Blender (`blender --python camera.py`)
 //! out/video.mp4                   when a video was asked for and ffmpeg is present
 //! ```
+//!
+//! The layers and motion passes are rendered by the CPU splatter whatever renderer made the
+//! colour ([`passes`]). The camera pass covers the whole path, also with a frame range, and is
+//! rewritten (same bytes) by every run.
+
+pub mod passes;
 
 use crate::error::{Error, Result};
 use crate::geometry::View;
 use crate::image_io::{
-    encode_png, prepare_output_dir, save_gray16_png, save_rgb_png, write_atomic,
+    encode_png, prepare_output_dir, save_gray16_png, save_rgb_png, save_rgb16_values_png,
+    save_rgba_png, write_atomic,
 };
 use crate::progress::Progress;
 use crate::project::Project;
@@ -167,6 +180,77 @@ pub struct Passes {
     pub depth: bool,
     /// 16-bit coverage (alpha).
     pub coverage: bool,
+    /// Each depth layer alone as RGBA ([`passes::render_layer`]).
+    pub layers: bool,
+    /// Forward motion vectors, 16-bit with a scale sidecar ([`passes::render_flow`]).
+    pub motion: bool,
+    /// Per-frame camera JSON and a Blender script ([`crate::path::export`]).
+    pub camera: bool,
+}
+
+/// One optional pass, by name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Pass {
+    /// `depth`.
+    Depth,
+    /// `coverage`.
+    Coverage,
+    /// `layers`.
+    Layers,
+    /// `motion`.
+    Motion,
+    /// `camera`.
+    Camera,
+}
+
+impl Pass {
+    /// Every pass, in the order of [`Pass::NAMES`].
+    pub const ALL: [Pass; 5] = [
+        Pass::Depth,
+        Pass::Coverage,
+        Pass::Layers,
+        Pass::Motion,
+        Pass::Camera,
+    ];
+
+    /// The valid names.
+    pub const NAMES: [&'static str; 5] = ["depth", "coverage", "layers", "motion", "camera"];
+
+    /// The pass's name.
+    pub fn name(self) -> &'static str {
+        Self::NAMES[Self::ALL.iter().position(|&p| p == self).unwrap_or(0)]
+    }
+}
+
+impl std::str::FromStr for Pass {
+    type Err = Error;
+
+    fn from_str(s: &str) -> Result<Self> {
+        let name = s.trim().to_ascii_lowercase();
+        Self::ALL
+            .into_iter()
+            .find(|p| p.name() == name)
+            .ok_or_else(|| {
+                Error::invalid(format!(
+                    "unknown pass '{s}' (valid: {})",
+                    Self::NAMES.join(", ")
+                ))
+            })
+    }
+}
+
+impl Passes {
+    /// These passes plus `pass`.
+    pub fn with(mut self, pass: Pass) -> Self {
+        match pass {
+            Pass::Depth => self.depth = true,
+            Pass::Coverage => self.coverage = true,
+            Pass::Layers => self.layers = true,
+            Pass::Motion => self.motion = true,
+            Pass::Camera => self.camera = true,
+        }
+        self
+    }
 }
 
 /// How to export.
@@ -211,6 +295,8 @@ pub struct RenderSummary {
     pub video: Option<PathBuf>,
     /// Things the user should know (e.g. ffmpeg missing).
     pub warnings: Vec<String>,
+    /// The pass folders written besides the colour (`depth`, `layer0`, …, `camera`).
+    pub pass_dirs: Vec<String>,
 }
 
 impl std::fmt::Display for RenderSummary {
@@ -229,6 +315,9 @@ impl std::fmt::Display for RenderSummary {
         )?;
         if self.frames_resumed > 0 {
             write!(f, "; {} already complete (resumed)", self.frames_resumed)?;
+        }
+        if !self.pass_dirs.is_empty() {
+            write!(f, "; passes: {}", self.pass_dirs.join(", "))?;
         }
         if let Some(v) = &self.video {
             write!(f, "; video {}", v.display())?;
@@ -274,7 +363,10 @@ fn remove_stale_temporaries(dir: &Path) {
     for entry in entries.flatten() {
         let name = entry.file_name();
         let name = name.to_string_lossy();
-        if name.starts_with('.') && name.ends_with(".tmp") && name.contains(".png.") {
+        let ours = [".png.", ".json.", ".py."]
+            .iter()
+            .any(|ext| name.contains(ext));
+        if name.starts_with('.') && name.ends_with(".tmp") && ours {
             let _ = std::fs::remove_file(entry.path());
         }
     }
@@ -451,23 +543,54 @@ pub fn render_sequence(
     }
     prepare_output_dir(out_dir)?;
     remove_stale_temporaries(out_dir);
+    let wanted = options.passes;
+    let mut pass_dirs = Vec::new();
+    let mut pass_dir = |name: &str| -> Result<PathBuf> {
+        let dir = out_dir.join(name);
+        prepare_output_dir(&dir)?;
+        remove_stale_temporaries(&dir);
+        pass_dirs.push(name.to_string());
+        Ok(dir)
+    };
     let depth_dir = out_dir.join("depth");
     let coverage_dir = out_dir.join("coverage");
+    let motion_dir = out_dir.join("motion");
+    let layer_count = if wanted.layers {
+        passes::layer_count(scene)
+    } else {
+        0
+    };
+    let layer_dirs: Vec<PathBuf> = (0..layer_count)
+        .map(|k| out_dir.join(format!("layer{k}")))
+        .collect();
     let scale = depth_scale(scene, &views);
-    if options.passes.depth {
-        prepare_output_dir(&depth_dir)?;
-        remove_stale_temporaries(&depth_dir);
+    if wanted.depth {
+        let dir = pass_dir("depth")?;
         let sidecar = DepthSidecar {
             scale,
             encoding: "16-bit grey PNG; depth along the optical axis = value × scale (scene units); 0 = no coverage".into(),
         };
-        let text = serde_json::to_string_pretty(&sidecar)
-            .map_err(|e| Error::invalid(format!("depth sidecar: {e}")))?;
-        write_atomic(&depth_dir.join("depth.json"), text.as_bytes())?;
+        write_json(&dir.join("depth.json"), &sidecar)?;
     }
-    if options.passes.coverage {
-        prepare_output_dir(&coverage_dir)?;
-        remove_stale_temporaries(&coverage_dir);
+    if wanted.coverage {
+        pass_dir("coverage")?;
+    }
+    for k in 0..layer_count {
+        let dir = pass_dir(&format!("layer{k}"))?;
+        write_json(&dir.join("layer.json"), &passes::layer_sidecar(scene, k))?;
+    }
+    if wanted.motion {
+        let dir = pass_dir("motion")?;
+        write_json(&dir.join("motion.json"), &passes::MotionSidecar::default())?;
+    }
+    if wanted.camera {
+        // The whole path, whatever the range: every run writes the same bytes.
+        let dir = pass_dir("camera")?;
+        let fps = project.output.fps as f64;
+        let json = crate::path::export::CameraExport::new(&views, width, height, fps)?.to_json()?;
+        write_atomic(&dir.join("camera.json"), json.as_bytes())?;
+        let script = crate::path::export::blender_script(&views, width, height, fps)?;
+        write_atomic(&dir.join("camera.py"), script.as_bytes())?;
     }
 
     let mut warnings = Vec::new();
@@ -492,22 +615,28 @@ pub fn render_sequence(
     let run = (|| -> Result<()> {
         for (n, i) in (first..end).enumerate() {
             progress.check()?;
-            let colour_path = out_dir.join(options.pattern.name(i));
-            let pass_paths = [
-                (
-                    options.passes.depth,
-                    depth_dir.join(options.pattern.name(i)),
-                ),
-                (
-                    options.passes.coverage,
-                    coverage_dir.join(options.pattern.name(i)),
-                ),
-            ];
+            let name = options.pattern.name(i);
+            let colour_path = out_dir.join(&name);
+            let depth_path = depth_dir.join(&name);
+            let coverage_path = coverage_dir.join(&name);
+            let motion_path = motion_dir.join(&name);
+            let layer_paths: Vec<PathBuf> = layer_dirs.iter().map(|d| d.join(&name)).collect();
             let existing = if options.resume {
+                let mut pass_paths: Vec<&Path> = Vec::new();
+                if wanted.depth {
+                    pass_paths.push(&depth_path);
+                }
+                if wanted.coverage {
+                    pass_paths.push(&coverage_path);
+                }
+                if wanted.motion {
+                    pass_paths.push(&motion_path);
+                }
+                pass_paths.extend(layer_paths.iter().map(PathBuf::as_path));
                 complete_frame(&colour_path, width, height).filter(|_| {
                     pass_paths
                         .iter()
-                        .all(|(on, p)| !on || complete_frame(p, width, height).is_some())
+                        .all(|p| complete_frame(p, width, height).is_some())
                 })
             } else {
                 None
@@ -520,12 +649,37 @@ pub fn render_sequence(
             } else {
                 let frame = scene.render_frame(renderer, &views[i], i, width, height)?;
                 write_frame(&frame, &colour_path, options.sixteen_bit)?;
-                if options.passes.depth {
+                if wanted.depth {
                     let d = depth_for_pass(&frame, scale);
-                    save_gray16_png(&pass_paths[0].1, &d)?;
+                    save_gray16_png(&depth_path, &d)?;
                 }
-                if options.passes.coverage {
-                    save_gray16_png(&pass_paths[1].1, &frame.coverage)?;
+                if wanted.coverage {
+                    save_gray16_png(&coverage_path, &frame.coverage)?;
+                }
+                for (k, path) in layer_paths.iter().enumerate() {
+                    let layer = passes::render_layer(
+                        scene,
+                        &project.render,
+                        &views[i],
+                        i,
+                        width,
+                        height,
+                        k as u16,
+                    )?;
+                    save_rgba_png(path, &layer.colour, &layer.coverage, options.sixteen_bit)?;
+                }
+                if wanted.motion {
+                    let next = passes::next_view(&views, i).unwrap_or(views[i]);
+                    let flow = passes::render_flow(
+                        scene,
+                        &project.render,
+                        &views[i],
+                        &next,
+                        i,
+                        width,
+                        height,
+                    )?;
+                    save_rgb16_values_png(&motion_path, passes::encode_flow(&flow))?;
                 }
                 if let Some(enc) = video.as_mut() {
                     enc.push(crate::image_io::to_rgb8(&frame.colour).as_raw())?;
@@ -561,7 +715,15 @@ pub fn render_sequence(
         out_dir: out_dir.to_path_buf(),
         video: video_path,
         warnings,
+        pass_dirs,
     })
+}
+
+/// Writes `value` as pretty JSON, atomically.
+fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
+    let text = serde_json::to_string_pretty(value)
+        .map_err(|e| Error::invalid(format!("{}: {e}", path.display())))?;
+    write_atomic(path, text.as_bytes())
 }
 
 /// Writes a colour frame, 8- or 16-bit.

@@ -261,6 +261,46 @@ pub fn save_rgb_png(path: &Path, image: &RgbRaster, sixteen_bit: bool) -> Result
     write_atomic(path, &encode_png(&dynamic)?)
 }
 
+/// Writes colour with a straight (not premultiplied) alpha as an 8- or 16-bit RGBA PNG,
+/// atomically. `alpha` must have the colour's size.
+pub fn save_rgba_png(
+    path: &Path,
+    image: &RgbRaster,
+    alpha: &GrayRaster,
+    sixteen_bit: bool,
+) -> Result<()> {
+    if !image.same_size(alpha) {
+        return Err(Error::file(path, "colour and alpha sizes differ"));
+    }
+    let (w, h) = (image.width() as u32, image.height() as u32);
+    let pixels = image.data().iter().zip(alpha.data());
+    let dynamic = if sixteen_bit {
+        let mut out = image::ImageBuffer::<image::Rgba<u16>, Vec<u16>>::new(w, h);
+        for (dst, (c, &a)) in out.pixels_mut().zip(pixels) {
+            let [r, g, b] = c.map(unit_to_u16);
+            dst.0 = [r, g, b, unit_to_u16(a)];
+        }
+        DynamicImage::ImageRgba16(out)
+    } else {
+        let mut out = image::RgbaImage::new(w, h);
+        for (dst, (c, &a)) in out.pixels_mut().zip(pixels) {
+            let [r, g, b] = c.map(unit_to_u8);
+            dst.0 = [r, g, b, unit_to_u8(a)];
+        }
+        DynamicImage::ImageRgba8(out)
+    };
+    write_atomic(path, &encode_png(&dynamic)?)
+}
+
+/// Writes a 16-bit RGB image as a PNG, atomically (values already encoded, e.g. the motion
+/// pass).
+pub fn save_rgb16_values_png(
+    path: &Path,
+    image: image::ImageBuffer<image::Rgb<u16>, Vec<u16>>,
+) -> Result<()> {
+    write_atomic(path, &encode_png(&DynamicImage::ImageRgb16(image))?)
+}
+
 /// Writes a `[0, 1]` single-channel raster as a 16-bit greyscale PNG, atomically.
 pub fn save_gray16_png(path: &Path, image: &GrayRaster) -> Result<()> {
     let mut out = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::new(

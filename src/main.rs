@@ -5,7 +5,7 @@ use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use makeit4d::Error;
 use makeit4d::export::{
-    ExportOptions, FramePattern, Passes, VideoFormat, VideoOptions, render_sequence,
+    ExportOptions, FramePattern, Pass, Passes, VideoFormat, VideoOptions, render_sequence,
 };
 use makeit4d::path::{CameraPath, Preset, PresetKind};
 use makeit4d::progress::Progress;
@@ -320,9 +320,14 @@ struct RenderArgs {
     /// Skip frames already complete in the output folder (they decode and have the right size).
     #[arg(long)]
     resume: bool,
-    /// Extra passes: depth (16-bit + depth.json scale), coverage (16-bit alpha). Repeatable.
-    #[arg(long = "pass", value_enum)]
-    passes: Vec<PassArg>,
+    /// Extra pass, repeatable: depth (OUT/depth/, 16-bit + depth.json scale), coverage
+    /// (OUT/coverage/, 16-bit alpha), layers (OUT/layer0/, OUT/layer1/, …: each depth layer
+    /// alone as RGBA, alpha = its coverage), motion (OUT/motion/: forward flow to the next
+    /// frame, 16-bit RGB, flow = (RG − 32768) × scale px, B = known; scale in motion.json),
+    /// camera (OUT/camera/camera.json per-frame intrinsics + pose, camera.py for Blender).
+    /// layers and motion are always rendered on the CPU, whatever --renderer says.
+    #[arg(long = "pass", value_parser = parse_pass)]
+    passes: Vec<Pass>,
     /// Only frames START..END of the path (END exclusive), e.g. 10..20.
     #[arg(long, value_parser = parse_range)]
     range: Option<(usize, usize)>,
@@ -387,10 +392,9 @@ fn parse_layers(s: &str) -> Result<LayersArg, String> {
     }
 }
 
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-enum PassArg {
-    Depth,
-    Coverage,
+/// Parses `--pass`; an unknown name lists the valid ones.
+fn parse_pass(s: &str) -> Result<Pass, String> {
+    s.parse::<Pass>().map_err(|e| e.to_string())
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -645,10 +649,10 @@ fn render_one(
         pattern: FramePattern::parse(&args.pattern)?,
         sixteen_bit: args.bit_depth == 16,
         resume: args.resume,
-        passes: Passes {
-            depth: args.passes.contains(&PassArg::Depth),
-            coverage: args.passes.contains(&PassArg::Coverage),
-        },
+        passes: args
+            .passes
+            .iter()
+            .fold(Passes::default(), |passes, &p| passes.with(p)),
         range: args.range,
         video: args.video.map(|v| {
             let mut o = VideoOptions::new(match v {

@@ -716,20 +716,34 @@ impl Scene {
         width: usize,
         height: usize,
     ) -> Result<Frame> {
+        self.render_frame_with(frame_index, |positions| {
+            renderer.render(view, width, height, positions)
+        })
+    }
+
+    /// [`Scene::render_frame`] with any render of the cloud: `render` is called with the
+    /// positions of each cloud the frame needs (`None` = the still cloud), and its frames are
+    /// blended as the colour's are. Export passes use it to render a layer alone with exactly
+    /// the colour's animation.
+    pub fn render_frame_with(
+        &self,
+        frame_index: usize,
+        mut render: impl FnMut(Option<&[glam::Vec3]>) -> Result<Frame>,
+    ) -> Result<Frame> {
         let Some(motion) = self.motion.as_ref().filter(|m| !m.motion_loop.is_still()) else {
-            return renderer.render(view, width, height, None);
+            return render(None);
         };
         let f = motion.motion_loop.frame(frame_index)?;
         let k = self.canvas.intrinsics;
         let forward = if f.needs_forward() {
             let positions = displaced_positions(&self.cloud, &f.forward, &k)?;
-            Some(renderer.render(view, width, height, Some(&positions))?)
+            Some(render(Some(&positions))?)
         } else {
             None
         };
         let backward = if f.needs_backward() {
             let positions = displaced_positions(&self.cloud, &f.backward, &k)?;
-            Some(renderer.render(view, width, height, Some(&positions))?)
+            Some(render(Some(&positions))?)
         } else {
             None
         };
@@ -737,7 +751,7 @@ impl Scene {
             (Some(a), Some(b)) => symmetric_blend(&a, &b, f.t, DEFAULT_SHARPNESS),
             (Some(a), None) => Ok(a),
             (None, Some(b)) => Ok(b),
-            (None, None) => renderer.render(view, width, height, None),
+            (None, None) => render(None),
         }
     }
 }

@@ -112,6 +112,7 @@ struct Projector<'a> {
     width: f32,
     height: f32,
     settings: &'a SplatSettings,
+    only_layer: Option<u16>,
 }
 
 impl<'a> Projector<'a> {
@@ -131,6 +132,7 @@ impl<'a> Projector<'a> {
             width: width as f32,
             height: height as f32,
             settings,
+            only_layer: None,
         }
     }
 
@@ -139,6 +141,9 @@ impl<'a> Projector<'a> {
     fn splat(&self, i: usize) -> Option<Splat> {
         let alpha = self.cloud.alphas[i];
         if alpha <= 0.0 || alpha.is_nan() {
+            return None;
+        }
+        if self.only_layer.is_some_and(|l| self.cloud.layer[i] != l) {
             return None;
         }
         let k = &self.intrinsics;
@@ -228,6 +233,44 @@ pub fn render_cpu(
     height: usize,
     settings: &SplatSettings,
 ) -> Result<Frame> {
+    render_cpu_with(
+        cloud,
+        &PointOverrides {
+            positions,
+            ..PointOverrides::default()
+        },
+        view,
+        width,
+        height,
+        settings,
+    )
+}
+
+/// What a render may replace or select of the cloud, for export passes.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PointOverrides<'a> {
+    /// Replace the cloud's positions (animation), one per point.
+    pub positions: Option<&'a [Vec3]>,
+    /// Composite these per-point values instead of the colours, one per point. Any values
+    /// work (negative, above 1): the frame's `colour` holds their coverage-normalised
+    /// composite `Σ w_k·v_k·Π_{j<k}(1 − w_j) / A` with exactly the colour's weights.
+    pub values: Option<&'a [[f32; 3]]>,
+    /// Render only the points of this layer ([`PointCloud::layer`]); the others are absent,
+    /// not occluders.
+    pub only_layer: Option<u16>,
+}
+
+/// [`render_cpu`] with the positions, the composited values or the drawn layer replaced (see
+/// [`PointOverrides`]). Visibility, splat sizes and weights are those of the colour render.
+pub fn render_cpu_with(
+    cloud: &PointCloud,
+    overrides: &PointOverrides<'_>,
+    view: &View,
+    width: usize,
+    height: usize,
+    settings: &SplatSettings,
+) -> Result<Frame> {
+    let positions = overrides.positions;
     settings.validate()?;
     if width == 0 || height == 0 {
         return Err(Error::invalid(format!(
@@ -248,9 +291,25 @@ pub fn render_cpu(
             cloud.len()
         )));
     }
+    let values = overrides.values.unwrap_or(&cloud.colours);
+    if values.len() != cloud.len() {
+        return Err(Error::invalid(format!(
+            "render: {} values for {} points",
+            values.len(),
+            cloud.len()
+        )));
+    }
+    if overrides.only_layer.is_some() && cloud.layer.len() != cloud.len() {
+        return Err(Error::invalid(format!(
+            "render: {} layer ids for {} points",
+            cloud.layer.len(),
+            cloud.len()
+        )));
+    }
     let tiles_x = width.div_ceil(TILE);
     let tiles_y = height.div_ceil(TILE);
-    let projector = Projector::new(cloud, positions, view, width, height, settings);
+    let mut projector = Projector::new(cloud, positions, view, width, height, settings);
+    projector.only_layer = overrides.only_layer;
     let chunks = project_and_bin(&projector, width, height, tiles_x, tiles_y);
 
     // Rasterise one row of tiles per task, straight into the output rows it owns.
@@ -322,7 +381,7 @@ pub fn render_cpu(
                         let list = &entries[p * k_max..p * k_max + lens[p] as usize];
                         let (c, a, z) = composite(
                             list.iter()
-                                .map(|e| (e.w, cloud.colours[e.index as usize], e.z)),
+                                .map(|e| (e.w, values[e.index as usize], e.z)),
                         );
                         let out = row * width + x_start + col;
                         colour[out] = c;
