@@ -326,7 +326,7 @@ struct RenderArgs {
     /// frame, 16-bit RGB, flow = (RG − 32768) × scale px, B = known; scale in motion.json),
     /// camera (OUT/camera/camera.json per-frame intrinsics + pose, camera.py for Blender).
     /// layers and motion are always rendered on the CPU, whatever --renderer says.
-    #[arg(long = "pass", value_parser = parse_pass)]
+    #[arg(long = "pass", value_name = "NAME", value_parser = parse_pass)]
     passes: Vec<Pass>,
     /// Only frames START..END of the path (END exclusive), e.g. 10..20.
     #[arg(long, value_parser = parse_range)]

@@ -132,6 +132,14 @@ fn bad_arguments_and_outputs_fail_cleanly() {
     assert_clean_failure(&o, &["frames"]);
     let o = run(&[os(&img), os("--out"), os(&out), os("--size"), os("0x0")]);
     assert_clean_failure(&o, &["size"]);
+    let o = run(&[os(&img), os("--out"), os(&out), os("--pass"), os("normals")]);
+    assert_clean_failure(
+        &o,
+        &[
+            "unknown pass 'normals'",
+            "depth, coverage, layers, motion, camera",
+        ],
+    );
     assert!(!out.exists());
 
     // Output path that is a file.

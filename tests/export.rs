@@ -236,6 +236,177 @@ fn passes_patterns_and_sixteen_bit() {
     assert!(out.join("coverage/shot_002.png").is_file());
 }
 
+/// Reads a PNG as 16-bit RGB(A) samples with its channel count.
+fn samples16(path: &Path) -> (Vec<u16>, usize, (u32, u32)) {
+    let img = image::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let size = (img.width(), img.height());
+    match img {
+        image::DynamicImage::ImageRgb16(b) => (b.into_raw(), 3, size),
+        image::DynamicImage::ImageRgba8(b) => (
+            b.into_raw().into_iter().map(|v| v as u16 * 257).collect(),
+            4,
+            size,
+        ),
+        other => panic!("{}: unexpected {:?}", path.display(), other.color()),
+    }
+}
+
+#[test]
+fn layers_motion_and_camera_passes() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o");
+    let args = [
+        "--frames", "4", "--preset", "still", "--size", "160x100", "--pass", "layers", "--pass",
+        "motion", "--pass", "camera", "--range", "1..3",
+    ];
+    let o = render_cmd(&out, &args).output().unwrap();
+    ok(&o);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("passes: layer0, layer1, motion, camera"),
+        "{stdout}"
+    );
+    assert_eq!(
+        all_files(&out),
+        [
+            "camera",
+            "frame_0001.png",
+            "frame_0002.png",
+            "layer0",
+            "layer1",
+            "motion"
+        ]
+    );
+    assert_eq!(
+        all_files(&out.join("layer1")),
+        ["frame_0001.png", "frame_0002.png", "layer.json"]
+    );
+    // A still camera over a still scene: zero flow, known almost everywhere.
+    let sidecar: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("motion/motion.json")).unwrap())
+            .unwrap();
+    assert_eq!(sidecar["offset"].as_u64(), Some(32768));
+    assert!(sidecar["scale"].as_f64().unwrap() > 0.0);
+    let (flow, channels, size) = samples16(&out.join("motion/frame_0001.png"));
+    assert_eq!((channels, size), (3, (160, 100)));
+    let mut known = 0;
+    for p in flow.chunks(3) {
+        assert_eq!(p[..2], [32768, 32768]);
+        known += usize::from(p[2] > 0);
+    }
+    assert!(known > 160 * 100 * 99 / 100, "{known} pixels with a flow");
+    // The two layers over each other give the colour frame back.
+    let colour = image::open(out.join("frame_0001.png"))
+        .unwrap()
+        .to_rgb8()
+        .into_raw();
+    let layer = |k: usize| samples16(&out.join(format!("layer{k}/frame_0001.png")));
+    let (near, c0, _) = layer(0);
+    let (far, c1, _) = layer(1);
+    assert_eq!((c0, c1), (4, 4));
+    let (mut se, mut n) = (0.0f64, 0usize);
+    for i in 0..160 * 100 {
+        let a0 = near[4 * i + 3] as f64 / 65535.0;
+        let a1 = far[4 * i + 3] as f64 / 65535.0;
+        let total = a0 + (1.0 - a0) * a1;
+        if total <= 0.0 {
+            continue;
+        }
+        for c in 0..3 {
+            let over = a0 * near[4 * i + c] as f64 / 65535.0
+                + (1.0 - a0) * a1 * far[4 * i + c] as f64 / 65535.0;
+            let d = over / total - colour[3 * i + c] as f64 / 255.0;
+            se += d * d;
+            n += 1;
+        }
+    }
+    let psnr = 10.0 * (n as f64 / se.max(1e-12)).log10();
+    assert!(psnr > 30.0, "layers composite PSNR {psnr:.1} dB");
+    // The camera: the whole path, the first pose the identity.
+    let camera: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("camera/camera.json")).unwrap())
+            .unwrap();
+    let frames = camera["frames"].as_array().unwrap();
+    assert_eq!(frames.len(), 4);
+    let identity = [
+        [1.0, 0.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0, 0.0],
+        [0.0, 0.0, 0.0, 1.0],
+    ];
+    for (r, row) in identity.iter().enumerate() {
+        for (c, v) in row.iter().enumerate() {
+            let got = frames[0]["world_from_camera"][r][c].as_f64().unwrap();
+            assert!((got - v).abs() < 1e-9, "[{r}][{c}] = {got}");
+        }
+    }
+    let script = std::fs::read_to_string(out.join("camera/camera.py")).unwrap();
+    assert!(script.contains("import bpy"));
+
+    // Resume: nothing to do; a layer file gone (or broken) re-renders that frame only.
+    let o = render_cmd(&out, &[&args[..], &["--resume"]].concat())
+        .output()
+        .unwrap();
+    ok(&o);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("2 already complete"));
+    let before = std::fs::read(out.join("layer1/frame_0002.png")).unwrap();
+    std::fs::write(out.join("layer1/frame_0002.png"), b"broken").unwrap();
+    std::fs::remove_file(out.join("motion/frame_0001.png")).unwrap();
+    let o = render_cmd(&out, &[&args[..], &["--resume"]].concat())
+        .output()
+        .unwrap();
+    ok(&o);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("wrote 2/2") && !stdout.contains("already complete"),
+        "{stdout}"
+    );
+    assert_eq!(
+        std::fs::read(out.join("layer1/frame_0002.png")).unwrap(),
+        before
+    );
+    assert!(out.join("motion/frame_0001.png").is_file());
+}
+
+#[test]
+fn motion_pass_follows_a_pan() {
+    // A sideways pan: the flow points against the camera's motion and is largest up close.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o");
+    let o = render_cmd(
+        &out,
+        &[
+            "--frames", "6", "--preset", "pan", "--size", "160x100", "--pass", "motion", "--pass",
+            "depth", "--range", "2..3",
+        ],
+    )
+    .output()
+    .unwrap();
+    ok(&o);
+    let scale = {
+        let s: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("motion/motion.json")).unwrap())
+                .unwrap();
+        s["scale"].as_f64().unwrap()
+    };
+    let (flow, _, _) = samples16(&out.join("motion/frame_0002.png"));
+    let xs: Vec<f64> = flow
+        .chunks(3)
+        .filter(|p| p[2] > 0)
+        .map(|p| (p[0] as f64 - 32768.0) * scale)
+        .collect();
+    assert!(xs.len() > 160 * 90);
+    let mean = xs.iter().sum::<f64>() / xs.len() as f64;
+    assert!(mean < -0.05, "mean horizontal flow {mean}");
+    // Every pixel moves the same way.
+    let same_sign = xs.iter().filter(|&&x| x * mean > 0.0).count();
+    assert!(
+        same_sign > xs.len() * 95 / 100,
+        "{same_sign} of {}",
+        xs.len()
+    );
+}
+
 #[test]
 fn batch_renders_each_project_and_summarises() {
     let dir = tempfile::tempdir().unwrap();

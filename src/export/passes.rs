@@ -63,11 +63,12 @@ impl Default for MotionSidecar {
         Self {
             scale: FLOW_SCALE,
             offset: FLOW_OFFSET,
-            encoding: "16-bit RGB PNG; forward flow to the next frame in pixels (x right, y down): \
+            encoding:
+                "16-bit RGB PNG; forward flow to the next frame in pixels (x right, y down): \
                  flow_x = (R - offset) * scale, flow_y = (G - offset) * scale; B / 65535 = \
                  coverage of the surfaces whose flow is known (0 = no flow: hole, or the surface \
                  goes behind the next camera); the last frame repeats the previous camera step"
-                .into(),
+                    .into(),
         }
     }
 }
@@ -168,11 +169,7 @@ pub fn composite_layers(layers: &[(RgbRaster, Raster<f32>)]) -> Result<(RgbRaste
     let colour = Raster::from_fn(w, h, |x, y| {
         let a = alpha.at(x, y);
         let p = premultiplied.at(x, y);
-        if a > 1e-6 {
-            p.map(|v| v / a)
-        } else {
-            [0.0; 3]
-        }
+        if a > 1e-6 { p.map(|v| v / a) } else { [0.0; 3] }
     });
     Ok((colour, alpha))
 }
@@ -262,11 +259,7 @@ pub fn render_flow(
             settings,
         )
     };
-    let Some(motion) = scene
-        .motion
-        .as_ref()
-        .filter(|m| !m.motion_loop.is_still())
-    else {
+    let Some(motion) = scene.motion.as_ref().filter(|m| !m.motion_loop.is_still()) else {
         return render(&cloud.positions, &cloud.positions);
     };
     // As `Scene::render_frame`, with each cloud's positions one loop step later beside them:
@@ -321,9 +314,8 @@ pub fn flow_at(frame: &Frame, x: usize, y: usize) -> (Option<[f32; 2]>, f32) {
 /// documentation).
 pub fn encode_flow(frame: &Frame) -> image::ImageBuffer<image::Rgb<u16>, Vec<u16>> {
     let (w, h) = frame.colour.size();
-    let quantise = |v: f32| {
-        ((v / FLOW_SCALE).round() + FLOW_OFFSET as f32).clamp(0.0, 65535.0) as u16
-    };
+    let quantise =
+        |v: f32| ((v / FLOW_SCALE).round() + FLOW_OFFSET as f32).clamp(0.0, 65535.0) as u16;
     image::ImageBuffer::from_fn(w as u32, h as u32, |x, y| {
         let (flow, known) = flow_at(frame, x as usize, y as usize);
         match flow {
@@ -340,12 +332,10 @@ pub fn encode_flow(frame: &Frame) -> image::ImageBuffer<image::Rgb<u16>, Vec<u16
 /// Decodes one motion-pass pixel: the flow in pixels, `None` where `B = 0`.
 pub fn decode_flow(pixel: [u16; 3], scale: f32) -> Option<[f32; 2]> {
     let [r, g, b] = pixel;
-    (b > 0).then(|| {
-        [
-            (r as f32 - FLOW_OFFSET as f32) * scale,
-            (g as f32 - FLOW_OFFSET as f32) * scale,
-        ]
-    })
+    (b > 0).then_some([
+        (r as f32 - FLOW_OFFSET as f32) * scale,
+        (g as f32 - FLOW_OFFSET as f32) * scale,
+    ])
 }
 
 #[cfg(test)]
@@ -423,8 +413,8 @@ mod tests {
                 assert!((fx - expected).abs() < 1e-3, "{fx} vs {expected}");
                 assert!(fy.abs() < 1e-4);
                 assert!(known > 0.99);
-                let decoded = decode_flow(image.get_pixel(x as u32, y as u32).0, FLOW_SCALE)
-                    .expect("valid");
+                let decoded =
+                    decode_flow(image.get_pixel(x as u32, y as u32).0, FLOW_SCALE).expect("valid");
                 assert!((decoded[0] - expected).abs() <= 0.5 * FLOW_SCALE + 1e-4);
                 assert_eq!(decoded[1], 0.0);
                 checked += 1;
@@ -462,11 +452,7 @@ mod tests {
         };
         let frame = flow_frame(&cloud, &view(w, h, 0.0), &next, w, h);
         let image = encode_flow(&frame);
-        assert!(
-            image
-                .pixels()
-                .all(|p| p.0 == [FLOW_OFFSET, FLOW_OFFSET, 0])
-        );
+        assert!(image.pixels().all(|p| p.0 == [FLOW_OFFSET, FLOW_OFFSET, 0]));
     }
 
     #[test]
@@ -564,7 +550,9 @@ mod tests {
         assert!(layers[0].1.data().iter().filter(|&&a| a > 0.5).count() < w * h / 2);
         assert!(layers[1].1.data().iter().filter(|&&a| a > 0.5).count() > w * h * 9 / 10);
         let (composite, alpha) = composite_layers(&layers).unwrap();
-        let db = psnr(&composite, &beauty.colour, |x, y| beauty.coverage.at(x, y) > 0.0);
+        let db = psnr(&composite, &beauty.colour, |x, y| {
+            beauty.coverage.at(x, y) > 0.0
+        });
         assert!(db > 35.0, "layers composite PSNR {db:.1} dB");
         for (a, b) in alpha.data().iter().zip(beauty.coverage.data()) {
             assert!((a - b).abs() < 0.02, "{a} vs {b}");

@@ -379,10 +379,8 @@ pub fn render_cpu_with(
                     for col in 0..tw {
                         let p = row * TILE + col;
                         let list = &entries[p * k_max..p * k_max + lens[p] as usize];
-                        let (c, a, z) = composite(
-                            list.iter()
-                                .map(|e| (e.w, values[e.index as usize], e.z)),
-                        );
+                        let (c, a, z) =
+                            composite(list.iter().map(|e| (e.w, values[e.index as usize], e.z)));
                         let out = row * width + x_start + col;
                         colour[out] = c;
                         coverage[out] = a;
