@@ -32,7 +32,7 @@ use crate::render::{Frame, FrameRenderer};
 use crate::stages::depth::{DepthEstimator, DepthStageOutput, run_depth_stage};
 use crate::stages::inpaint::{InpaintRequest, Inpainter};
 use crate::stages::layers::{
-    Layer, LayerDepthParams, LayeredScene, inpaint_layers, layer_based_depth, plan_layers,
+    Layer, LayerDepthParams, LayeredScene, inpaint_layers, layer_based_depth, plan_layers_with_sky,
 };
 use crate::stages::motion::displaced_positions;
 use crate::stages::motion::{FlowField, MotionLoop, prepare_motion};
@@ -354,7 +354,12 @@ impl SceneBuilder {
             _ => {
                 let started = std::time::Instant::now();
                 p.report(0.0, Stage::Layers.name());
-                let v = Arc::new(plan_layers(&canvas.depth, &params, &p)?);
+                let v = Arc::new(plan_layers_with_sky(
+                    &canvas.depth,
+                    Some(&canvas.sky),
+                    &params,
+                    &p,
+                )?);
                 self.ran(Stage::Layers, started);
                 self.layers = Some(Slot {
                     key,

@@ -21,7 +21,7 @@
 //! | `fly-out` | backward along −z by `s·e` |
 //! | `pan` | sideways along +x (camera right; negative amplitude: left) by `s·e`, orientation fixed. This is a *truck*/*track* in film terms: a translation, not a rotation |
 //! | `orbit` | on a horizontal circle of radius `Z₀` about the pivot `(0, 0, Z₀)`, always looking at it; arc length `s·e` (angle `φ = s·e/Z₀`, toward +x first): `position = (Z₀·sin φ, 0, Z₀·(1 − cos φ))`, rotation `−φ` about y |
-//! | `swing` | a full circle of radius `r = 0.25·amplitude·near_depth` in the image plane, orientation fixed (3D-photo style): `position = (r·sin 2πt, −r·(1 − cos 2πt), 0)`, right then up; the last frame equals the first |
+//! | `swing` | a full circle of radius `r = 0.04·amplitude·near_depth` (near pixels move by at most ≈ 8 % of the focal length) in the image plane, orientation fixed (3D-photo style): `position = (r·sin 2πt, −r·(1 − cos 2πt), 0)`, right then up; the last frame equals the first |
 //! | `dolly-zoom` | forward by `dz = min(s, 0.9·near_depth)·e` while the focal length shrinks as `f = f₀·(Z₀ − dz)/Z₀`: whatever is at the median depth keeps its size in the image while the background stretches (the "Vertigo" effect) |
 
 use super::ease::Ease;
@@ -46,7 +46,7 @@ pub const MAX_FORWARD_FRACTION_OF_NEAR: f64 = 0.9;
 pub const MAX_AMPLITUDE: f64 = 1e6;
 
 /// Swing radius at amplitude 1, as a fraction of the near depth.
-pub const SWING_RADIUS_FRACTION_OF_NEAR: f64 = 0.25;
+pub const SWING_RADIUS_FRACTION_OF_NEAR: f64 = 0.04;
 
 /// Keyframe segments per full turn when a swing becomes keyframes.
 const SWING_SEGMENTS: usize = 16;

@@ -115,6 +115,12 @@ pub struct LayerParams {
     pub edge_depth_ratio: f32,
     /// Bins of the disparity histogram the clustering runs on.
     pub histogram_bins: usize,
+    /// With a sky mask ([`plan_layers_with_sky`]), the sky is a layer of its own, the farthest:
+    /// the rest of the scene is clustered without it and one cut is added between the farthest
+    /// non-sky depth and the sky (see [`sky_thresholds`]). Clustered together in disparity, the
+    /// sky and distant mountains share a layer, and the ridge between them tears open with
+    /// nothing behind it as soon as the camera moves.
+    pub sky_layer: bool,
 }
 
 impl Default for LayerParams {
@@ -130,6 +136,7 @@ impl Default for LayerParams {
             edge_window_px: 11,
             edge_depth_ratio: 1.3,
             histogram_bins: 4096,
+            sky_layer: true,
         }
     }
 }
@@ -249,6 +256,77 @@ pub fn layer_thresholds(depth: &GrayRaster, params: &LayerParams) -> Result<Vec<
     apply_overrides(&t, &params.overrides)
 }
 
+/// Sky pixels: `sky ≥ 0.5` (a soft mask) and a finite depth `> 0`.
+fn is_sky(sky: f32, z: f32) -> bool {
+    sky >= 0.5 && z.is_finite() && z > 0.0
+}
+
+/// The thresholds with the sky as a layer of its own (`params.sky_layer`): the non-sky pixels
+/// are clustered alone (into one layer fewer when the count is fixed), the last threshold (the
+/// farthest non-sky depth `z_n`) becomes the cut `c` and the sky's farthest depth `z_s⁺` closes
+/// the sky interval: `… d_L, c, z_s⁺` with `c = √(z_n · z_s⁻)` (the geometric mean, the midpoint
+/// in disparity's log) when the nearest sky depth `z_s⁻` is beyond `z_n`, else `c = z_s⁻`
+/// (sky and scene overlap in depth: whatever is at least as far as the nearest sky goes with
+/// it). Falls back to [`layer_thresholds`] when there is no sky mask of the depth's size, fewer
+/// than `min_layer_px` sky pixels, no non-sky pixel, a fixed count of 1, or `sky_layer` off.
+/// Overrides apply last, to the combined list.
+pub fn sky_thresholds(
+    depth: &GrayRaster,
+    sky: Option<&GrayRaster>,
+    params: &LayerParams,
+) -> Result<Vec<f32>> {
+    params.validate()?;
+    let Some(sky) = sky.filter(|s| params.sky_layer && s.size() == depth.size()) else {
+        return layer_thresholds(depth, params);
+    };
+    let mode = match params.mode {
+        LayerCount::Count(1) => return layer_thresholds(depth, params),
+        LayerCount::Count(n) => LayerCount::Count(n - 1),
+        LayerCount::Auto {
+            relative_cost,
+            max_layers,
+        } => LayerCount::Auto {
+            relative_cost,
+            max_layers: max_layers.saturating_sub(1).max(1),
+        },
+    };
+    let (mut sky_px, mut sky_min, mut sky_max) = (0usize, f32::INFINITY, 0.0f32);
+    let ground: Vec<f32> = depth
+        .data()
+        .iter()
+        .zip(sky.data())
+        .map(|(&z, &s)| {
+            if is_sky(s, z) {
+                sky_px += 1;
+                sky_min = sky_min.min(z);
+                sky_max = sky_max.max(z);
+                f32::NAN
+            } else {
+                z
+            }
+        })
+        .collect();
+    let has_ground = ground.iter().any(|z| z.is_finite() && *z > 0.0);
+    if sky_px < params.min_layer_px.max(1) || !has_ground {
+        return layer_thresholds(depth, params);
+    }
+    let (w, h) = depth.size();
+    let ground = Raster::from_vec(w, h, ground)
+        .ok_or_else(|| Error::invalid("layers: depth buffer of the wrong size"))?;
+    let mut t = cluster_thresholds(&ground, mode, params.method, params.histogram_bins)?;
+    let far_ground = t.pop().unwrap_or(sky_min);
+    let cut = if sky_min > far_ground {
+        (f64::from(far_ground) * f64::from(sky_min)).sqrt() as f32
+    } else {
+        sky_min
+    };
+    // A cut at or before the previous threshold would empty that interval: keep the order.
+    let cut = t.last().map_or(cut, |&prev| cut.max(prev));
+    t.push(cut);
+    t.push(sky_max.max(cut));
+    apply_overrides(&t, &params.overrides)
+}
+
 /// The interval index of depth `z` under `thresholds`: the number of interior thresholds
 /// `d_2 … d_L` that are `≤ z` (so `d_i ≤ z < d_{i+1}`; depths beyond the ends fall into the
 /// first or last interval).
@@ -351,6 +429,17 @@ pub fn plan_layers(
     params: &LayerParams,
     progress: &Progress,
 ) -> Result<LayerPlan> {
+    plan_layers_with_sky(depth, None, params, progress)
+}
+
+/// [`plan_layers`] with the canvas's sky mask: the sky becomes the farthest layer of its own
+/// (when `params.sky_layer`; see [`sky_thresholds`]).
+pub fn plan_layers_with_sky(
+    depth: &GrayRaster,
+    sky: Option<&GrayRaster>,
+    params: &LayerParams,
+    progress: &Progress,
+) -> Result<LayerPlan> {
     params.validate()?;
     let (w, h) = depth.size();
     if depth.is_empty() {
@@ -359,7 +448,7 @@ pub fn plan_layers(
     progress.report(0.0, "layers");
     let (filled, invalid_depth_px) = edges::fill_invalid_depth(depth)
         .ok_or_else(|| Error::invalid("layers: the depth has no finite value > 0"))?;
-    let thresholds = layer_thresholds(&filled, params)?;
+    let thresholds = sky_thresholds(&filled, sky, params)?;
     let intervals = thresholds.len().saturating_sub(1).max(1);
     let raw_labels = filled.map(|z| interval_of(z, &thresholds) as u16);
     progress.check()?;

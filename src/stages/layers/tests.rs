@@ -846,3 +846,97 @@ fn auto_count_is_resolution_independent() {
         }
     }
 }
+
+/// Ground rising from Z = 2 (bottom) to 30 (row 20), a mountain band at Z = 40 (rows 10–19)
+/// and sky at Z = 1000 above it, with its mask.
+fn landscape() -> (GrayRaster, GrayRaster) {
+    let depth = Raster::from_fn(W, H, |_, y| match y {
+        0..10 => 1000.0,
+        10..20 => 40.0,
+        _ => 2.0 + 28.0 * (H - 1 - y) as f32 / (H - 21) as f32,
+    });
+    let sky = Raster::from_fn(W, H, |_, y| if y < 10 { 1.0 } else { 0.0 });
+    (depth, sky)
+}
+
+#[test]
+fn the_sky_is_a_layer_of_its_own() {
+    let (depth, sky) = landscape();
+    let plan = plan_layers_with_sky(&depth, Some(&sky), &count_params(3), &Progress::none())
+        .expect("plan");
+    assert_eq!(plan.regions.len(), 3);
+    let far = plan.regions.last().expect("sky layer");
+    for y in 0..H {
+        for x in 0..W {
+            assert_eq!(far.mask.at(x, y), y < 10, "({x}, {y})");
+        }
+    }
+    // The cut is the geometric mean of the farthest ground (40) and the nearest sky (1000).
+    let n = plan.thresholds.len();
+    assert!(
+        (plan.thresholds[n - 2] - 200.0).abs() < 1e-3,
+        "{:?}",
+        plan.thresholds
+    );
+    assert_eq!(plan.thresholds[n - 1], 1000.0);
+    // The sky layer continues behind the mountains: its hidden region is not empty.
+    assert!(count(&far.hidden) > 0);
+    // Without the mask (or with the option off) the two-layer-fewer split differs: the
+    // mountains and the sky share the farthest cluster of a 2-layer plan.
+    let off = LayerParams {
+        sky_layer: false,
+        ..count_params(2)
+    };
+    let plain = plan_layers_with_sky(&depth, Some(&sky), &off, &Progress::none()).expect("plan");
+    assert_eq!(
+        plain,
+        plan_layers(&depth, &count_params(2), &Progress::none()).expect("plan")
+    );
+    let far = plain.regions.last().expect("far layer");
+    assert!(
+        far.mask.at(0, 5) && far.mask.at(0, 15),
+        "{:?}",
+        plain.thresholds
+    );
+}
+
+#[test]
+fn sky_layer_edge_cases() {
+    let (depth, sky) = landscape();
+    // A fixed count of 1 stays one layer; auto keeps the sky apart.
+    let one = plan_layers_with_sky(&depth, Some(&sky), &count_params(1), &Progress::none())
+        .expect("plan");
+    assert_eq!(one.regions.len(), 1);
+    let auto = plan_layers_with_sky(
+        &depth,
+        Some(&sky),
+        &LayerParams::default(),
+        &Progress::none(),
+    )
+    .expect("plan");
+    assert!(auto.regions.last().expect("sky").mask.at(0, 0));
+    assert!(!auto.regions.last().expect("sky").mask.at(0, 15));
+    // All sky, no sky, a mask of another size: the plain clustering.
+    let all = Raster::new(W, H, 1.0f32);
+    let none = Raster::new(W, H, 0.0f32);
+    let small = Raster::new(3, 3, 1.0f32);
+    let plain = sky_thresholds(&depth, None, &count_params(3)).expect("plain");
+    for mask in [&all, &none, &small] {
+        assert_eq!(
+            sky_thresholds(&depth, Some(mask), &count_params(3)).expect("thresholds"),
+            plain
+        );
+    }
+    // Sky nearer than the farthest ground (overlap): the cut is the nearest sky depth, and
+    // the thresholds stay sorted.
+    let overlap = depth.map(|z| if z == 1000.0 { 35.0 } else { z });
+    let t = sky_thresholds(&overlap, Some(&sky), &count_params(3)).expect("thresholds");
+    assert!(t.windows(2).all(|p| p[0] <= p[1]), "{t:?}");
+    assert_eq!(t[t.len() - 2], 35.0f32.max(t[t.len() - 3]));
+    // One-pixel sky: below min_layer_px, no sky layer.
+    let dot = Raster::from_fn(W, H, |x, y| if (x, y) == (0, 0) { 1.0 } else { 0.0 });
+    assert_eq!(
+        sky_thresholds(&depth, Some(&dot), &count_params(3)).expect("thresholds"),
+        plain
+    );
+}
