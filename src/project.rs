@@ -88,6 +88,10 @@ pub struct LayerSettings {
     /// overlays; the classical estimator is not, and re-estimating warps long structures (the
     /// pier of cold_ripple.jpg bends into waves). Worth turning on with a learned depth model.
     pub layer_depth: bool,
+    /// Thin the point cloud where the camera path never needs full density: a layer that every
+    /// frame shows at most at half its canvas resolution keeps one point per `s × s` block
+    /// ([`crate::stages::layers::density_strides`]). Off: one point per canvas pixel.
+    pub adaptive_density: bool,
     /// Clustering and mask parameters.
     pub params: LayerParams,
 }
@@ -98,6 +102,7 @@ impl Default for LayerSettings {
             enabled: true,
             inpaint: true,
             layer_depth: false,
+            adaptive_density: true,
             params: LayerParams::default(),
         }
     }

@@ -32,7 +32,8 @@ use crate::render::{Frame, FrameRenderer};
 use crate::stages::depth::{DepthEstimator, DepthStageOutput, run_depth_stage};
 use crate::stages::inpaint::{InpaintRequest, Inpainter};
 use crate::stages::layers::{
-    Layer, LayerDepthParams, LayeredScene, inpaint_layers, layer_based_depth, plan_layers_with_sky,
+    CloudOptions, Layer, LayerDepthParams, LayeredScene, density_strides, inpaint_layers,
+    layer_based_depth, plan_layers_with_sky,
 };
 use crate::stages::motion::displaced_positions;
 use crate::stages::motion::{FlowField, MotionLoop, prepare_motion};
@@ -433,13 +434,29 @@ impl SceneBuilder {
 
         // 7. Cloud.
         let p = step(Stage::Cloud);
-        let key = key_of(key, &());
+        let key = key_of(key, &project.layers.adaptive_density);
         let cloud = match &self.cloud {
             Some(s) if s.key == key => s.value.clone(),
             _ => {
                 let started = std::time::Instant::now();
                 p.report(0.0, Stage::Cloud.name());
-                let mut c = layered.point_cloud(&canvas.intrinsics)?;
+                let strides = if project.layers.adaptive_density {
+                    let (ow, oh) = output_size;
+                    let out_k = intrinsics.scaled(ow as f32 / w as f32, oh as f32 / h as f32);
+                    let views =
+                        project
+                            .camera
+                            .path
+                            .views(&out_k, ow, &scale, project.output.frames)?;
+                    density_strides(&layered, &canvas.intrinsics, &views)
+                } else {
+                    Vec::new()
+                };
+                let options = CloudOptions {
+                    needed: None,
+                    strides,
+                };
+                let mut c = layered.point_cloud_with(&canvas.intrinsics, &options)?;
                 // Outpainted pixels count as synthesised content too.
                 for (flag, px) in c.inpainted.iter_mut().zip(&c.source_pixel) {
                     let (x, y) = (px[0].round() as usize, px[1].round() as usize);

@@ -2,7 +2,7 @@
 
 use super::LayeredScene;
 use crate::error::{Error, Result};
-use crate::geometry::Intrinsics;
+use crate::geometry::{Intrinsics, View};
 use crate::raster::{GrayRaster, MaskRaster, Raster, Rgb, RgbRaster};
 use crate::stages::points::{LiftOptions, PointCloud, SAME_SURFACE_RELATIVE_DEPTH};
 use rayon::prelude::*;
@@ -19,6 +19,71 @@ pub struct CloudOptions<'a> {
     /// pixels, so the renderer covers the same area with `s²` times fewer points. Meant for far
     /// layers, whose pixels the path never magnifies.
     pub strides: Vec<usize>,
+}
+
+/// Largest stride [`density_strides`] picks.
+pub const MAX_DENSITY_STRIDE: usize = 4;
+
+/// Per-layer sampling strides for a camera path (for [`CloudOptions::strides`]).
+///
+/// A canvas pixel at depth `z` spans `z / f_c` in the world (`f_c` the canvas focal length); a
+/// view with focal length `f_v` that sees it at depth `z_v` draws it `m = (f_v / f_c) · z / z_v`
+/// pixels wide. A stride `s` keeps one point per `s × s` block, so it loses nothing the frames
+/// can show while `s · m ≤ 1`: `s = ⌊1 / m_max⌋`, clamped to `1..=`[`MAX_DENSITY_STRIDE`], where
+/// `m_max` is the largest magnification of the layer over every view, sampled at the layer's
+/// nearest depth (its interval's start, the worst case) at the centre and the four corners of
+/// its bounding box. A sample behind or at a view's camera plane counts as unbounded (`s = 1`).
+/// Output frames smaller than the canvas (a 640-pixel render of a 1280-pixel photo) and far
+/// layers on a fly-out get `s > 1`; a fly-in's near layers keep every pixel.
+pub fn density_strides(scene: &LayeredScene, canvas: &Intrinsics, views: &[View]) -> Vec<usize> {
+    scene
+        .layers
+        .iter()
+        .map(|layer| {
+            let (w, h) = layer.mask.size();
+            let mut bbox: Option<[usize; 4]> = None;
+            for y in 0..h {
+                for x in 0..w {
+                    if layer.covers(x, y) {
+                        let b = bbox.get_or_insert([x, y, x, y]);
+                        *b = [b[0].min(x), b[1].min(y), b[2].max(x), b[3].max(y)];
+                    }
+                }
+            }
+            let (Some([x0, y0, x1, y1]), false) = (bbox, views.is_empty()) else {
+                return 1;
+            };
+            let z = layer.interval[0];
+            if !(z.is_finite() && z > 0.0 && canvas.fx > 0.0) {
+                return 1;
+            }
+            let samples = [
+                ((x0 + x1) as f32 * 0.5, (y0 + y1) as f32 * 0.5),
+                (x0 as f32, y0 as f32),
+                (x1 as f32, y0 as f32),
+                (x0 as f32, y1 as f32),
+                (x1 as f32, y1 as f32),
+            ];
+            let mut m_max = 0.0f64;
+            for view in views {
+                let camera_from_world = view.world_from_camera.inverse();
+                for &(u, v) in &samples {
+                    let p = canvas.unproject(u, v, z);
+                    let z_v = camera_from_world.transform_point(p).z;
+                    if !(z_v.is_finite() && z_v > 1e-6 * z) {
+                        return 1;
+                    }
+                    let m = f64::from(view.intrinsics.fx) / f64::from(canvas.fx) * f64::from(z)
+                        / f64::from(z_v);
+                    m_max = m_max.max(m);
+                }
+            }
+            if !(m_max.is_finite() && m_max > 0.0) {
+                return 1;
+            }
+            ((1.0 / m_max).floor() as usize).clamp(1, MAX_DENSITY_STRIDE)
+        })
+        .collect()
 }
 
 impl LayeredScene {

@@ -25,7 +25,7 @@ mod complete;
 pub mod edges;
 pub mod morph;
 
-pub use cloud::CloudOptions;
+pub use cloud::{CloudOptions, MAX_DENSITY_STRIDE, density_strides};
 pub use complete::{LayerDepthParams, inpaint_layers, layer_based_depth, remap_to_interval};
 
 use crate::error::{Error, Result};

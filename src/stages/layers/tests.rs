@@ -940,3 +940,46 @@ fn sky_layer_edge_cases() {
         plain
     );
 }
+
+#[test]
+fn density_strides_known_answers() {
+    use crate::geometry::{Pose, View};
+    use glam::{Quat, Vec3};
+    let (canvas, depth) = two_planes();
+    let plan = plan_layers(&depth, &count_params(2), &Progress::none()).expect("plan");
+    let scene = inpaint_layers(
+        &canvas,
+        &plan,
+        &MeanInpainter::default(),
+        3,
+        &Progress::none(),
+    )
+    .expect("ok");
+    let k = Intrinsics::from_hfov(W, H, 60.0);
+    let near = scene.layers[0].interval[0];
+    let view = |focal_ratio: f32, z: f32| View {
+        intrinsics: k.scaled(focal_ratio, focal_ratio),
+        world_from_camera: Pose::new(Quat::IDENTITY, Vec3::new(0.0, 0.0, z)),
+    };
+    let strides = |views: &[View]| density_strides(&scene, &k, views);
+    // m = (f_v / f_c) · z / z_v: half-size output → 2, a quarter → 4, a fifth → clamped to 4.
+    assert_eq!(strides(&[view(1.0, 0.0)]), vec![1, 1]);
+    assert_eq!(strides(&[view(0.5, 0.0)]), vec![2, 2]);
+    assert_eq!(strides(&[view(0.25, 0.0)]), vec![4, 4]);
+    assert_eq!(strides(&[view(0.2, 0.0)]), vec![MAX_DENSITY_STRIDE; 2]);
+    // Flying back by the near depth halves the near layer: m = z / 2z.
+    assert_eq!(strides(&[view(1.0, -near)])[0], 2);
+    // The largest magnification over the path decides: a fly-in frame keeps every point.
+    // Near layer: m = 0.5 · z / (z − z/2) = 1. The wall, sampled at its interval's start z₁:
+    // m = 0.5 · z₁ / (z₁ − near/2).
+    let z1 = scene.layers[1].interval[0];
+    let wall = ((z1 - 0.5 * near) / (0.5 * z1)).floor() as usize;
+    assert_eq!(
+        strides(&[view(0.5, 0.0), view(0.5, 0.5 * near)]),
+        vec![1, wall.clamp(1, MAX_DENSITY_STRIDE)]
+    );
+    // A camera at or past the layer, or no views at all: full density.
+    assert_eq!(strides(&[view(0.25, near)])[0], 1);
+    assert_eq!(strides(&[view(0.25, 2.0 * BG)]), vec![1, 1]);
+    assert_eq!(strides(&[]), vec![1, 1]);
+}
