@@ -11,6 +11,7 @@ use makeit4d::app::panels::Tab;
 use makeit4d::app::{EditorApp, EditorOptions};
 use makeit4d::path::CameraPath;
 use makeit4d::project::Project;
+use makeit4d::render::gpu::RendererChoice;
 use makeit4d::scene::Stage;
 use makeit4d::stages::inpaint::InpaintPreset;
 use makeit4d::stages::layers::LayerCount;
@@ -34,6 +35,11 @@ fn fast_project(dir: &Path) -> PathBuf {
 
 /// The harness, or `None` (skip) when there is no wgpu adapter outside CI.
 fn harness(open: PathBuf) -> Option<Harness<'static, EditorApp>> {
+    harness_with(open, RendererChoice::Auto)
+}
+
+/// The harness with the preview renderer `preview`.
+fn harness_with(open: PathBuf, preview: RendererChoice) -> Option<Harness<'static, EditorApp>> {
     let built = std::panic::catch_unwind(move || {
         Harness::builder()
             .with_size(egui::vec2(1280.0, 800.0))
@@ -44,6 +50,7 @@ fn harness(open: PathBuf) -> Option<Harness<'static, EditorApp>> {
                     EditorOptions {
                         open: Some(open),
                         ephemeral: true,
+                        preview_renderer: preview,
                         ..Default::default()
                     },
                 )
@@ -214,4 +221,54 @@ fn editor_end_to_end() {
     assert!(!out.join("frame_0003.png").exists());
     // The export's hole fractions feed the timeline strip.
     assert!(h.state().hole_fractions().len() >= 3);
+}
+
+/// The preview through the GPU splatter's paint callback on the harness's own wgpu device
+/// (lavapipe): forced with `RendererChoice::Gpu` (`Auto` takes the CPU on a software adapter),
+/// it renders at the viewport's pixel size and the window shows a picture there.
+#[test]
+fn preview_draws_through_the_gpu_paint_callback() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(mut h) = harness_with(fast_project(dir.path()), RendererChoice::Gpu) else {
+        return;
+    };
+    wait_idle(&mut h, Duration::from_secs(600));
+    h.get_by_label("7 Preview").click();
+    h.step();
+    h.step();
+    assert!(
+        h.state().preview_uses_gpu(),
+        "{}",
+        h.state().preview_renderer()
+    );
+    // kittest paints (and so runs the callback's prepare) only when asked to render.
+    let image = h.render().expect("render the window");
+    let image = h.render().unwrap_or(image);
+    assert!(h.state().notices().iter().all(|n| !n.contains("GPU")), "{:?}", h.state().notices());
+    assert!(h.state().preview_uses_gpu(), "{}", h.state().preview_renderer());
+    let (renders, size) = h.state().gpu_preview_renders();
+    assert!(renders >= 1, "the paint callback rendered");
+    let view = h.state().probe().view.expect("the preview view");
+    let ppp = image.width() as f32 / 1280.0;
+    let expected = [
+        (view.rect.width() * ppp).round() as u32,
+        (view.rect.height() * ppp).round() as u32,
+    ];
+    assert_eq!(size, expected, "rendered at the viewport's pixel size");
+    // The picture inside the rect is not empty: many distinct, mostly non-black pixels.
+    let inner = view.rect.shrink(8.0);
+    let mut colours = std::collections::HashSet::new();
+    let mut lit = 0usize;
+    let mut total = 0usize;
+    for y in (inner.min.y as u32..inner.max.y as u32).step_by(3) {
+        for x in (inner.min.x as u32..inner.max.x as u32).step_by(3) {
+            let p = image.get_pixel((x as f32 * ppp) as u32, (y as f32 * ppp) as u32).0;
+            colours.insert([p[0] / 8, p[1] / 8, p[2] / 8]);
+            lit += usize::from(u32::from(p[0]) + u32::from(p[1]) + u32::from(p[2]) > 30);
+            total += 1;
+        }
+    }
+    assert!(colours.len() > 50, "{} distinct colours", colours.len());
+    assert!(lit * 10 > total * 8, "{lit} of {total} pixels lit");
+    assert!(h.state().preview_renderer().starts_with("GPU preview"));
 }
