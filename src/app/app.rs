@@ -15,7 +15,7 @@ use super::worker::{
     Command, Event, JobKind, JobStatus, PreviewOutput, PreviewRequest, PreviewWork, PreviewWorker,
     SceneSnapshot, SceneWorker,
 };
-use crate::geometry::{Intrinsics, View};
+use crate::geometry::View;
 use crate::path::{CameraPath, Keyframe};
 use crate::project::Project;
 use crate::render::gpu::RendererChoice;
@@ -844,21 +844,16 @@ impl EditorApp {
             return;
         }
         self.camera_key = Some(key);
-        let (ow, oh) = match (p.output.width, p.output.height) {
-            (Some(w), Some(h)) => (w, h),
-            _ => (iw, ih),
-        };
-        let k = Intrinsics::from_hfov(iw, ih, p.camera.hfov_deg)
-            .scaled(ow as f32 / iw as f32, oh as f32 / ih as f32);
-        self.camera = match p.camera.path.views(&k, ow, &scale, p.output.frames) {
+        let (views, output_size) = super::panels::camera::path_views(p, &snapshot.scene);
+        self.camera = match views {
             Ok(views) => CameraInfo {
                 views,
-                output_size: (ow, oh),
+                output_size,
                 error: None,
             },
             Err(e) => CameraInfo {
                 views: Vec::new(),
-                output_size: (ow, oh),
+                output_size,
                 error: Some(format!("{e:#}")),
             },
         };
