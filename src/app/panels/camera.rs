@@ -70,8 +70,8 @@ struct KeyDrag {
 }
 
 fn path_plot_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, proj: &Projection, width: f32) {
-    let drag_id = egui::Id::new(("camera key drag", proj.name));
-    let near_id = egui::Id::new(("camera near key", proj.name));
+    let drag_id = egui::Id::unique(("camera key drag", proj.name));
+    let near_id = egui::Id::unique(("camera near key", proj.name));
     let drag: Option<KeyDrag> = ui.data(|d| d.get_temp(drag_id));
     // Set in the last frame: the pointer is over a key, so a press grabs it instead of
     // panning the plot.
