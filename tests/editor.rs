@@ -272,3 +272,41 @@ fn preview_draws_through_the_gpu_paint_callback() {
     assert!(lit * 10 > total * 8, "{lit} of {total} pixels lit");
     assert!(h.state().preview_renderer().starts_with("GPU preview"));
 }
+
+/// Camera tab: a keyframe dragged in the top-view plot moves in x (one undoable edit).
+#[test]
+fn keyframes_drag_in_the_camera_plot() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(mut h) = harness(fast_project(dir.path())) else {
+        return;
+    };
+    let limit = Duration::from_secs(600);
+    wait_idle(&mut h, limit);
+    h.get_by_label("6 Camera").click();
+    h.step();
+    h.get_by_label("Edit as keyframes").click();
+    h.step();
+    wait_idle(&mut h, limit);
+    let keys_of = |h: &Harness<'_, EditorApp>| match &h.state().project().unwrap().camera.path {
+        CameraPath::Keyframes(k) => k.keys.clone(),
+        CameraPath::Preset(_) => panic!("the preset became keyframes"),
+    };
+    let before = keys_of(&h);
+    let handles = h.state().probe().key_handles.clone();
+    assert_eq!(handles.len(), before.len());
+    let last = handles.len() - 1;
+    let from = handles[last];
+    drag(&mut h, from, from + egui::vec2(60.0, 0.0));
+    let after = keys_of(&h);
+    assert!(
+        after[last].position.x > before[last].position.x + 1e-3,
+        "{:?} → {:?}",
+        before[last].position,
+        after[last].position
+    );
+    assert!((after[last].position.z - before[last].position.z).abs() < 0.05);
+    assert_eq!(after[last].position.y, before[last].position.y, "top view keeps y");
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
+    h.step();
+    assert_eq!(keys_of(&h)[last].position, before[last].position, "one undo");
+}

@@ -123,7 +123,7 @@ fn path_plot_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, proj: &Projection, width
         ui.label(egui::RichText::new(proj.name).strong());
         let plot = Plot::new(proj.name)
             .width(width)
-            .height(width.min(ui.available_height() - 24.0).max(120.0))
+            .height((ui.available_height() - 24.0).max(120.0))
             .data_aspect(1.0)
             .x_axis_label(proj.x_label)
             .y_axis_label(proj.y_label)
@@ -132,6 +132,12 @@ fn path_plot_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, proj: &Projection, width
             .include_y(0.0)
             .allow_drag(!(near_key || drag.is_some()))
             .show(ui, |pui| {
+                // Hold the axes still while a key is dragged (the path changes under the
+                // pointer), and fit them again when it is dropped.
+                if drag.is_some() {
+                    let held = pui.response().dragged();
+                    pui.set_auto_bounds(!held);
+                }
                 pui.line(
                     Line::new("path", PlotPoints::from(pts.clone()))
                         .color(Color32::from_rgb(110, 170, 255))
@@ -195,9 +201,16 @@ fn path_plot_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, proj: &Projection, width
                             .min_by(|a, b| a.1.total_cmp(&b.1))
                             .map(|(i, _)| i)
                     });
-                (response, nearest, pui.pointer_coordinate())
+                let handles: Vec<egui::Pos2> = keys
+                    .iter()
+                    .map(|k| pui.screen_from_plot(PlotPoint::new(k[0], k[1])))
+                    .collect();
+                (response, nearest, pui.pointer_coordinate(), handles)
             });
-        let (response, nearest, pointer) = plot.inner;
+        let (response, nearest, pointer, handles) = plot.inner;
+        if proj.name == TOP.name {
+            cx.probe.key_handles = handles;
+        }
         ui.data_mut(|d| d.insert_temp(near_id, nearest.is_some()));
         if nearest.is_some() || drag.is_some() {
             ui.ctx().set_cursor_icon(if drag.is_some() {

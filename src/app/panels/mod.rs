@@ -184,6 +184,8 @@ pub struct Probe {
     pub view: Option<ImageView>,
     /// Screen positions of the draggable layer threshold lines (interior thresholds, in order).
     pub threshold_handles: Vec<egui::Pos2>,
+    /// Screen positions of the keyframe markers in the camera's top-view plot, by key index.
+    pub key_handles: Vec<egui::Pos2>,
 }
 
 /// Everything a panel may read, and where it puts its edits and requests.

@@ -124,13 +124,20 @@ impl StagePanel for PreviewPanel {
                 1000.0 * cx.preview.seconds,
             ),
         };
-        ui.painter().text(
-            view.rect.left_top() + egui::vec2(6.0, 6.0),
-            egui::Align2::LEFT_TOP,
+        // On a dark plate, so it stays readable over a bright sky.
+        let painter = ui.painter_at(area);
+        let galley = painter.layout_no_wrap(
             text,
             egui::FontId::proportional(13.0),
             egui::Color32::WHITE,
         );
+        let at = view.rect.left_top().max(area.left_top()) + egui::vec2(6.0, 6.0);
+        painter.rect_filled(
+            egui::Rect::from_min_size(at, galley.size()).expand(3.0),
+            3.0,
+            egui::Color32::from_black_alpha(150),
+        );
+        painter.galley(at, galley, egui::Color32::WHITE);
     }
 
     fn inspector_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>) {
