@@ -310,3 +310,56 @@ fn keyframes_drag_in_the_camera_plot() {
     h.step();
     assert_eq!(keys_of(&h)[last].position, before[last].position, "one undo");
 }
+
+/// Not a check but a measurement (run with `--ignored --nocapture`): the UI frame time while
+/// the scene builds. Opens `MAKEIT4D_PHOTO` (default: the test sample) and steps the real app
+/// headless during the build, timing each `step` (eframe's logic + ui + tessellation) and each
+/// `render` (egui's wgpu paint on the harness adapter, read back), then prints mean / p95 / max
+/// for the frames drawn while the build ran and after.
+#[test]
+#[ignore = "measurement; prints figures"]
+fn ui_frame_times_during_a_rebuild() {
+    let photo = std::env::var_os("MAKEIT4D_PHOTO").map_or_else(sample, PathBuf::from);
+    let Some(mut h) = harness(photo) else {
+        return;
+    };
+    let mut samples: Vec<(bool, f64, f64)> = Vec::new();
+    let start = Instant::now();
+    let mut idle_frames = 0;
+    while idle_frames < 30 && start.elapsed() < Duration::from_secs(900) {
+        let busy = !h.state().is_idle();
+        let t0 = Instant::now();
+        h.step();
+        let step_ms = t0.elapsed().as_secs_f64() * 1000.0;
+        let t1 = Instant::now();
+        let _ = h.render();
+        let render_ms = t1.elapsed().as_secs_f64() * 1000.0;
+        samples.push((busy, step_ms, render_ms));
+        if !busy {
+            idle_frames += 1;
+        }
+    }
+    let stats = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
+        let p95 = v.get((v.len() * 95 / 100).min(v.len().saturating_sub(1)));
+        format!(
+            "mean {mean:.1} ms, p95 {:.1} ms, max {:.1} ms",
+            p95.copied().unwrap_or(0.0),
+            v.last().copied().unwrap_or(0.0)
+        )
+    };
+    for busy in [true, false] {
+        let mut step: Vec<f64> = samples.iter().filter(|s| s.0 == busy).map(|s| s.1).collect();
+        let mut render: Vec<f64> = samples.iter().filter(|s| s.0 == busy).map(|s| s.2).collect();
+        let what = if busy { "building" } else { "idle" };
+        println!(
+            "{what}: {} frames; step (logic + ui + tessellate): {}; render (wgpu paint): {}",
+            step.len(),
+            stats(&mut step),
+            stats(&mut render)
+        );
+    }
+    let (n, mean, max) = h.state().frame_times().stats(true);
+    println!("App::ui alone while building: {n} frames, mean {mean:.2} ms, max {max:.1} ms");
+}
