@@ -244,8 +244,16 @@ fn preview_draws_through_the_gpu_paint_callback() {
     // kittest paints (and so runs the callback's prepare) only when asked to render.
     let image = h.render().expect("render the window");
     let image = h.render().unwrap_or(image);
-    assert!(h.state().notices().iter().all(|n| !n.contains("GPU")), "{:?}", h.state().notices());
-    assert!(h.state().preview_uses_gpu(), "{}", h.state().preview_renderer());
+    assert!(
+        h.state().notices().iter().all(|n| !n.contains("GPU")),
+        "{:?}",
+        h.state().notices()
+    );
+    assert!(
+        h.state().preview_uses_gpu(),
+        "{}",
+        h.state().preview_renderer()
+    );
     let (renders, size) = h.state().gpu_preview_renders();
     assert!(renders >= 1, "the paint callback rendered");
     let view = h.state().probe().view.expect("the preview view");
@@ -262,7 +270,9 @@ fn preview_draws_through_the_gpu_paint_callback() {
     let mut total = 0usize;
     for y in (inner.min.y as u32..inner.max.y as u32).step_by(3) {
         for x in (inner.min.x as u32..inner.max.x as u32).step_by(3) {
-            let p = image.get_pixel((x as f32 * ppp) as u32, (y as f32 * ppp) as u32).0;
+            let p = image
+                .get_pixel((x as f32 * ppp) as u32, (y as f32 * ppp) as u32)
+                .0;
             colours.insert([p[0] / 8, p[1] / 8, p[2] / 8]);
             lit += usize::from(u32::from(p[0]) + u32::from(p[1]) + u32::from(p[2]) > 30);
             total += 1;
@@ -305,10 +315,17 @@ fn keyframes_drag_in_the_camera_plot() {
         after[last].position
     );
     assert!((after[last].position.z - before[last].position.z).abs() < 0.05);
-    assert_eq!(after[last].position.y, before[last].position.y, "top view keeps y");
+    assert_eq!(
+        after[last].position.y, before[last].position.y,
+        "top view keeps y"
+    );
     h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
     h.step();
-    assert_eq!(keys_of(&h)[last].position, before[last].position, "one undo");
+    assert_eq!(
+        keys_of(&h)[last].position,
+        before[last].position,
+        "one undo"
+    );
 }
 
 /// Not a check but a measurement (run with `--ignored --nocapture`): the UI frame time while
@@ -350,8 +367,16 @@ fn ui_frame_times_during_a_rebuild() {
         )
     };
     for busy in [true, false] {
-        let mut step: Vec<f64> = samples.iter().filter(|s| s.0 == busy).map(|s| s.1).collect();
-        let mut render: Vec<f64> = samples.iter().filter(|s| s.0 == busy).map(|s| s.2).collect();
+        let mut step: Vec<f64> = samples
+            .iter()
+            .filter(|s| s.0 == busy)
+            .map(|s| s.1)
+            .collect();
+        let mut render: Vec<f64> = samples
+            .iter()
+            .filter(|s| s.0 == busy)
+            .map(|s| s.2)
+            .collect();
         let what = if busy { "building" } else { "idle" };
         println!(
             "{what}: {} frames; step (logic + ui + tessellate): {}; render (wgpu paint): {}",

@@ -2,6 +2,7 @@
 //! the panels and the workers.
 
 use super::STORAGE_KEY;
+use super::gpu_preview::GpuPreview;
 use super::history::History;
 use super::images::Textures;
 use super::panels::{
@@ -9,7 +10,6 @@ use super::panels::{
     Tab, all_panels,
 };
 use super::timeline::{TimelineState, timeline_ui};
-use super::gpu_preview::GpuPreview;
 use super::viewport::{CpuPreview, PreviewRenderer};
 use super::worker::{
     Command, Event, JobKind, JobStatus, PreviewOutput, PreviewRequest, PreviewWork, PreviewWorker,
@@ -333,9 +333,9 @@ impl EditorApp {
     /// True when the preview is drawn by the GPU splatter in the window (see
     /// [`EditorOptions::preview_renderer`]).
     pub fn preview_uses_gpu(&self) -> bool {
-        self.gpu.as_ref().is_some_and(|g| {
-            self.gpu_error.is_none() && self.preview_choice.uses_gpu(g.context())
-        })
+        self.gpu
+            .as_ref()
+            .is_some_and(|g| self.gpu_error.is_none() && self.preview_choice.uses_gpu(g.context()))
     }
 
     /// GPU preview renders so far and the pixel size of the last one (zeros without one).
@@ -884,11 +884,16 @@ impl EditorApp {
                     level: Level::Error,
                     at: Instant::now(),
                 }),
-                (None, Some(PreviewOutput::Image {
-                    image,
-                    hole_fraction,
-                })) => {
-                    let texture = self.textures.get(ctx, "preview", frame.id, || image.clone());
+                (
+                    None,
+                    Some(PreviewOutput::Image {
+                        image,
+                        hole_fraction,
+                    }),
+                ) => {
+                    let texture = self
+                        .textures
+                        .get(ctx, "preview", frame.id, || image.clone());
                     self.preview.texture = Some(texture.id());
                     self.preview.size = image.size;
                     self.preview.frame_index = frame.frame_index;

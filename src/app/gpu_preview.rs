@@ -21,9 +21,7 @@
 use crate::geometry::View;
 use crate::render::SplatSettings;
 use crate::render::blend::DEFAULT_SHARPNESS;
-use crate::render::gpu::{
-    FrameSlot, GpuContext, GpuSplatter, Positions, VIEWPORT_WGSL, scoped,
-};
+use crate::render::gpu::{FrameSlot, GpuContext, GpuSplatter, Positions, VIEWPORT_WGSL, scoped};
 use crate::scene::FramePositions;
 use crate::stages::points::PointCloud;
 use eframe::egui;
@@ -277,7 +275,10 @@ impl PreviewResources {
         }
         let key = DrawKey {
             cloud: Arc::as_ptr(&frame.cloud) as usize,
-            positions: frame.positions.as_ref().map_or(0, |p| Arc::as_ptr(p) as usize),
+            positions: frame
+                .positions
+                .as_ref()
+                .map_or(0, |p| Arc::as_ptr(p) as usize),
             view: frame.view,
             size: frame.size,
             settings: frame.settings,
@@ -365,7 +366,8 @@ impl PreviewResources {
             let Some(target) = &self.target else {
                 return Err(crate::Error::Gpu("preview texture missing".into()));
             };
-            self.splatter.encode_present(&mut encoder, slot, &target.view)?;
+            self.splatter
+                .encode_present(&mut encoder, slot, &target.view)?;
             if self.stats_state.load(Ordering::Acquire) == STATS_IDLE {
                 self.splatter.encode_copy_stats(&mut encoder, &self.stats);
                 self.stats_state.store(STATS_COPIED, Ordering::Release);
@@ -401,11 +403,9 @@ impl PreviewResources {
             }
             STATS_MAPPED => {
                 let needed = {
-                    let data = self
-                        .stats
-                        .slice(0..8)
-                        .get_mapped_range()
-                        .map_err(|e| crate::Error::Gpu(format!("reading the preview stats: {e}")))?;
+                    let data = self.stats.slice(0..8).get_mapped_range().map_err(|e| {
+                        crate::Error::Gpu(format!("reading the preview stats: {e}"))
+                    })?;
                     let stats: Vec<u32> = bytemuck::pod_collect_to_vec(&data[..8]);
                     stats[0].max(stats[1]) as usize
                 };
@@ -543,10 +543,7 @@ impl egui_wgpu::CallbackTrait for SplatCallback {
 /// Renders `frame` through the callback's prepare path on `context` and returns the preview
 /// texture's RGBA8 pixels (row-major, `size[0] × size[1]`): the test hook for comparing the
 /// GPU preview with the CPU renderer.
-pub fn render_to_rgba(
-    context: GpuContext,
-    frame: &GpuFrame,
-) -> crate::Result<Vec<[u8; 4]>> {
+pub fn render_to_rgba(context: GpuContext, frame: &GpuFrame) -> crate::Result<Vec<[u8; 4]>> {
     let shared = Arc::new(Shared::default());
     let mut resources =
         PreviewResources::new(context.clone(), wgpu::TextureFormat::Rgba8Unorm, shared)?;
@@ -594,11 +591,9 @@ pub fn render_to_rgba(
     );
     context.queue.submit(Some(encoder.finish()));
     let (tx, rx) = std::sync::mpsc::channel();
-    readback
-        .slice(..)
-        .map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
+    readback.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+        let _ = tx.send(r);
+    });
     device
         .poll(wgpu::PollType::wait_indefinitely())
         .map_err(|e| crate::Error::Gpu(format!("waiting for the GPU: {e}")))?;

@@ -815,13 +815,15 @@ fn preview_thread(
                     image: rgb_image(&frame.colour, usize::MAX),
                     hole_fraction: frame.hole_fraction(),
                 }),
-            PreviewWork::Positions => snapshot
-                .scene
-                .frame_positions(request.frame_index)
-                .map(|p| PreviewOutput::Positions {
-                    cloud: snapshot.scene.cloud.clone(),
-                    positions: Arc::new(p),
-                }),
+            PreviewWork::Positions => {
+                snapshot
+                    .scene
+                    .frame_positions(request.frame_index)
+                    .map(|p| PreviewOutput::Positions {
+                        cloud: snapshot.scene.cloud.clone(),
+                        positions: Arc::new(p),
+                    })
+            }
         });
         let (output, error) = match result {
             Ok(output) => (Some(output), None),

@@ -126,11 +126,8 @@ impl StagePanel for PreviewPanel {
         };
         // On a dark plate, so it stays readable over a bright sky.
         let painter = ui.painter_at(area);
-        let galley = painter.layout_no_wrap(
-            text,
-            egui::FontId::proportional(13.0),
-            egui::Color32::WHITE,
-        );
+        let galley =
+            painter.layout_no_wrap(text, egui::FontId::proportional(13.0), egui::Color32::WHITE);
         let at = view.rect.left_top().max(area.left_top()) + egui::vec2(6.0, 6.0);
         painter.rect_filled(
             egui::Rect::from_min_size(at, galley.size()).expand(3.0),
@@ -155,7 +152,11 @@ impl StagePanel for PreviewPanel {
                     "GPU",
                     "The GPU splatter drawing into the window, on any adapter",
                 ),
-                (RendererChoice::Cpu, "CPU", "The CPU splatter on the preview thread"),
+                (
+                    RendererChoice::Cpu,
+                    "CPU",
+                    "The CPU splatter on the preview thread",
+                ),
             ] {
                 ui.selectable_value(&mut cx.preview.choice, choice, text)
                     .on_hover_text(hint);
@@ -163,9 +164,7 @@ impl StagePanel for PreviewPanel {
         });
         ui.label(egui::RichText::new(&cx.preview.renderer).weak());
         if cx.preview.gpu.is_some() {
-            ui.label(
-                egui::RichText::new("The GPU renders at the viewport's pixel size.").weak(),
-            );
+            ui.label(egui::RichText::new("The GPU renders at the viewport's pixel size.").weak());
         } else {
             ui.horizontal(|ui| {
                 ui.label("size");
