@@ -736,6 +736,71 @@ mod tests {
         }
     }
 
+    /// An error in `prepare` becomes one message for the UI (no panic), the callback stops
+    /// drawing, and a reset lets the next frame try again.
+    #[test]
+    fn a_gpu_error_is_reported_once_and_stops_drawing_until_reset() {
+        use egui_wgpu::CallbackTrait as _;
+        let Some(context) = context() else {
+            return;
+        };
+        let shared = Arc::new(Shared::default());
+        let preview = GpuPreview {
+            shared: shared.clone(),
+            context: context.clone(),
+        };
+        let mut resources = egui_wgpu::CallbackResources::new();
+        resources.insert(
+            PreviewResources::new(context.clone(), wgpu::TextureFormat::Rgba8Unorm, shared)
+                .unwrap(),
+        );
+        let (cloud, k, w, h) = photo_cloud();
+        let good = GpuFrame {
+            cloud: Arc::new(cloud),
+            positions: None,
+            view: View {
+                intrinsics: k,
+                world_from_camera: Pose::default(),
+            },
+            size: [w as u32, h as u32],
+            settings: SplatSettings::default(),
+            ctx: None,
+        };
+        let bad = GpuFrame {
+            settings: SplatSettings {
+                k: 0,
+                ..Default::default()
+            },
+            ..good.clone()
+        };
+        let screen = egui_wgpu::ScreenDescriptor {
+            size_in_pixels: [w as u32, h as u32],
+            pixels_per_point: 1.0,
+        };
+        let mut prepare = |frame: &GpuFrame| {
+            let mut encoder = context.device.create_command_encoder(&Default::default());
+            SplatCallback {
+                frame: frame.clone(),
+            }
+            .prepare(
+                &context.device,
+                &context.queue,
+                &screen,
+                &mut encoder,
+                &mut resources,
+            )
+            .len()
+        };
+        assert_eq!(prepare(&bad), 0);
+        let error = preview.take_error().expect("the error reaches the UI");
+        assert!(error.contains('K'), "{error}");
+        assert!(preview.take_error().is_none(), "reported once");
+        assert_eq!(prepare(&good), 0, "stopped after the error");
+        preview.reset();
+        assert_eq!(prepare(&good), 1, "drawing again after a reset");
+        assert_eq!(preview.rendered().0, 1);
+    }
+
     #[test]
     fn pixel_size_rounds_and_clamps() {
         let rect = egui::Rect::from_min_size(egui::pos2(3.0, 4.0), egui::vec2(100.4, 0.1));

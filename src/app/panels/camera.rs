@@ -185,34 +185,34 @@ fn path_plot_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, proj: &Projection, width
                             .color(Color32::from_rgb(80, 230, 120)),
                     );
                 }
-                // The key under the pointer, if any (nearest within the grab radius).
-                let response = pui.response().clone();
-                let nearest = response
-                    .interact_pointer_pos()
-                    .or(response.hover_pos())
-                    .and_then(|p| {
-                        keys.iter()
-                            .enumerate()
-                            .map(|(i, k)| {
-                                let s = pui.screen_from_plot(PlotPoint::new(k[0], k[1]));
-                                (i, s.distance(p))
-                            })
-                            .filter(|&(_, d)| d <= GRAB_RADIUS)
-                            .min_by(|a, b| a.1.total_cmp(&b.1))
-                            .map(|(i, _)| i)
-                    });
                 let handles: Vec<egui::Pos2> = keys
                     .iter()
                     .map(|k| pui.screen_from_plot(PlotPoint::new(k[0], k[1])))
                     .collect();
-                (response, nearest, pui.pointer_coordinate(), handles)
+                (pui.response().clone(), pui.pointer_coordinate(), handles)
             });
-        let (response, nearest, pointer, handles) = plot.inner;
+        let (response, pointer, handles) = plot.inner;
+        // The key nearest to `p` within the grab radius.
+        let key_at = |p: egui::Pos2| {
+            handles
+                .iter()
+                .enumerate()
+                .map(|(i, h)| (i, h.distance(p)))
+                .filter(|&(_, d)| d <= GRAB_RADIUS)
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|(i, _)| i)
+        };
+        // A drag starts only after the pointer moved a few points, so grab the key under the
+        // press, not under the pointer now.
+        let (primary_down, press_origin) =
+            ui.input(|i| (i.pointer.primary_down(), i.pointer.press_origin()));
+        let pressed_key = press_origin.filter(|_| primary_down).and_then(key_at);
+        let hovered_key = response.hover_pos().and_then(key_at);
         if proj.name == TOP.name {
-            cx.probe.key_handles = handles;
+            cx.probe.key_handles = handles.clone();
         }
-        ui.data_mut(|d| d.insert_temp(near_id, nearest.is_some()));
-        if nearest.is_some() || drag.is_some() {
+        ui.data_mut(|d| d.insert_temp(near_id, hovered_key.is_some() || pressed_key.is_some()));
+        if hovered_key.is_some() || drag.is_some() {
             ui.ctx().set_cursor_icon(if drag.is_some() {
                 egui::CursorIcon::Grabbing
             } else {
@@ -221,7 +221,7 @@ fn path_plot_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, proj: &Projection, width
         }
         let pointer = pointer.map(|p| [p.x, p.y]);
         if response.drag_started_by(egui::PointerButton::Primary)
-            && let (Some(index), Some(at)) = (nearest, pointer)
+            && let (Some(index), Some(at)) = (pressed_key, pointer)
         {
             ui.data_mut(|d| d.insert_temp(drag_id, KeyDrag { index, at }));
             cx.timeline.selected_key = Some(index);
