@@ -752,28 +752,68 @@ impl Scene {
         frame_index: usize,
         mut render: impl FnMut(Option<&[glam::Vec3]>) -> Result<Frame>,
     ) -> Result<Frame> {
-        let Some(motion) = self.motion.as_ref().filter(|m| !m.motion_loop.is_still()) else {
-            return render(None);
+        let positions = self.frame_positions(frame_index)?;
+        let forward = match &positions.forward {
+            Some(p) => Some(render(Some(p))?),
+            None => None,
         };
-        let f = motion.motion_loop.frame(frame_index)?;
-        let k = self.canvas.intrinsics;
-        let forward = if f.needs_forward() {
-            let positions = displaced_positions(&self.cloud, &f.forward, &k)?;
-            Some(render(Some(&positions))?)
-        } else {
-            None
-        };
-        let backward = if f.needs_backward() {
-            let positions = displaced_positions(&self.cloud, &f.backward, &k)?;
-            Some(render(Some(&positions))?)
-        } else {
-            None
+        let backward = match &positions.backward {
+            Some(p) => Some(render(Some(p))?),
+            None => None,
         };
         match (forward, backward) {
-            (Some(a), Some(b)) => symmetric_blend(&a, &b, f.t, DEFAULT_SHARPNESS),
+            (Some(a), Some(b)) => symmetric_blend(&a, &b, positions.t, DEFAULT_SHARPNESS),
             (Some(a), None) => Ok(a),
             (None, Some(b)) => Ok(b),
             (None, None) => render(None),
         }
+    }
+
+    /// The cloud positions output frame `frame_index` renders (what [`Scene::render_frame`]
+    /// splats): for a moving scene the forward cloud displaced by `F_m(M)` and the backward
+    /// cloud by `F_{N−m}(−M)`, each only when it contributes, and the blend time `t`; for a
+    /// still scene neither (render the cloud's own positions).
+    pub fn frame_positions(&self, frame_index: usize) -> Result<FramePositions> {
+        let Some(motion) = self.motion.as_ref().filter(|m| !m.motion_loop.is_still()) else {
+            return Ok(FramePositions::still());
+        };
+        let f = motion.motion_loop.frame(frame_index)?;
+        let k = self.canvas.intrinsics;
+        let forward = if f.needs_forward() {
+            Some(displaced_positions(&self.cloud, &f.forward, &k)?)
+        } else {
+            None
+        };
+        let backward = if f.needs_backward() {
+            Some(displaced_positions(&self.cloud, &f.backward, &k)?)
+        } else {
+            None
+        };
+        Ok(FramePositions {
+            forward,
+            backward,
+            t: f.t,
+        })
+    }
+}
+
+/// The positions one output frame renders (see [`Scene::frame_positions`]). When both clouds
+/// are given the frame is their symmetric blend at time `t` with
+/// [`crate::render::blend::DEFAULT_SHARPNESS`]; when one is, that render alone; when neither,
+/// the cloud's own positions.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FramePositions {
+    /// The forward cloud's positions, one per point, when it contributes.
+    pub forward: Option<Vec<glam::Vec3>>,
+    /// The backward cloud's positions, one per point, when it contributes.
+    pub backward: Option<Vec<glam::Vec3>>,
+    /// Blend time `t ∈ [0, 1]`: the backward render's share.
+    pub t: f32,
+}
+
+impl FramePositions {
+    /// A frame of a still scene: the cloud's own positions.
+    pub fn still() -> Self {
+        Self::default()
     }
 }

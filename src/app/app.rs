@@ -2,6 +2,7 @@
 //! the panels and the workers.
 
 use super::STORAGE_KEY;
+use super::gpu_preview::GpuPreview;
 use super::history::History;
 use super::images::Textures;
 use super::panels::{
@@ -11,12 +12,15 @@ use super::panels::{
 use super::timeline::{TimelineState, timeline_ui};
 use super::viewport::{CpuPreview, PreviewRenderer};
 use super::worker::{
-    Command, Event, JobKind, JobStatus, PreviewRequest, PreviewWorker, SceneSnapshot, SceneWorker,
+    Command, Event, JobKind, JobStatus, PreviewOutput, PreviewRequest, PreviewWork, PreviewWorker,
+    SceneSnapshot, SceneWorker,
 };
-use crate::geometry::{Intrinsics, View};
+use crate::geometry::View;
 use crate::path::{CameraPath, Keyframe};
 use crate::project::Project;
-use crate::scene::Stage;
+use crate::render::gpu::RendererChoice;
+use crate::scene::{FramePositions, Stage};
+use crate::stages::points::PointCloud;
 use eframe::egui::{self, Color32, Key, KeyboardShortcut, Modifiers, RichText};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -35,8 +39,13 @@ const FRAME_SAMPLES: usize = 600;
 pub struct EditorOptions {
     /// An image or project to open.
     pub open: Option<PathBuf>,
-    /// The preview renderer (default: [`CpuPreview`]).
+    /// The renderer of the CPU preview (default: [`CpuPreview`]).
     pub renderer: Option<Box<dyn PreviewRenderer>>,
+    /// Which renderer draws the preview: `Auto` (the default) draws it with the GPU splatter
+    /// in the window when eframe runs on a hardware adapter, and on the CPU otherwise (the
+    /// command line's `--renderer auto` rule); `Gpu` forces the GPU path wherever eframe has a
+    /// wgpu render state; `Cpu` never uses it.
+    pub preview_renderer: RendererChoice,
     /// Do not read or write the persisted settings (tests).
     pub ephemeral: bool,
 }
@@ -135,6 +144,14 @@ pub struct EditorApp {
     preview: PreviewInfo,
     preview_id: u64,
     preview_key: Option<(u64, usize, String, usize)>,
+    /// The GPU preview, when eframe has a wgpu render state and the pipelines built there.
+    gpu: Option<GpuPreview>,
+    /// Why the GPU preview is not available or stopped (one line).
+    gpu_error: Option<String>,
+    preview_choice: RendererChoice,
+    /// Positions of the newest motion frame computed for the GPU preview.
+    gpu_positions: Option<(usize, Arc<PointCloud>, Arc<FramePositions>)>,
+    positions_key: Option<(u64, usize)>,
     notices: Vec<Notice>,
     persisted: Persisted,
     ephemeral: bool,
@@ -169,6 +186,13 @@ impl EditorApp {
                 format!("{} ({:?})", info.name, info.backend)
             }
             None => "no GPU adapter".to_string(),
+        };
+        let (gpu, gpu_error) = match &cc.wgpu_render_state {
+            Some(rs) => match GpuPreview::new(rs) {
+                Ok(g) => (Some(g), None),
+                Err(e) => (None, Some(format!("the GPU splatter cannot run here: {e}"))),
+            },
+            None => (None, Some("eframe has no wgpu render state".to_string())),
         };
         let mut notices = Vec::new();
         let scene_worker = match SceneWorker::start(ctx.clone()) {
@@ -215,6 +239,7 @@ impl EditorApp {
             || "no preview".to_string(),
             |p| p.renderer_name().to_string(),
         );
+        let cpu_renderer = renderer_name.clone();
         Self {
             doc: None,
             history: History::default(),
@@ -241,9 +266,17 @@ impl EditorApp {
                 fly: FlyCamera::default(),
                 max_side: persisted.preview_side,
                 renderer: renderer_name,
+                cpu_renderer,
+                gpu: None,
+                choice: options.preview_renderer,
             },
             preview_id: 0,
             preview_key: None,
+            gpu,
+            gpu_error,
+            preview_choice: options.preview_renderer,
+            gpu_positions: None,
+            positions_key: None,
             notices,
             ephemeral: options.ephemeral,
             persisted,
@@ -295,6 +328,54 @@ impl EditorApp {
                 .scene_worker
                 .as_ref()
                 .is_some_and(|w| w.has_pending_build())
+    }
+
+    /// True when the preview is drawn by the GPU splatter in the window (see
+    /// [`EditorOptions::preview_renderer`]).
+    pub fn preview_uses_gpu(&self) -> bool {
+        self.gpu
+            .as_ref()
+            .is_some_and(|g| self.gpu_error.is_none() && self.preview_choice.uses_gpu(g.context()))
+    }
+
+    /// GPU preview renders so far and the pixel size of the last one (zeros without one).
+    pub fn gpu_preview_renders(&self) -> (u64, [u32; 2]) {
+        self.gpu.as_ref().map_or((0, [0, 0]), GpuPreview::rendered)
+    }
+
+    /// Which renderer draws the preview and why, one line (the status bar shows it).
+    pub fn preview_renderer(&self) -> String {
+        let cpu = self.preview.cpu_renderer.as_str();
+        if self.preview_uses_gpu() {
+            return match &self.gpu {
+                Some(g) => format!("GPU preview on {}", g.context().adapter_info().name),
+                None => cpu.to_string(),
+            };
+        }
+        match (&self.gpu, &self.gpu_error, self.preview_choice) {
+            (_, _, RendererChoice::Cpu) => format!("{cpu} (chosen)"),
+            (_, Some(e), _) => format!("{cpu}: {e}"),
+            (Some(g), None, _) => format!(
+                "{cpu}: {} is a software rasteriser, the CPU splatter is faster (choose GPU to force it)",
+                g.context().adapter_info().name
+            ),
+            (None, None, _) => cpu.to_string(),
+        }
+    }
+
+    /// Chooses the preview renderer (a GPU error is forgotten, so GPU is tried again).
+    pub fn set_preview_renderer(&mut self, choice: RendererChoice) {
+        if choice != self.preview_choice {
+            self.preview_choice = choice;
+            if self.gpu.is_some() {
+                self.gpu_error = None;
+                if let Some(g) = &self.gpu {
+                    g.reset();
+                }
+            }
+            self.preview_key = None;
+            self.positions_key = None;
+        }
     }
 
     /// The running job, if any.
@@ -426,6 +507,8 @@ impl EditorApp {
         self.preview.texture = None;
         self.preview.fly = FlyCamera::default();
         self.preview_key = None;
+        self.positions_key = None;
+        self.gpu_positions = None;
         self.camera_key = None;
         self.camera = CameraInfo::default();
         if let Some(w) = &mut self.scene_worker {
@@ -761,53 +844,72 @@ impl EditorApp {
             return;
         }
         self.camera_key = Some(key);
-        let (ow, oh) = match (p.output.width, p.output.height) {
-            (Some(w), Some(h)) => (w, h),
-            _ => (iw, ih),
-        };
-        let k = Intrinsics::from_hfov(iw, ih, p.camera.hfov_deg)
-            .scaled(ow as f32 / iw as f32, oh as f32 / ih as f32);
-        self.camera = match p.camera.path.views(&k, ow, &scale, p.output.frames) {
+        let (views, output_size) = super::panels::camera::path_views(p, &snapshot.scene);
+        self.camera = match views {
             Ok(views) => CameraInfo {
                 views,
-                output_size: (ow, oh),
+                output_size,
                 error: None,
             },
             Err(e) => CameraInfo {
                 views: Vec::new(),
-                output_size: (ow, oh),
+                output_size,
                 error: Some(format!("{e:#}")),
             },
         };
         self.timeline.frame = self.timeline.frame.min(p.output.frames.saturating_sub(1));
     }
 
-    /// Sends a preview request when the frame, the view or the scene changed.
+    /// Sends a preview request when the frame, the view or the scene changed; for the GPU
+    /// preview, hands the panel what its paint callback draws.
     fn update_preview(&mut self, ctx: &egui::Context) {
+        if let Some(e) = self.gpu.as_ref().and_then(GpuPreview::take_error) {
+            self.error(format!(
+                "the GPU preview failed, using the CPU preview: {e}"
+            ));
+            self.gpu_error = Some(format!("the GPU preview failed: {e}"));
+            self.preview_key = None;
+        }
+        let on_gpu = self.preview_uses_gpu();
+        self.preview.renderer = self.preview_renderer();
+        self.preview.choice = self.preview_choice;
+        self.preview.gpu = None;
         let (Some(worker), Some(snapshot)) = (&self.preview_worker, &self.snapshot) else {
             return;
         };
         if let Some(frame) = worker.take_frame() {
-            if let Some(e) = &frame.error {
-                self.notices.push(Notice {
+            match (&frame.error, frame.output) {
+                (Some(e), _) => self.notices.push(Notice {
                     text: format!("preview failed: {e}"),
                     level: Level::Error,
                     at: Instant::now(),
-                });
-            } else {
-                let texture = self
-                    .textures
-                    .get(ctx, "preview", frame.id, || frame.image.clone());
-                self.preview.texture = Some(texture.id());
-                self.preview.size = frame.image.size;
-                self.preview.frame_index = frame.frame_index;
-                self.preview.hole_fraction = frame.hole_fraction;
-                self.preview.seconds = frame.seconds;
-                if frame.generation == snapshot.generation {
-                    self.timeline
-                        .hole_fractions
-                        .insert(frame.frame_index, frame.hole_fraction);
+                }),
+                (
+                    None,
+                    Some(PreviewOutput::Image {
+                        image,
+                        hole_fraction,
+                    }),
+                ) => {
+                    let texture = self
+                        .textures
+                        .get(ctx, "preview", frame.id, || image.clone());
+                    self.preview.texture = Some(texture.id());
+                    self.preview.size = image.size;
+                    self.preview.frame_index = frame.frame_index;
+                    self.preview.hole_fraction = hole_fraction;
+                    self.preview.seconds = frame.seconds;
+                    if frame.generation == snapshot.generation {
+                        self.timeline
+                            .hole_fractions
+                            .insert(frame.frame_index, hole_fraction);
+                    }
                 }
+                (None, Some(PreviewOutput::Positions { cloud, positions })) => {
+                    self.preview.seconds = frame.seconds;
+                    self.gpu_positions = Some((frame.frame_index, cloud, positions));
+                }
+                (None, None) => {}
             }
         }
         let frame = self.timeline.frame;
@@ -817,6 +919,41 @@ impl EditorApp {
         let view = self.preview.fly.apply(path_view);
         self.preview.view = Some(view);
         let wanted = matches!(self.tab, Tab::Preview | Tab::Camera) || self.timeline.playing;
+        if on_gpu && let Some(gpu) = &self.gpu {
+            // The GPU splats every frame itself; the worker only displaces the cloud for a
+            // moving scene (newest frame wins; the last positions are drawn meanwhile).
+            let scene = &snapshot.scene;
+            let moving = scene
+                .motion
+                .as_ref()
+                .is_some_and(|m| !m.motion_loop.is_still());
+            let positions = self
+                .gpu_positions
+                .as_ref()
+                .filter(|(_, cloud, _)| moving && Arc::ptr_eq(cloud, &scene.cloud));
+            self.preview.frame_index = positions.map_or(frame, |p| p.0);
+            self.preview.gpu = Some(super::panels::GpuDraw {
+                preview: gpu.clone(),
+                cloud: scene.cloud.clone(),
+                positions: positions.map(|p| p.2.clone()),
+                settings: snapshot.project.render,
+            });
+            let key = (snapshot.generation, frame);
+            if moving && wanted && self.positions_key != Some(key) {
+                self.positions_key = Some(key);
+                self.preview_id += 1;
+                worker.request(PreviewRequest {
+                    id: self.preview_id,
+                    snapshot: snapshot.clone(),
+                    view,
+                    frame_index: frame,
+                    width: 0,
+                    height: 0,
+                    work: PreviewWork::Positions,
+                });
+            }
+            return;
+        }
         if !wanted {
             return;
         }
@@ -844,6 +981,7 @@ impl EditorApp {
             frame_index: frame,
             width: pw,
             height: ph,
+            work: PreviewWork::Render,
         });
     }
 
@@ -1097,8 +1235,16 @@ impl EditorApp {
                 ui.separator();
                 ui.label(&self.ort);
                 ui.separator();
-                ui.label(format!("{} · {}", self.adapter, self.preview.renderer))
-                    .on_hover_text("The window's GPU adapter; the preview renderer");
+                let short = if self.preview_uses_gpu() {
+                    "GPU preview"
+                } else {
+                    "CPU preview"
+                };
+                ui.label(format!("{} · {short}", self.adapter))
+                    .on_hover_text(format!(
+                        "The window's GPU adapter; the preview renderer: {}",
+                        self.preview.renderer
+                    ));
             });
         });
     }
@@ -1272,6 +1418,9 @@ impl eframe::App for EditorApp {
         }
         if let Some((label, project)) = pending_edit {
             self.apply_edit(&label, project);
+        }
+        if self.preview.choice != self.preview_choice {
+            self.set_preview_renderer(self.preview.choice);
         }
         for r in requests {
             self.handle_request(r);

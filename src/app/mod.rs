@@ -7,15 +7,18 @@
 //! - Work never runs on the UI thread (worker.rs): a named scene thread owns the one
 //!   [`crate::scene::SceneBuilder`] (so editing a threshold re-runs layers onward only) and runs
 //!   exports; a named preview thread renders the newest preview request with the last good
-//!   scene. The UI sends commands over a bounded channel and reads results from latest-value
+//!   scene (or, for the GPU preview, only displaces the cloud for the frame's motion). The UI sends commands over a bounded channel and reads results from latest-value
 //!   slots.
-//! - viewport.rs holds the seam for the renderer behind the preview ([`viewport::PreviewRenderer`];
-//!   the CPU splatter now, the GPU splatter drawn through an `egui_wgpu` paint callback later)
-//!   and the zoomable image view the stage panels draw on.
+//! - The preview is drawn by the GPU splatter straight into the window through an `egui_wgpu`
+//!   paint callback (gpu_preview.rs) when eframe runs on a hardware adapter (the command
+//!   line's `--renderer auto` rule), and otherwise by the CPU splatter on the preview thread
+//!   as an image ([`viewport::PreviewRenderer`]); a GPU error falls back to the CPU preview.
+//!   viewport.rs also holds the zoomable image view the stage panels draw on.
 
 // The brief's file layout: app/app.rs holds the application itself.
 #[allow(clippy::module_inception)]
 mod app;
+pub mod gpu_preview;
 pub mod history;
 pub mod images;
 pub mod panels;

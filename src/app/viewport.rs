@@ -1,18 +1,10 @@
-//! The preview renderer seam and the zoomable image view the stage panels draw on.
+//! The CPU preview renderer and the zoomable image view the stage panels draw on.
 //!
-//! # Renderer seam
-//!
-//! [`PreviewRenderer`] is what the preview thread calls. Today it is [`CpuPreview`] (the
-//! reference splatter at a reduced size; the frame comes back as a texture). The GPU splatter
-//! (render/gpu.rs, wgpu 30, the version egui-wgpu 0.37 uses) plugs in at one of two depths:
-//!
-//! 1. as another `PreviewRenderer` that renders offscreen and reads back (no UI change); or
-//! 2. drawn straight into the window: create its pipelines once from
-//!    `CreationContext::wgpu_render_state` into `callback_resources`, and in
-//!    [`crate::app::panels`]' preview view replace the texture with
-//!    `egui_wgpu::Callback::new_paint_callback(rect, SplatCallback { view, frame_index })`,
-//!    whose `prepare` renders into its own colour + depth targets and whose `paint` only
-//!    composites (egui has no depth buffer). [`ImageView`] already gives the screen rect.
+//! [`PreviewRenderer`] is what the preview thread calls when the preview is drawn on the CPU
+//! ([`CpuPreview`]: the reference splatter at a reduced size; the frame comes back as a
+//! texture). When eframe runs on a hardware adapter the preview is drawn by the GPU splatter
+//! straight into the window instead ([`crate::app::gpu_preview`]); [`image_layout_ui`] gives
+//! its paint callback the screen rect.
 
 use crate::geometry::View;
 use crate::render::cpu::CpuRenderer;
@@ -133,6 +125,25 @@ pub fn image_view_ui(
     transform: &mut ViewTransform,
     sense: Sense,
 ) -> (Response, ImageView) {
+    let (response, view, area) = image_layout_ui(ui, size, transform, sense);
+    ui.painter_at(area).image(
+        texture,
+        view.rect,
+        Rect::from_min_max(pos2(0.0, 0.0), pos2(1.0, 1.0)),
+        egui::Color32::WHITE,
+    );
+    (response, view)
+}
+
+/// [`image_view_ui`] without the drawing: allocates the area, applies the zoom and pan, and
+/// returns the response, where an image of `size` pixels goes, and the allocated area (clip
+/// what is drawn to it).
+pub fn image_layout_ui(
+    ui: &mut Ui,
+    size: [usize; 2],
+    transform: &mut ViewTransform,
+    sense: Sense,
+) -> (Response, ImageView, Rect) {
     let (area, response) = ui.allocate_exact_size(ui.available_size(), sense | Sense::hover());
     let size_f = [size[0].max(1) as f32, size[1].max(1) as f32];
     let fit = (area.width() / size_f[0]).min(area.height() / size_f[1]);
@@ -163,14 +174,7 @@ pub fn image_view_ui(
         area.center() + transform.pan,
         vec2(size_f[0] * scale, size_f[1] * scale),
     );
-    let painter = ui.painter_at(area);
-    painter.image(
-        texture,
-        rect,
-        Rect::from_min_max(pos2(0.0, 0.0), pos2(1.0, 1.0)),
-        egui::Color32::WHITE,
-    );
-    (response, ImageView { rect, size: size_f })
+    (response, ImageView { rect, size: size_f }, area)
 }
 
 #[cfg(test)]

@@ -647,6 +647,33 @@ fn flow_arrows(flow: &crate::raster::Raster<[f32; 2]>) -> (Vec<FlowArrow>, f32) 
     (out, max_speed)
 }
 
+/// What the preview thread does for a request.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PreviewWork {
+    /// Render the frame with the thread's renderer (the CPU preview).
+    Render,
+    /// Only compute the frame's displaced cloud positions, for the GPU preview to splat.
+    Positions,
+}
+
+/// What the preview thread made.
+pub enum PreviewOutput {
+    /// A rendered picture.
+    Image {
+        /// The picture.
+        image: ColorImage,
+        /// Fraction of hole pixels (coverage < 0.5).
+        hole_fraction: f32,
+    },
+    /// The frame's positions for the cloud they were computed for.
+    Positions {
+        /// The cloud.
+        cloud: Arc<crate::stages::points::PointCloud>,
+        /// Its positions in this frame.
+        positions: Arc<crate::scene::FramePositions>,
+    },
+}
+
 /// A preview to render: the scene, the view and the size.
 pub struct PreviewRequest {
     /// Identifies the request.
@@ -661,6 +688,8 @@ pub struct PreviewRequest {
     pub width: usize,
     /// Size in pixels.
     pub height: usize,
+    /// Render, or only compute positions.
+    pub work: PreviewWork,
 }
 
 /// A rendered preview.
@@ -671,10 +700,8 @@ pub struct PreviewFrame {
     pub generation: u64,
     /// Output frame index.
     pub frame_index: usize,
-    /// The picture.
-    pub image: ColorImage,
-    /// Fraction of hole pixels (coverage < 0.5).
-    pub hole_fraction: f32,
+    /// The picture or the positions (`None` when the work failed).
+    pub output: Option<PreviewOutput>,
     /// Render time.
     pub seconds: f64,
     /// Set when the render failed.
@@ -773,34 +800,40 @@ fn preview_thread(
         };
         shared.busy.store(true, Ordering::Relaxed);
         let start = Instant::now();
-        let result = on_pool(pool.as_ref(), || {
-            renderer.render(
-                &request.snapshot.scene,
-                &request.snapshot.project.render,
-                &request.view,
-                request.frame_index,
-                request.width,
-                request.height,
-            )
+        let snapshot = &request.snapshot;
+        let result = on_pool(pool.as_ref(), || match request.work {
+            PreviewWork::Render => renderer
+                .render(
+                    &snapshot.scene,
+                    &snapshot.project.render,
+                    &request.view,
+                    request.frame_index,
+                    request.width,
+                    request.height,
+                )
+                .map(|frame| PreviewOutput::Image {
+                    image: rgb_image(&frame.colour, usize::MAX),
+                    hole_fraction: frame.hole_fraction(),
+                }),
+            PreviewWork::Positions => {
+                snapshot
+                    .scene
+                    .frame_positions(request.frame_index)
+                    .map(|p| PreviewOutput::Positions {
+                        cloud: snapshot.scene.cloud.clone(),
+                        positions: Arc::new(p),
+                    })
+            }
         });
-        let (image, hole_fraction, error) = match result {
-            Ok(frame) => (
-                rgb_image(&frame.colour, usize::MAX),
-                frame.hole_fraction(),
-                None,
-            ),
-            Err(e) => (
-                ColorImage::filled([1, 1], Color32::BLACK),
-                0.0,
-                Some(one_line(&e)),
-            ),
+        let (output, error) = match result {
+            Ok(output) => (Some(output), None),
+            Err(e) => (None, Some(one_line(&e))),
         };
         *lock(&shared.frame) = Some(PreviewFrame {
             id: request.id,
             generation: request.snapshot.generation,
             frame_index: request.frame_index,
-            image,
-            hole_fraction,
+            output,
             seconds: start.elapsed().as_secs_f64(),
             error,
         });

@@ -81,12 +81,15 @@ const _: () = assert!(crate::render::cpu::MAX_K == 16);
 const SPLAT_WGSL: &str = include_str!("../../shaders/splat.wgsl");
 const BLEND_WGSL: &str = include_str!("../../shaders/blend.wgsl");
 const PRESENT_WGSL: &str = include_str!("../../shaders/present.wgsl");
+/// The editor's blit of a presented frame into its viewport (used by `app::gpu_preview`).
+pub const VIEWPORT_WGSL: &str = include_str!("../../shaders/viewport.wgsl");
 
 /// Every WGSL file of the crate with its name (for validation tests).
-pub const SHADERS: [(&str, &str); 3] = [
+pub const SHADERS: [(&str, &str); 4] = [
     ("splat.wgsl", SPLAT_WGSL),
     ("blend.wgsl", BLEND_WGSL),
     ("present.wgsl", PRESENT_WGSL),
+    ("viewport.wgsl", VIEWPORT_WGSL),
 ];
 
 /// A wgpu device and queue plus what the adapter said about itself.
@@ -1002,6 +1005,21 @@ impl GpuSplatter {
         Ok(self.read_frame(encoder, FrameSlot::Blended)?.0)
     }
 
+    /// Makes room for `needed` tile-list entries (what a render's stats said it needed);
+    /// returns true when there already was room, false when the lists grew (the render that
+    /// reported `needed` lost entries and should be redone).
+    pub fn reserve_entries(&mut self, needed: usize) -> Result<bool> {
+        self.ensure_entries(needed)
+    }
+
+    /// Records a copy of the tile-list entries the renders of this submission needed
+    /// (`[forward, backward]`, two `u32`) into the first 8 bytes of `target`, which needs
+    /// `COPY_DST` usage. A caller that does not read frames back (an editor viewport) maps
+    /// `target` later and passes the larger value to [`Self::reserve_entries`].
+    pub fn encode_copy_stats(&self, encoder: &mut wgpu::CommandEncoder, target: &wgpu::Buffer) {
+        encoder.copy_buffer_to_buffer(&self.stats, 0, target, 0, 8);
+    }
+
     /// `(groups_x, groups_y, threads_per_row)` for one invocation per item.
     fn point_dispatch(&self, items: usize) -> (u32, u32, u32) {
         let max = self
@@ -1065,7 +1083,11 @@ impl GpuSplatter {
 
 /// Runs `f` inside validation and out-of-memory error scopes and turns a captured wgpu error
 /// into [`Error::Gpu`].
-fn scoped<T>(device: &wgpu::Device, what: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
+pub(crate) fn scoped<T>(
+    device: &wgpu::Device,
+    what: &str,
+    f: impl FnOnce() -> Result<T>,
+) -> Result<T> {
     let memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
     let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
     let out = f();
@@ -1227,6 +1249,29 @@ impl std::str::FromStr for RendererChoice {
     }
 }
 
+impl RendererChoice {
+    /// Whether this choice renders on `context`'s adapter: `Gpu` always, `Cpu` never, `Auto`
+    /// only on a hardware adapter (on a software rasteriser such as lavapipe the CPU renderer
+    /// is 2.5–8× faster, see `render::bench`). The command line's `--renderer` and the
+    /// editor's preview both decide with this.
+    pub fn uses_gpu(self, context: &GpuContext) -> bool {
+        match self {
+            Self::Cpu => false,
+            Self::Gpu => true,
+            Self::Auto => !context.is_software(),
+        }
+    }
+
+    /// The name `--renderer` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Cpu => "cpu",
+            Self::Gpu => "gpu",
+            Self::Auto => "auto",
+        }
+    }
+}
+
 /// Builds the renderer `choice` asks for and says which one and why (one line for the user).
 ///
 /// `Auto` takes the GPU renderer on a hardware adapter. On a software adapter (lavapipe,
@@ -1250,7 +1295,7 @@ pub fn select_renderer(
             Ok((Box::new(renderer), why))
         }
         RendererChoice::Auto => match GpuContext::new() {
-            Ok(context) if !context.is_software() => {
+            Ok(context) if choice.uses_gpu(&context) => {
                 let why = format!("gpu renderer on {}", context.describe());
                 Ok((Box::new(GpuRenderer::with_context(context, settings)?), why))
             }

@@ -1,10 +1,35 @@
 //! The camera path: top view (x–z) and side view (z–y) plots of every frame's camera, the
-//! keyframes, the current frame; preset or keyframes in the inspector.
+//! keyframes (drag one to move it in the plot's two axes), the current frame; preset or
+//! keyframes in the inspector.
 
 use super::{PanelContext, Request, StagePanel, Tab, committed, placeholder_ui};
+use crate::geometry::{Intrinsics, View};
 use crate::path::{CameraPath, Ease, Interpolation, Preset, PresetKind};
+use crate::project::Project;
+use crate::scene::Scene;
 use eframe::egui::{self, Color32, Ui};
-use egui_plot::{Arrows, Legend, Line, MarkerShape, Plot, PlotPoints, Points};
+use egui_plot::{Arrows, Legend, Line, MarkerShape, Plot, PlotPoint, PlotPoints, Points};
+use glam::DVec3;
+
+/// A keyframe marker is grabbed within this many points of the pointer.
+const GRAB_RADIUS: f32 = 10.0;
+
+/// The camera path's view of every output frame of `project` over `scene` (at the output
+/// size), and the output size.
+pub fn path_views(project: &Project, scene: &Scene) -> (crate::Result<Vec<View>>, (usize, usize)) {
+    let (iw, ih) = scene.input.rgb.size();
+    let (ow, oh) = match (project.output.width, project.output.height) {
+        (Some(w), Some(h)) => (w, h),
+        _ => (iw, ih),
+    };
+    let k = Intrinsics::from_hfov(iw, ih, project.camera.hfov_deg)
+        .scaled(ow as f32 / iw as f32, oh as f32 / ih as f32);
+    let views = project
+        .camera
+        .path
+        .views(&k, ow, &scene.scale, project.output.frames);
+    (views, (ow, oh))
+}
 
 /// The Camera tab.
 #[derive(Default)]
@@ -16,6 +41,8 @@ struct Projection {
     x_label: &'static str,
     y_label: &'static str,
     pick: fn(glam::Vec3) -> [f64; 2],
+    /// `position` with the plot's two axes set to `plot` (the inverse of `pick`).
+    place: fn(DVec3, [f64; 2]) -> DVec3,
 }
 
 const TOP: Projection = Projection {
@@ -23,6 +50,7 @@ const TOP: Projection = Projection {
     x_label: "x (right)",
     y_label: "z (forward)",
     pick: |p| [p.x as f64, p.z as f64],
+    place: |p, q| DVec3::new(q[0], p.y, q[1]),
 };
 
 // OpenCV y points down: plot −y so up is up.
@@ -31,21 +59,59 @@ const SIDE: Projection = Projection {
     x_label: "z (forward)",
     y_label: "−y (up)",
     pick: |p| [p.z as f64, -p.y as f64],
+    place: |p, q| DVec3::new(p.x, -q[1], q[0]),
 };
 
-fn path_plot_ui(ui: &mut Ui, cx: &PanelContext<'_>, proj: &Projection, width: f32) {
-    let views = &cx.camera.views;
+/// A keyframe being dragged in a plot: its index and where it is now (plot coordinates).
+#[derive(Clone, Copy, Debug)]
+struct KeyDrag {
+    index: usize,
+    at: [f64; 2],
+}
+
+fn path_plot_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, proj: &Projection, width: f32) {
+    let drag_id = egui::Id::unique(("camera key drag", proj.name));
+    let near_id = egui::Id::unique(("camera near key", proj.name));
+    let drag: Option<KeyDrag> = ui.data(|d| d.get_temp(drag_id));
+    // Set in the last frame: the pointer is over a key, so a press grabs it instead of
+    // panning the plot.
+    let near_key: bool = ui.data(|d| d.get_temp(near_id)).unwrap_or(false);
+    let (project, camera, snapshot) = (cx.project, cx.camera, cx.snapshot);
+    let key_path = match &project.camera.path {
+        CameraPath::Keyframes(k) => Some(k),
+        CameraPath::Preset(_) => None,
+    };
+    // While a key is dragged, the path follows it.
+    let dragged_path = drag.zip(key_path).and_then(|(d, k)| {
+        let mut k = k.clone();
+        let key = k.keys.get_mut(d.index)?;
+        key.position = (proj.place)(key.position, d.at);
+        Some(CameraPath::Keyframes(k))
+    });
+    let live_views = match (&dragged_path, snapshot) {
+        (Some(path), Some(s)) => {
+            let mut project = project.clone();
+            project.camera.path = path.clone();
+            path_views(&project, &s.scene).0.ok()
+        }
+        _ => None,
+    };
+    let views = live_views.as_ref().unwrap_or(&camera.views);
     let pts: Vec<[f64; 2]> = views
         .iter()
         .map(|v| (proj.pick)(v.world_from_camera.translation))
         .collect();
-    let keys: Vec<[f64; 2]> = match &cx.project.camera.path {
-        CameraPath::Keyframes(k) => k
+    let keys: Vec<[f64; 2]> = match key_path {
+        Some(k) => k
             .keys
             .iter()
-            .map(|k| (proj.pick)(k.position.as_vec3()))
+            .enumerate()
+            .map(|(i, k)| match drag {
+                Some(d) if d.index == i => d.at,
+                _ => (proj.pick)(k.position.as_vec3()),
+            })
             .collect(),
-        CameraPath::Preset(_) => Vec::new(),
+        None => Vec::new(),
     };
     let frame = cx.timeline.frame.min(views.len().saturating_sub(1));
     let current = views.get(frame).copied();
@@ -55,16 +121,23 @@ fn path_plot_ui(ui: &mut Ui, cx: &PanelContext<'_>, proj: &Projection, width: f3
         .map_or(1.0, |s| f64::from(s.scene.scale.near_depth) * 0.25);
     ui.vertical(|ui| {
         ui.label(egui::RichText::new(proj.name).strong());
-        Plot::new(proj.name)
+        let plot = Plot::new(proj.name)
             .width(width)
-            .height(width.min(ui.available_height() - 24.0).max(120.0))
+            .height((ui.available_height() - 24.0).max(120.0))
             .data_aspect(1.0)
             .x_axis_label(proj.x_label)
             .y_axis_label(proj.y_label)
             .legend(Legend::default())
             .include_x(0.0)
             .include_y(0.0)
+            .allow_drag(!(near_key || drag.is_some()))
             .show(ui, |pui| {
+                // Hold the axes still while a key is dragged (the path changes under the
+                // pointer), and fit them again when it is dropped.
+                if drag.is_some() {
+                    let held = pui.response().dragged();
+                    pui.set_auto_bounds(!held);
+                }
                 pui.line(
                     Line::new("path", PlotPoints::from(pts.clone()))
                         .color(Color32::from_rgb(110, 170, 255))
@@ -112,7 +185,63 @@ fn path_plot_ui(ui: &mut Ui, cx: &PanelContext<'_>, proj: &Projection, width: f3
                             .color(Color32::from_rgb(80, 230, 120)),
                     );
                 }
+                let handles: Vec<egui::Pos2> = keys
+                    .iter()
+                    .map(|k| pui.screen_from_plot(PlotPoint::new(k[0], k[1])))
+                    .collect();
+                (pui.response().clone(), pui.pointer_coordinate(), handles)
             });
+        let (response, pointer, handles) = plot.inner;
+        // The key nearest to `p` within the grab radius.
+        let key_at = |p: egui::Pos2| {
+            handles
+                .iter()
+                .enumerate()
+                .map(|(i, h)| (i, h.distance(p)))
+                .filter(|&(_, d)| d <= GRAB_RADIUS)
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|(i, _)| i)
+        };
+        // A drag starts only after the pointer moved a few points, so grab the key under the
+        // press, not under the pointer now.
+        let (primary_down, press_origin) =
+            ui.input(|i| (i.pointer.primary_down(), i.pointer.press_origin()));
+        let pressed_key = press_origin.filter(|_| primary_down).and_then(key_at);
+        let hovered_key = response.hover_pos().and_then(key_at);
+        if proj.name == TOP.name {
+            cx.probe.key_handles = handles.clone();
+        }
+        ui.data_mut(|d| d.insert_temp(near_id, hovered_key.is_some() || pressed_key.is_some()));
+        if hovered_key.is_some() || drag.is_some() {
+            ui.ctx().set_cursor_icon(if drag.is_some() {
+                egui::CursorIcon::Grabbing
+            } else {
+                egui::CursorIcon::Grab
+            });
+        }
+        let pointer = pointer.map(|p| [p.x, p.y]);
+        if response.drag_started_by(egui::PointerButton::Primary)
+            && let (Some(index), Some(at)) = (pressed_key, pointer)
+        {
+            ui.data_mut(|d| d.insert_temp(drag_id, KeyDrag { index, at }));
+            cx.timeline.selected_key = Some(index);
+        } else if let Some(d) = drag {
+            if response.dragged()
+                && let Some(at) = pointer
+            {
+                ui.data_mut(|m| m.insert_temp(drag_id, KeyDrag { at, ..d }));
+            } else if !response.dragged() {
+                // Released (or lost): commit the move as one edit.
+                ui.data_mut(|m| m.remove::<KeyDrag>(drag_id));
+                cx.edit("Move keyframe", |p| {
+                    if let CameraPath::Keyframes(k) = &mut p.camera.path
+                        && let Some(key) = k.keys.get_mut(d.index)
+                    {
+                        key.position = (proj.place)(key.position, d.at);
+                    }
+                });
+            }
+        }
     });
 }
 

@@ -154,8 +154,26 @@ pub struct PreviewInfo {
     pub fly: FlyCamera,
     /// Longest side of preview renders, pixels.
     pub max_side: usize,
-    /// Renderer name.
+    /// Which renderer draws the preview and why, one line.
     pub renderer: String,
+    /// The CPU preview renderer's name.
+    pub cpu_renderer: String,
+    /// Set when the GPU draws the preview this frame: what its paint callback needs.
+    pub gpu: Option<GpuDraw>,
+    /// The preview renderer the user chose (the panel may change it).
+    pub choice: crate::render::gpu::RendererChoice,
+}
+
+/// What the preview panel hands the GPU preview's paint callback (besides the view and size).
+pub struct GpuDraw {
+    /// The GPU preview.
+    pub preview: super::gpu_preview::GpuPreview,
+    /// The scene's cloud.
+    pub cloud: Arc<crate::stages::points::PointCloud>,
+    /// The newest motion frame's positions for this cloud (`None`: still, or not computed yet).
+    pub positions: Option<Arc<crate::scene::FramePositions>>,
+    /// Splat settings.
+    pub settings: crate::render::SplatSettings,
 }
 
 /// Where things were drawn in the last frame: lets tests (and tools) find widgets that have
@@ -166,6 +184,8 @@ pub struct Probe {
     pub view: Option<ImageView>,
     /// Screen positions of the draggable layer threshold lines (interior thresholds, in order).
     pub threshold_handles: Vec<egui::Pos2>,
+    /// Screen positions of the keyframe markers in the camera's top-view plot, by key index.
+    pub key_handles: Vec<egui::Pos2>,
 }
 
 /// Everything a panel may read, and where it puts its edits and requests.

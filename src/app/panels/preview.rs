@@ -2,7 +2,9 @@
 //! user's fly offset); drag to look around, right-drag / scroll / WASD-QE to move, I to key it.
 
 use super::{FlyCamera, PanelContext, StagePanel, Tab, committed, placeholder_ui};
-use crate::app::viewport::{ViewTransform, image_view_ui};
+use crate::app::gpu_preview::{GpuFrame, pixel_size};
+use crate::app::viewport::{ViewTransform, image_layout_ui};
+use crate::render::gpu::RendererChoice;
 use eframe::egui::{self, Key, Sense, Ui};
 
 /// The Preview tab.
@@ -21,11 +23,12 @@ impl StagePanel for PreviewPanel {
     }
 
     fn view_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>) {
-        let Some(texture) = cx.preview.texture else {
+        let (ow, oh) = cx.camera.output_size;
+        let on_gpu = cx.preview.gpu.is_some() && cx.preview.view.is_some();
+        if !on_gpu && cx.preview.texture.is_none() {
             placeholder_ui(ui, "rendering the preview…");
             return;
-        };
-        let (ow, oh) = cx.camera.output_size;
+        }
         let size = if ow > 0 && oh > 0 {
             [ow, oh]
         } else {
@@ -33,13 +36,42 @@ impl StagePanel for PreviewPanel {
         };
         // The fly camera takes the drags; the view itself does not zoom or pan here.
         self.transform = ViewTransform::default();
-        let (response, view) = image_view_ui(
-            ui,
-            texture,
-            size,
-            &mut self.transform,
-            Sense::click_and_drag(),
-        );
+        let (response, view, area) =
+            image_layout_ui(ui, size, &mut self.transform, Sense::click_and_drag());
+        let mut gpu_size = None;
+        match (&cx.preview.gpu, cx.preview.view, cx.preview.texture) {
+            (Some(draw), Some(preview_view), _) => {
+                // Render at the viewport's pixel size with the output camera scaled to it.
+                let px = pixel_size(view.rect, ui.ctx().pixels_per_point());
+                let intrinsics = preview_view.intrinsics.scaled(
+                    px[0] as f32 / size[0].max(1) as f32,
+                    px[1] as f32 / size[1].max(1) as f32,
+                );
+                let frame = GpuFrame {
+                    cloud: draw.cloud.clone(),
+                    positions: draw.positions.clone(),
+                    view: crate::geometry::View {
+                        intrinsics,
+                        world_from_camera: preview_view.world_from_camera,
+                    },
+                    size: px,
+                    settings: draw.settings,
+                    ctx: Some(ui.ctx().clone()),
+                };
+                ui.painter_at(area)
+                    .add(draw.preview.callback(view.rect, frame));
+                gpu_size = Some(px);
+            }
+            (_, _, Some(texture)) => {
+                ui.painter_at(area).image(
+                    texture,
+                    view.rect,
+                    egui::Rect::from_min_max(egui::pos2(0.0, 0.0), egui::pos2(1.0, 1.0)),
+                    egui::Color32::WHITE,
+                );
+            }
+            _ => {}
+        }
         cx.probe.view = Some(view);
         let step = cx
             .snapshot
@@ -75,36 +107,72 @@ impl StagePanel for PreviewPanel {
         if *fly != before {
             ui.ctx().request_repaint();
         }
-        let text = format!(
-            "frame {} · {:.1} % holes · {:.0} ms · {}{}",
-            cx.preview.frame_index,
-            100.0 * cx.preview.hole_fraction,
-            1000.0 * cx.preview.seconds,
-            cx.preview.renderer,
-            if cx.preview.fly.is_identity() {
-                ""
-            } else {
-                " · off the path (I keys this view)"
-            }
+        let off_path = if cx.preview.fly.is_identity() {
+            ""
+        } else {
+            " · off the path (I keys this view)"
+        };
+        let text = match gpu_size {
+            Some([w, h]) => format!(
+                "frame {} · GPU {w}×{h} px{off_path}",
+                cx.preview.frame_index
+            ),
+            None => format!(
+                "frame {} · {:.1} % holes · {:.0} ms · CPU{off_path}",
+                cx.preview.frame_index,
+                100.0 * cx.preview.hole_fraction,
+                1000.0 * cx.preview.seconds,
+            ),
+        };
+        // On a dark plate, so it stays readable over a bright sky.
+        let painter = ui.painter_at(area);
+        let galley =
+            painter.layout_no_wrap(text, egui::FontId::proportional(13.0), egui::Color32::WHITE);
+        let at = view.rect.left_top().max(area.left_top()) + egui::vec2(6.0, 6.0);
+        painter.rect_filled(
+            egui::Rect::from_min_size(at, galley.size()).expand(3.0),
+            3.0,
+            egui::Color32::from_black_alpha(150),
         );
-        ui.painter().text(
-            view.rect.left_top() + egui::vec2(6.0, 6.0),
-            egui::Align2::LEFT_TOP,
-            text,
-            egui::FontId::proportional(13.0),
-            egui::Color32::WHITE,
-        );
+        painter.galley(at, galley, egui::Color32::WHITE);
     }
 
     fn inspector_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>) {
         ui.heading("Preview");
         ui.horizontal(|ui| {
-            ui.label("size");
-            for side in [240, 360, 480, 720] {
-                ui.selectable_value(&mut cx.preview.max_side, side, format!("{side}"));
+            ui.label("renderer");
+            for (choice, text, hint) in [
+                (
+                    RendererChoice::Auto,
+                    "Auto",
+                    "The GPU on a hardware adapter, the CPU on a software one (as --renderer auto)",
+                ),
+                (
+                    RendererChoice::Gpu,
+                    "GPU",
+                    "The GPU splatter drawing into the window, on any adapter",
+                ),
+                (
+                    RendererChoice::Cpu,
+                    "CPU",
+                    "The CPU splatter on the preview thread",
+                ),
+            ] {
+                ui.selectable_value(&mut cx.preview.choice, choice, text)
+                    .on_hover_text(hint);
             }
         });
-        ui.label(format!("renderer: {}", cx.preview.renderer));
+        ui.label(egui::RichText::new(&cx.preview.renderer).weak());
+        if cx.preview.gpu.is_some() {
+            ui.label(egui::RichText::new("The GPU renders at the viewport's pixel size.").weak());
+        } else {
+            ui.horizontal(|ui| {
+                ui.label("size");
+                for side in [240, 360, 480, 720] {
+                    ui.selectable_value(&mut cx.preview.max_side, side, format!("{side}"));
+                }
+            });
+        }
         ui.separator();
         ui.heading("Fly camera");
         let f = cx.preview.fly;
