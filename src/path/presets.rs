@@ -423,15 +423,18 @@ mod tests {
     #[test]
     fn swing_stays_in_the_image_plane_on_a_circle() {
         let v = views(Preset::new(PresetKind::Swing), 41);
-        let centre = Vec3::new(0.0, -0.5, 0.0);
+        // r = 0.04 · near_depth (2 in this scene).
+        let r = (SWING_RADIUS_FRACTION_OF_NEAR * 2.0) as f32;
+        assert!((r - 0.08).abs() < 1e-7);
+        let centre = Vec3::new(0.0, -r, 0.0);
         for view in &v {
             let p = view.world_from_camera.translation;
             assert_eq!(p.z, 0.0);
-            assert!(((p - centre).length() - 0.5).abs() < 1e-6);
+            assert!(((p - centre).length() - r).abs() < 1e-6);
             assert_eq!(view.world_from_camera.rotation, glam::Quat::IDENTITY);
         }
         // Quarter turn: right by r, up by r.
-        assert!((v[10].world_from_camera.translation - Vec3::new(0.5, -0.5, 0.0)).length() < 1e-6);
+        assert!((v[10].world_from_camera.translation - Vec3::new(r, -r, 0.0)).length() < 1e-6);
     }
 
     #[test]
