@@ -17,6 +17,14 @@
 //! mean squared distance, `σ²` the 75th percentile of those, `depth` how far its centre lies
 //! inside the hole: Wexler's weights).
 //!
+//! k-NN voting (`vote_candidates` > 1, the `final` preset): at the end of every level and at
+//! full resolution, k-nearest-neighbour PatchMatch (Barnes et al. 2010) finds several good
+//! source patches per target, and every pixel becomes the weighted mean over all of them
+//! (same weights, `σ²` widened by [`KNN_SIGMA2_SCALE`]). Where the matches agree (an edge, a
+//! periodic texture) the fill stays sharp; where the known pixels do not decide the texture's
+//! phase the fill tends to the mean of the plausible answers, which is what minimises the
+//! squared error. Each level then hands this mean, not a single-match vote, to the finer one.
+//!
 //! Matching cost: squared differences over colour, guide and two texture features (mean luma
 //! gradients along x and y over a patch-sized window, computed at full resolution and
 //! synthesised with the colour; without them EM settles on a smooth fill in textured regions),
@@ -105,7 +113,8 @@ pub enum InpaintPreset {
     #[default]
     Preview,
     /// Best quality: 7×7 patches, three passes per EM step, twice the preview's EM iterations on
-    /// the coarse levels and three at full resolution.
+    /// the coarse levels and one at full resolution, the coarsest level started from the
+    /// membrane, and k-NN voting over 8 source patches per target.
     Final,
 }
 
@@ -1621,6 +1630,19 @@ mod tests {
             other_seed.image, one.image,
             "the seed should matter on noise"
         );
+        // The k-NN vote of `final` too.
+        let knn = PatchMatchInpainter::preset(InpaintPreset::Final);
+        let run = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| knn.inpaint(&req, &Progress::none()).unwrap())
+        };
+        let (one, three) = (run(1), run(3));
+        assert_eq!(one.image, three.image);
+        assert_eq!(one.guide, three.guide);
+        assert_outside_unchanged(&one.image, &input, &hole);
     }
 
     #[test]
