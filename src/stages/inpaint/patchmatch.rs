@@ -49,7 +49,8 @@
 //! order, so the result is the same whatever the number of threads.
 //!
 //! Memory: a few buffers of the image's size per level (working pixels of 6 floats, the NNF,
-//! distances, weights, masks); about 500 MB peak for a 2560×1600 image with a 60 % hole.
+//! distances, weights, masks); about 500 MB peak for a 2560×1600 image with a 60 % hole, 720 MB
+//! with the k-NN vote of `final` (k source indices, costs and weights per target centre).
 
 use super::common::{self, KeyedRng, Plan};
 use super::harmonic::membrane_fill;
