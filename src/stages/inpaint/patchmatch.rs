@@ -1254,9 +1254,9 @@ fn knn_candidates(
     let n = w * h;
     let mut slot = vec![NONE; n];
     let mut targets: Vec<u32> = Vec::new();
-    for i in 0..n {
+    for (i, slot) in slot.iter_mut().enumerate() {
         if problem.target[i] && field.nnf[i] != NONE {
-            slot[i] = targets.len() as u32;
+            *slot = targets.len() as u32;
             targets.push(i as u32);
         }
     }
