@@ -17,6 +17,14 @@
 //! mean squared distance, `σ²` the 75th percentile of those, `depth` how far its centre lies
 //! inside the hole: Wexler's weights).
 //!
+//! k-NN voting (`vote_candidates` > 1, the `final` preset): at the end of every level and at
+//! full resolution, k-nearest-neighbour PatchMatch (Barnes et al. 2010) finds several good
+//! source patches per target, and every pixel becomes the weighted mean over all of them
+//! (same weights, `σ²` widened by [`KNN_SIGMA2_SCALE`]). Where the matches agree (an edge, a
+//! periodic texture) the fill stays sharp; where the known pixels do not decide the texture's
+//! phase the fill tends to the mean of the plausible answers, which is what minimises the
+//! squared error. Each level then hands this mean, not a single-match vote, to the finer one.
+//!
 //! Matching cost: squared differences over colour, guide and two texture features (mean luma
 //! gradients along x and y over a patch-sized window, computed at full resolution and
 //! synthesised with the colour; without them EM settles on a smooth fill in textured regions),
@@ -41,7 +49,8 @@
 //! order, so the result is the same whatever the number of threads.
 //!
 //! Memory: a few buffers of the image's size per level (working pixels of 6 floats, the NNF,
-//! distances, weights, masks); about 500 MB peak for a 2560×1600 image with a 60 % hole.
+//! distances, weights, masks); about 500 MB peak for a 2560×1600 image with a 60 % hole, 720 MB
+//! with the k-NN vote of `final` (k source indices, costs and weights per target centre).
 
 use super::common::{self, KeyedRng, Plan};
 use super::harmonic::membrane_fill;
@@ -82,6 +91,14 @@ const FINE_SEARCH_DIVISOR: usize = 8;
 const LOCALITY: f32 = 0.05;
 /// Default weight of the texture features.
 const TEXTURE_WEIGHT: f32 = 3.0;
+/// Most candidates per target in the final k-NN vote.
+const MAX_VOTE_CANDIDATES: usize = 16;
+/// k-NN PatchMatch passes before a k-NN vote.
+const KNN_PASSES: usize = 2;
+/// The k-NN vote's `σ²` is this multiple of the 75th percentile of the best matches' mean
+/// squared distances: wider than the single-match vote's, so that the runner-up matches count
+/// (measured on the blob holes of the shared photos: 1 → −0.5 dB, 4 and 16 → best, 64 → −0.03).
+const KNN_SIGMA2_SCALE: f32 = 4.0;
 /// Wexler's spatial weight base γ: a patch one pixel deeper in the hole weighs 1/γ as much.
 const CONFIDENCE_DECAY: f32 = 1.3;
 
@@ -97,7 +114,8 @@ pub enum InpaintPreset {
     #[default]
     Preview,
     /// Best quality: 7×7 patches, three passes per EM step, twice the preview's EM iterations on
-    /// the coarse levels and three at full resolution.
+    /// the coarse levels and one at full resolution, the coarsest level started from the
+    /// membrane, and k-NN voting over 8 source patches per target.
     Final,
 }
 
@@ -132,6 +150,7 @@ impl InpaintPreset {
                 texture_weight: TEXTURE_WEIGHT,
                 onion_peel: true,
                 locality: LOCALITY,
+                vote_candidates: 1,
             },
             InpaintPreset::Preview => PatchMatchParams {
                 patch_size: 7,
@@ -144,18 +163,20 @@ impl InpaintPreset {
                 texture_weight: TEXTURE_WEIGHT,
                 onion_peel: true,
                 locality: LOCALITY,
+                vote_candidates: 1,
             },
             InpaintPreset::Final => PatchMatchParams {
                 patch_size: 7,
                 pm_iterations: 3,
                 em_iterations_coarse: 10,
-                em_iterations_fine: 3,
+                em_iterations_fine: 1,
                 max_levels: 10,
                 guide_weight: 1.0,
                 seamless: true,
                 texture_weight: TEXTURE_WEIGHT,
-                onion_peel: true,
+                onion_peel: false,
                 locality: LOCALITY,
+                vote_candidates: 8,
             },
         }
     }
@@ -215,6 +236,9 @@ pub struct PatchMatchParams {
     /// diagonal away (growing with the squared offset); prefers nearby texture among near-equal
     /// matches. 0 = none.
     pub locality: f32,
+    /// Source patches per target in the k-nearest-neighbour votes (at the end of every level
+    /// and at full resolution); 1 = vote with the nearest only.
+    pub vote_candidates: usize,
 }
 
 impl Default for PatchMatchParams {
@@ -706,7 +730,11 @@ fn complete(
                 drop(coarse);
                 let mut field = field;
                 refresh_distances(&problem, &level.pixels, &mut field);
-                vote(&problem, &mut level.pixels, &field);
+                // With k-NN voting the enlarged coarse pixels are already a vote over several
+                // matches; re-voting them with the single upsampled match would undo that.
+                if params.vote_candidates <= 1 {
+                    vote(&problem, &mut level.pixels, &field);
+                }
                 field
             }
         };
@@ -738,8 +766,41 @@ fn complete(
                 break;
             }
         }
-        if l == 0 && params.seamless {
-            poisson_correct(&problem, &mut level, &field, progress)?;
+        if l > 0 && params.vote_candidates > 1 {
+            // The level hands the finer one the k-NN vote (its mean of plausible fills), not
+            // the single-match vote: structure is decided here.
+            refresh_distances(&problem, &level.pixels, &mut field);
+            let candidates = knn_candidates(
+                &problem,
+                &level.pixels,
+                &field,
+                params.vote_candidates.clamp(1, MAX_VOTE_CANDIDATES),
+                seed,
+                l as u64,
+            );
+            vote_candidates(&problem, &mut level.pixels, &candidates);
+        }
+        if l == 0 {
+            let k = params.vote_candidates.clamp(1, MAX_VOTE_CANDIDATES);
+            if k > 1 {
+                // Final vote over the k best source patches of every target: where the matches
+                // disagree (texture whose phase the known pixels do not decide) the fill
+                // tends to their mean, where they agree it stays sharp.
+                refresh_distances(&problem, &level.pixels, &mut field);
+                let candidates = knn_candidates(&problem, &level.pixels, &field, k, seed, l as u64);
+                vote_candidates(&problem, &mut level.pixels, &candidates);
+                if params.seamless {
+                    let weights = candidate_weights(&problem, &candidates);
+                    let predict = |px: &[Px], i: usize| {
+                        voted_candidates_value(&problem, &candidates, &weights, px, i)
+                    };
+                    poisson_correct(&problem, &mut level, predict, progress)?;
+                }
+            } else if params.seamless {
+                let weights = vote_weights(&problem, &field);
+                let predict = |px: &[Px], i: usize| voted_value(&problem, &field, &weights, px, i);
+                poisson_correct(&problem, &mut level, predict, progress)?;
+            }
         }
         done += work[l];
         coarser = Some((level, field));
@@ -1147,6 +1208,217 @@ fn vote(problem: &Problem, pixels: &mut [Px], field: &Field) -> f32 {
     (change / (3 * problem.domain_list.len().max(1)) as f64) as f32
 }
 
+/// The `k` best source patches of every target centre (k-nearest-neighbour PatchMatch,
+/// Barnes et al. 2010), sorted by cost; unused entries are `NONE`.
+struct Candidates {
+    k: usize,
+    /// Per pixel: its row in `src`/`dist`, or `NONE` when it is not a target centre.
+    slot: Vec<u32>,
+    /// `k` source centres per target, best first.
+    src: Vec<u32>,
+    /// Their matching costs.
+    dist: Vec<f32>,
+}
+
+/// Inserts `(s, d)` into a sorted candidate list of fixed length when it is better than the
+/// worst entry and not already present.
+#[inline]
+fn insert_candidate(src: &mut [u32], dist: &mut [f32], s: u32, d: f32) {
+    let k = src.len();
+    if d >= dist[k - 1] || src.contains(&s) {
+        return;
+    }
+    let mut j = k - 1;
+    while j > 0 && dist[j - 1] > d {
+        src[j] = src[j - 1];
+        dist[j] = dist[j - 1];
+        j -= 1;
+    }
+    src[j] = s;
+    dist[j] = d;
+}
+
+/// Finds `k` good source patches per target: starts from the field's match, then runs
+/// [`KNN_PASSES`] passes of k-NN PatchMatch (each candidate of the four neighbours, shifted;
+/// random search around every candidate at halving radii). Each pass reads only the previous
+/// pass's lists, so the result does not depend on the thread count.
+fn knn_candidates(
+    problem: &Problem,
+    pixels: &[Px],
+    field: &Field,
+    k: usize,
+    seed: u64,
+    level_key: u64,
+) -> Candidates {
+    let (w, h, r) = (problem.w, problem.h, problem.r);
+    let n = w * h;
+    let mut slot = vec![NONE; n];
+    let mut targets: Vec<u32> = Vec::new();
+    for (i, slot) in slot.iter_mut().enumerate() {
+        if problem.target[i] && field.nnf[i] != NONE {
+            *slot = targets.len() as u32;
+            targets.push(i as u32);
+        }
+    }
+    let mut src = vec![NONE; targets.len() * k];
+    let mut dist = vec![f32::INFINITY; targets.len() * k];
+    for (t, &i) in targets.iter().enumerate() {
+        src[t * k] = field.nnf[i as usize];
+        dist[t * k] = field.dist[i as usize];
+    }
+    let max_radius = problem.search_radius;
+    for pass in 0..KNN_PASSES {
+        let prev_src = src.clone();
+        src.par_chunks_mut(k)
+            .zip(dist.par_chunks_mut(k))
+            .zip(targets.par_iter())
+            .with_min_len(256)
+            .for_each(|((src, dist), &i)| {
+                let i = i as usize;
+                let (x, y) = ((i % w) as isize, (i / w) as isize);
+                let consider = |cand: isize, src: &mut [u32], dist: &mut [f32]| {
+                    if cand < 0 || cand as usize >= n || !problem.valid[cand as usize] {
+                        return;
+                    }
+                    let cand = cand as usize;
+                    if src.contains(&(cand as u32)) {
+                        return;
+                    }
+                    let d = problem.cost(pixels, i, cand, dist[k - 1]);
+                    insert_candidate(src, dist, cand as u32, d);
+                };
+                for (dx, dy) in [(-1isize, 0isize), (1, 0), (0, -1), (0, 1)] {
+                    let (nx, ny) = (x + dx, y + dy);
+                    if nx < 0 || ny < 0 || nx >= w as isize || ny >= h as isize {
+                        continue;
+                    }
+                    let j = slot[ny as usize * w + nx as usize];
+                    if j == NONE {
+                        continue;
+                    }
+                    let offset = dy * w as isize + dx;
+                    for &s in &prev_src[j as usize * k..(j as usize + 1) * k] {
+                        if s != NONE {
+                            consider(s as isize - offset, src, dist);
+                        }
+                    }
+                }
+                let mut rng = KeyedRng::new(seed ^ 0x6e6e, level_key, pass as u64, i as u64);
+                for c in 0..k {
+                    let base = src[c];
+                    if base == NONE {
+                        continue;
+                    }
+                    let (sx, sy) = ((base as usize % w) as isize, (base as usize / w) as isize);
+                    let mut radius = max_radius;
+                    while radius >= 1 {
+                        let cx =
+                            (sx + rng.symmetric(radius)).clamp(r as isize, (w - 1 - r) as isize);
+                        let cy =
+                            (sy + rng.symmetric(radius)).clamp(r as isize, (h - 1 - r) as isize);
+                        consider(cy * w as isize + cx, src, dist);
+                        radius /= 2;
+                    }
+                }
+            });
+    }
+    Candidates { k, slot, src, dist }
+}
+
+/// Wexler's weights for every candidate (see [`vote_weights`]; `σ²` from the best candidates).
+fn candidate_weights(problem: &Problem, candidates: &Candidates) -> Vec<f32> {
+    let npix = problem.patch_pixels();
+    let k = candidates.k;
+    let best: Vec<f32> = candidates
+        .dist
+        .chunks(k)
+        .map(|d| d[0] / npix)
+        .filter(|d| d.is_finite())
+        .collect();
+    let sigma2 = KNN_SIGMA2_SCALE * quantile(&best, 0.75).unwrap_or(0.0).max(1e-6);
+    let mut weights = vec![0.0f32; candidates.src.len()];
+    for (i, &t) in candidates.slot.iter().enumerate() {
+        if t == NONE {
+            continue;
+        }
+        let t = t as usize;
+        for c in 0..k {
+            let d = candidates.dist[t * k + c];
+            if candidates.src[t * k + c] == NONE || !d.is_finite() {
+                continue;
+            }
+            weights[t * k + c] =
+                ((-(d / npix) / (2.0 * sigma2)).exp() * problem.confidence[i]).max(1e-30);
+        }
+    }
+    weights
+}
+
+/// The weighted mean of what every candidate of the target patches overlapping `q` copies
+/// onto it; `None` when no target patch covers it.
+#[inline]
+fn voted_candidates_value(
+    problem: &Problem,
+    candidates: &Candidates,
+    weights: &[f32],
+    pixels: &[Px],
+    q: usize,
+) -> Option<Px> {
+    let (w, h, r) = (problem.w, problem.h, problem.r as isize);
+    let k = candidates.k;
+    let (qx, qy) = ((q % w) as isize, (q / w) as isize);
+    let mut acc = [0.0f32; CH];
+    let mut wsum = 0.0f32;
+    for dy in -r..=r {
+        let py = qy - dy;
+        if py < 0 || py >= h as isize {
+            continue;
+        }
+        for dx in -r..=r {
+            let px = qx - dx;
+            if px < 0 || px >= w as isize {
+                continue;
+            }
+            let t = candidates.slot[py as usize * w + px as usize];
+            if t == NONE {
+                continue;
+            }
+            let t = t as usize;
+            for c in 0..k {
+                let s = candidates.src[t * k + c];
+                let wgt = weights[t * k + c];
+                if s == NONE || wgt == 0.0 {
+                    continue;
+                }
+                let v = pixels[(s as isize + dy * w as isize + dx) as usize];
+                for ch in 0..CH {
+                    acc[ch] += wgt * v[ch];
+                }
+                wsum += wgt;
+            }
+        }
+    }
+    (wsum > 0.0).then(|| acc.map(|a| a / wsum))
+}
+
+/// Re-synthesises the domain pixels by weighted voting over every candidate.
+fn vote_candidates(problem: &Problem, pixels: &mut [Px], candidates: &Candidates) {
+    let weights = candidate_weights(problem, candidates);
+    let old: &[Px] = pixels;
+    let new_values: Vec<Px> = problem
+        .domain_list
+        .par_iter()
+        .with_min_len(256)
+        .map(|&q| {
+            voted_candidates_value(problem, candidates, &weights, old, q as usize)
+                .unwrap_or(old[q as usize])
+        })
+        .collect();
+    for (&q, v) in problem.domain_list.iter().zip(new_values) {
+        pixels[q as usize] = v;
+    }
+}
+
 /// Seamless blending of the fill into its surroundings (Pérez et al. 2003): the copied patches
 /// also predict the known pixels around the hole; the mismatch `actual − predicted` on that
 /// ring is interpolated harmonically into the hole and added, so the fill keeps its texture
@@ -1154,7 +1426,7 @@ fn vote(problem: &Problem, pixels: &mut [Px], field: &Field) -> f32 {
 fn poisson_correct(
     problem: &Problem,
     level: &mut Level,
-    field: &Field,
+    predict: impl Fn(&[Px], usize) -> Option<Px> + Sync,
     progress: &Progress,
 ) -> Result<()> {
     let (w, h) = (level.w, level.h);
@@ -1162,7 +1434,6 @@ fn poisson_correct(
     for &q in &problem.domain_list {
         in_domain[q as usize] = true;
     }
-    let weights = vote_weights(problem, field);
     // Ring: source pixels 8-adjacent to the domain.
     let mut ring = Vec::new();
     for y in 0..h {
@@ -1181,7 +1452,7 @@ fn poisson_correct(
     let mismatch: Vec<(usize, Px)> = ring
         .par_iter()
         .filter_map(|&i| {
-            let v = voted_value(problem, field, &weights, &level.pixels, i)?;
+            let v = predict(&level.pixels, i)?;
             let a = level.pixels[i];
             Some((i, std::array::from_fn(|c| a[c] - v[c])))
         })
@@ -1360,6 +1631,19 @@ mod tests {
             other_seed.image, one.image,
             "the seed should matter on noise"
         );
+        // The k-NN vote of `final` too.
+        let knn = PatchMatchInpainter::preset(InpaintPreset::Final);
+        let run = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| knn.inpaint(&req, &Progress::none()).unwrap())
+        };
+        let (one, three) = (run(1), run(3));
+        assert_eq!(one.image, three.image);
+        assert_eq!(one.guide, three.guide);
+        assert_outside_unchanged(&one.image, &input, &hole);
     }
 
     #[test]
@@ -1607,6 +1891,65 @@ mod tests {
             .inpaint(&request(&input, &hole), &Progress::none())
             .unwrap();
         assert_outside_unchanged(&out.image, &input, &hole);
+    }
+
+    #[test]
+    fn candidate_lists_stay_sorted_and_unique() {
+        let mut src = [NONE; 3];
+        let mut dist = [f32::INFINITY; 3];
+        for (s, d) in [
+            (10, 5.0),
+            (11, 2.0),
+            (12, 9.0),
+            (11, 1.0),
+            (13, 3.0),
+            (14, 20.0),
+        ] {
+            insert_candidate(&mut src, &mut dist, s, d);
+        }
+        // 11 is kept once (its first, smaller-than-worst entry); 12 and 14 fall off.
+        assert_eq!(src, [11, 13, 10]);
+        assert_eq!(dist, [2.0, 3.0, 5.0]);
+    }
+
+    #[test]
+    fn knn_weights_follow_wexler() {
+        // A 9×9 image, hole at the centre pixel, 3×3 patches: one target centre per pixel
+        // around the hole. Weights must be exp(−(d/n)/(2σ²))·γ^−depth with
+        // σ² = KNN_SIGMA2_SCALE · (75th percentile of the best mean distances).
+        let (w, h) = (9, 9);
+        let mut hole = vec![false; w * h];
+        hole[4 * w + 4] = true;
+        let level = Level {
+            w,
+            h,
+            pixels: vec![[0.0; CH]; w * h],
+            hole: hole.clone(),
+            source: hole.iter().map(|&b| !b).collect(),
+        };
+        let problem = Problem::new(&level, 1, false, 0.0);
+        let mut slot = vec![NONE; w * h];
+        let centre = 4 * w + 4;
+        slot[centre] = 0;
+        slot[centre + 1] = 1;
+        let candidates = Candidates {
+            k: 2,
+            slot,
+            src: vec![10, 11, 20, NONE],
+            dist: vec![9.0, 18.0, 18.0, f32::INFINITY],
+        };
+        let weights = candidate_weights(&problem, &candidates);
+        // Best mean distances 1 and 2; the 75th percentile of [1, 2] (nearest rank) is 2.
+        let sigma2 = KNN_SIGMA2_SCALE * 2.0;
+        let expect = |mean_d: f32, depth: f32| {
+            (-mean_d / (2.0 * sigma2)).exp() * CONFIDENCE_DECAY.powf(-depth)
+        };
+        let close = |a: f32, b: f32| (a - b).abs() < 1e-5 * b.max(1e-6);
+        // The hole pixel lies at depth 1 (chessboard distance to the nearest known pixel).
+        assert!(close(weights[0], expect(1.0, 1.0)), "{weights:?}");
+        assert!(close(weights[1], expect(2.0, 1.0)), "{weights:?}");
+        assert!(close(weights[2], expect(2.0, 0.0)), "{weights:?}");
+        assert_eq!(weights[3], 0.0);
     }
 
     #[test]
