@@ -2,7 +2,7 @@
 //! inpainting preset on each photo.
 //!
 //! One **case** = one photo at one preset: a default project (fly-in, 100 frames, the classical
-//! depth estimator, outpainting, layers, layer inpainting and layer-based depth) is built with a
+//! depth estimator, outpainting, layers, layer inpainting; layer-based depth off) is built with a
 //! fresh [`SceneBuilder`] (every stage runs once; its wall time comes from
 //! [`SceneBuilder::last_run_seconds`]) and the path's middle frame is rendered and written as a
 //! 16-bit PNG. Peak memory is the process's `VmHWM` (Linux), so each case should run in its own
@@ -226,8 +226,9 @@ impl SceneBenchReport {
             ));
         }
         out.push_str(&format!(
-            "\nDefault project (fly-in, 100 frames, classical depth, outpainting, layers, layer \
-             inpainting, layer-based depth), CPU renderer, {} threads; every stage run once in a \
+            "\nDefault project (fly-in, 100 frames, classical depth, outpainting, layers with the \
+             sky apart, layer inpainting; layer-based depth off), CPU renderer, {} threads; every \
+             stage run once in a \
              fresh process; quality = PSNR of the middle frame against the final preset's.\n",
             self.threads
         ));
