@@ -172,10 +172,16 @@ impl StagePanel for ExportPanel {
         ui.heading("Passes");
         ui.checkbox(&mut self.passes.depth, "Depth (16-bit + depth.json)");
         ui.checkbox(&mut self.passes.coverage, "Coverage (16-bit alpha)");
-        ui.checkbox(&mut self.passes.layers, "Layers (RGBA per depth layer, CPU)")
-            .on_hover_text("layer0/ … layerN/: each depth layer alone, alpha = its coverage");
-        ui.checkbox(&mut self.passes.motion, "Motion vectors (16-bit + motion.json, CPU)")
-            .on_hover_text("motion/: forward flow to the next frame, in pixels");
+        ui.checkbox(
+            &mut self.passes.layers,
+            "Layers (RGBA per depth layer, CPU)",
+        )
+        .on_hover_text("layer0/ … layerN/: each depth layer alone, alpha = its coverage");
+        ui.checkbox(
+            &mut self.passes.motion,
+            "Motion vectors (16-bit + motion.json, CPU)",
+        )
+        .on_hover_text("motion/: forward flow to the next frame, in pixels");
         ui.checkbox(&mut self.passes.camera, "Camera (JSON + Blender script)")
             .on_hover_text("camera/camera.json and camera/camera.py, the whole path");
         ui.separator();
