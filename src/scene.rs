@@ -672,6 +672,22 @@ fn build_canvas(
             synthesised,
         });
     }
+    // A flat black or white frame around the photo is re-filled with the margin, so that it
+    // does not continue as a seam around the photo.
+    // Two more pixels on each framed side take the JPEG ringing and anti-aliasing along it.
+    let bleed = |b: usize| if b > 0 { b + 2 } else { 0 };
+    let [fl, ft, fr, fb] = crate::stages::outpaint::frame_border(image).map(bleed);
+    let (fl, fr) = (fl.min(w / 4), fr.min(w / 4));
+    let (ft, fb) = (ft.min(h / 4), fb.min(h / 4));
+    let synthesised = if fl + ft + fr + fb == 0 {
+        synthesised
+    } else {
+        let (x0, y0) = (layout.left_pad + fl, layout.top_pad + ft);
+        let (x1, y1) = (layout.left_pad + w - fr, layout.top_pad + h - fb);
+        MaskRaster::from_fn(layout.width, layout.height, |x, y| {
+            synthesised.at(x, y) || !((x0..x1).contains(&x) && (y0..y1).contains(&y))
+        })
+    };
     let mut canvas_image = RgbRaster::new(layout.width, layout.height, [0.0; 3]);
     for y in 0..h {
         let dst = (y + layout.top_pad) * layout.width + layout.left_pad;
