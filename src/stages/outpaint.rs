@@ -466,7 +466,7 @@ pub fn frame_border(image: &RgbRaster) -> [usize; 4] {
         let n = outer.len().max(1) as f32;
         let mean = [mean[0] / n, mean[1] / n, mean[2] / n];
         let l = luma(mean);
-        if !(l < 0.08 || l > 0.92) {
+        if (0.08..=0.92).contains(&l) {
             return 0;
         }
         let flat = |px: &[[f32; 3]]| {
