@@ -617,15 +617,12 @@ pub fn render_to_rgba(context: GpuContext, frame: &GpuFrame) -> crate::Result<Ve
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::{Intrinsics, Pose};
-    use crate::image_io::load_image;
+    use crate::geometry::Pose;
     use crate::raster::{Raster, RgbRaster};
     use crate::render::bench::psnr_rgb;
     use crate::render::blend::symmetric_blend;
     use crate::render::cpu::render_cpu;
-    use crate::stages::points::LiftOptions;
     use glam::{Quat, Vec3};
-    use std::path::Path;
 
     /// lavapipe (or any adapter); `None` with a message outside CI when there is none.
     fn context() -> Option<GpuContext> {
@@ -640,26 +637,6 @@ mod tests {
                 None
             }
         }
-    }
-
-    /// The test photo lifted with a ground-plane depth.
-    fn photo_cloud() -> (PointCloud, Intrinsics, usize, usize) {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/evening_glow_320.jpg");
-        let image = load_image(&path).expect("test photo").rgb;
-        let (w, h) = image.size();
-        let k = Intrinsics::from_hfov(w, h, 60.0);
-        let horizon = 0.4 * h as f32;
-        let depth = Raster::from_fn(w, h, |_, y| {
-            let dv = y as f32 - horizon;
-            if dv > 1.0 {
-                (k.fy / dv).clamp(1.0, 80.0)
-            } else {
-                80.0
-            }
-        });
-        let cloud =
-            PointCloud::lift(&image, &depth, &k, None, None, LiftOptions::default()).unwrap();
-        (cloud, k, w, h)
     }
 
     fn to_raster(pixels: &[[u8; 4]], w: usize, h: usize) -> RgbRaster {
@@ -681,7 +658,7 @@ mod tests {
         let Some(context) = context() else {
             return;
         };
-        let (cloud, k, w, h) = photo_cloud();
+        let (cloud, k, w, h) = crate::render::gpu::tests::photo_scene();
         // A viewport that is not the photo's size: the camera is scaled to it.
         let (vw, vh) = (272usize, 170usize);
         let view = View {
@@ -754,7 +731,7 @@ mod tests {
             PreviewResources::new(context.clone(), wgpu::TextureFormat::Rgba8Unorm, shared)
                 .unwrap(),
         );
-        let (cloud, k, w, h) = photo_cloud();
+        let (cloud, k, w, h) = crate::render::gpu::tests::photo_scene();
         let good = GpuFrame {
             cloud: Arc::new(cloud),
             positions: None,

@@ -1315,7 +1315,7 @@ pub fn select_renderer(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::geometry::{Intrinsics, Pose};
     use crate::image_io::load_image;
@@ -1386,7 +1386,7 @@ mod tests {
 
     /// The evening-glow test photo lifted with a ground-plane depth (sky far above a horizon
     /// at 40 % of the height).
-    fn photo_scene() -> (PointCloud, Intrinsics, usize, usize) {
+    pub(crate) fn photo_scene() -> (PointCloud, Intrinsics, usize, usize) {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/evening_glow_320.jpg");
         let image = load_image(&path).expect("test photo").rgb;
         let (w, h) = image.size();

@@ -26,6 +26,21 @@ fn two_planes() -> (RgbRaster, GrayRaster) {
     (canvas, depth)
 }
 
+/// [`two_planes`] cut into two layers and inpainted with the mean inpainter (seed 3).
+fn two_plane_scene() -> (RgbRaster, GrayRaster, LayeredScene) {
+    let (canvas, depth) = two_planes();
+    let plan = plan_layers(&depth, &count_params(2), &Progress::none()).expect("plan");
+    let scene = inpaint_layers(
+        &canvas,
+        &plan,
+        &MeanInpainter::default(),
+        3,
+        &Progress::none(),
+    )
+    .expect("ok");
+    (canvas, depth, scene)
+}
+
 fn count_params(n: usize) -> LayerParams {
     LayerParams {
         mode: LayerCount::Count(n),
@@ -579,16 +594,7 @@ fn layer_based_depth_known_answer_and_switch() {
 
 #[test]
 fn overlay_puts_nearer_layers_in_front() {
-    let (canvas, depth) = two_planes();
-    let plan = plan_layers(&depth, &count_params(2), &Progress::none()).expect("plan");
-    let scene = inpaint_layers(
-        &canvas,
-        &plan,
-        &MeanInpainter::default(),
-        3,
-        &Progress::none(),
-    )
-    .expect("ok");
+    let (canvas, depth, scene) = two_plane_scene();
     let (all, all_depth, covered) = scene.overlay(0, &canvas);
     assert_eq!(all, canvas);
     assert_eq!(all_depth, depth);
@@ -600,16 +606,7 @@ fn overlay_puts_nearer_layers_in_front() {
 
 #[test]
 fn point_cloud_density_options() {
-    let (canvas, depth) = two_planes();
-    let plan = plan_layers(&depth, &count_params(2), &Progress::none()).expect("plan");
-    let scene = inpaint_layers(
-        &canvas,
-        &plan,
-        &MeanInpainter::default(),
-        3,
-        &Progress::none(),
-    )
-    .expect("ok");
+    let (_, _, scene) = two_plane_scene();
     let k = Intrinsics::from_hfov(W, H, 60.0);
     let full = scene.point_cloud(&k).expect("cloud");
     // Halve the wall: 60×50 in 2×2 blocks → 30×25 samples, all covered.
@@ -945,16 +942,7 @@ fn sky_layer_edge_cases() {
 fn density_strides_known_answers() {
     use crate::geometry::{Pose, View};
     use glam::{Quat, Vec3};
-    let (canvas, depth) = two_planes();
-    let plan = plan_layers(&depth, &count_params(2), &Progress::none()).expect("plan");
-    let scene = inpaint_layers(
-        &canvas,
-        &plan,
-        &MeanInpainter::default(),
-        3,
-        &Progress::none(),
-    )
-    .expect("ok");
+    let (_, _, scene) = two_plane_scene();
     let k = Intrinsics::from_hfov(W, H, 60.0);
     let near = scene.layers[0].interval[0];
     let view = |focal_ratio: f32, z: f32| View {
