@@ -336,16 +336,14 @@ pub fn output_size(project: &Project, scene: &Scene) -> (usize, usize) {
 
 /// Every frame's view at the output size.
 pub fn output_views(project: &Project, scene: &Scene) -> Result<Vec<View>> {
-    let (width, height) = output_size(project, scene);
-    let (iw, ih) = scene.input.rgb.size();
-    let out_intrinsics = scene
-        .intrinsics
-        .scaled(width as f32 / iw as f32, height as f32 / ih as f32);
     let frames = project.output.frames;
-    let views = project
-        .camera
-        .path
-        .views(&out_intrinsics, width, &scene.scale, frames)?;
+    let views = crate::scene::path_views(
+        project,
+        &scene.intrinsics,
+        scene.input.rgb.size(),
+        output_size(project, scene),
+        &scene.scale,
+    )?;
     if views.len() != frames {
         return Err(Error::invalid(format!(
             "camera path produced {} views for {frames} frames",

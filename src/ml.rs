@@ -730,6 +730,14 @@ impl ModelManifest {
         })
     }
 
+    /// The manifest's file name, for messages about the model it describes.
+    pub fn file_name(&self) -> String {
+        self.manifest_path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    }
+
     /// An [`Error::Model`] about this manifest.
     pub fn error(&self, message: impl Into<String>) -> Error {
         Error::Model {

@@ -441,13 +441,7 @@ impl SceneBuilder {
                 let started = std::time::Instant::now();
                 p.report(0.0, Stage::Cloud.name());
                 let strides = if project.layers.adaptive_density {
-                    let (ow, oh) = output_size;
-                    let out_k = intrinsics.scaled(ow as f32 / w as f32, oh as f32 / h as f32);
-                    let views =
-                        project
-                            .camera
-                            .path
-                            .views(&out_k, ow, &scale, project.output.frames)?;
+                    let views = path_views(project, &intrinsics, (w, h), output_size, &scale)?;
                     density_strides(&layered, &canvas.intrinsics, &views)
                 } else {
                     Vec::new()
@@ -613,6 +607,24 @@ fn apply_input_alpha(cloud: &mut PointCloud, alpha: &GrayRaster, layout: &Canvas
 }
 
 /// Sizes the canvas from the path and completes colour and depth beyond the photo.
+/// Every frame's view of `project`'s camera path at the output size: the input camera
+/// (`intrinsics`, for an `input_size` photo) scaled to `output_size`. The canvas stage sizes the
+/// canvas from them, the cloud stage its density, and export renders them.
+pub fn path_views(
+    project: &Project,
+    intrinsics: &Intrinsics,
+    input_size: (usize, usize),
+    output_size: (usize, usize),
+    scale: &SceneScale,
+) -> Result<Vec<View>> {
+    let ((w, h), (ow, oh)) = (input_size, output_size);
+    let out_k = intrinsics.scaled(ow as f32 / w as f32, oh as f32 / h as f32);
+    project
+        .camera
+        .path
+        .views(&out_k, ow, scale, project.output.frames)
+}
+
 #[allow(clippy::too_many_arguments)]
 fn build_canvas(
     project: &Project,
@@ -634,13 +646,7 @@ fn build_canvas(
                 CanvasLayout::fixed((w, h), factor, placement)?
             }
             CanvasSizing::FromPath(options) => {
-                let (ow, oh) = output_size;
-                let out_k = intrinsics.scaled(ow as f32 / w as f32, oh as f32 / h as f32);
-                let views: Vec<View> =
-                    project
-                        .camera
-                        .path
-                        .views(&out_k, ow, scale, project.output.frames)?;
+                let views = path_views(project, intrinsics, (w, h), output_size, scale)?;
                 canvas_from_views(
                     (w, h),
                     intrinsics,

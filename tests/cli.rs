@@ -1,6 +1,8 @@
 //! The `makeit4d render` command end to end: good inputs render, bad inputs fail with one line,
 //! exit code 2 and nothing written.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -65,7 +67,7 @@ fn bad_inputs_fail_cleanly_and_write_nothing() {
     let jpeg = std::fs::read(data("evening_glow_320.jpg")).unwrap();
     std::fs::write(&truncated, &jpeg[..jpeg.len() / 3]).unwrap();
     let huge = d.join("huge.png");
-    std::fs::write(&huge, huge_png_header()).unwrap();
+    std::fs::write(&huge, common::png_header(100_000, 100_000)).unwrap();
 
     let cases: Vec<(PathBuf, Vec<&str>)> = vec![
         (d.join("missing.jpg"), vec!["missing.jpg", "no such file"]),
@@ -84,41 +86,6 @@ fn bad_inputs_fail_cleanly_and_write_nothing() {
             input.display()
         );
     }
-}
-
-/// A PNG signature and an IHDR chunk claiming 100000×100000 pixels.
-fn huge_png_header() -> Vec<u8> {
-    let mut bytes = vec![0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A];
-    let mut ihdr = b"IHDR".to_vec();
-    ihdr.extend_from_slice(&100_000u32.to_be_bytes());
-    ihdr.extend_from_slice(&100_000u32.to_be_bytes());
-    ihdr.extend_from_slice(&[8, 2, 0, 0, 0]);
-    bytes.extend_from_slice(&13u32.to_be_bytes());
-    bytes.extend_from_slice(&ihdr);
-    bytes.extend_from_slice(&crc32(&ihdr).to_be_bytes());
-    // An empty IDAT and the IEND, so the header is all a decoder can read.
-    for chunk in [&b"IDAT"[..], &b"IEND"[..]] {
-        bytes.extend_from_slice(&0u32.to_be_bytes());
-        bytes.extend_from_slice(chunk);
-        bytes.extend_from_slice(&crc32(chunk).to_be_bytes());
-    }
-    bytes
-}
-
-/// CRC-32 (IEEE) for PNG chunks.
-fn crc32(data: &[u8]) -> u32 {
-    let mut crc = 0xFFFF_FFFFu32;
-    for &b in data {
-        crc ^= b as u32;
-        for _ in 0..8 {
-            crc = if crc & 1 != 0 {
-                (crc >> 1) ^ 0xEDB8_8320
-            } else {
-                crc >> 1
-            };
-        }
-    }
-    !crc
 }
 
 #[test]

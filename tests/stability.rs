@@ -2,6 +2,8 @@
 //! at the edges of what it accepts. Every output must be finite and every failure a clear,
 //! one-line error. Images are tiny so that the suite stays fast in a debug build.
 
+mod common;
+
 use makeit4d::geometry::View;
 use makeit4d::image_io::{MAX_PIXELS, load_image, save_rgb_png};
 use makeit4d::path::{CameraPath, Keyframe, KeyframePath, Preset, PresetKind};
@@ -330,45 +332,13 @@ fn one_by_one_input() {
     assert_eq!(scene.input.rgb.size(), (1, 1));
 }
 
-/// A PNG that is all header: `width × height`, 8-bit RGB, no pixel data.
-fn png_header(width: u32, height: u32) -> Vec<u8> {
-    fn crc32(data: &[u8]) -> u32 {
-        let mut crc = 0xFFFF_FFFFu32;
-        for &b in data {
-            crc ^= b as u32;
-            for _ in 0..8 {
-                crc = if crc & 1 != 0 {
-                    (crc >> 1) ^ 0xEDB8_8320
-                } else {
-                    crc >> 1
-                };
-            }
-        }
-        !crc
-    }
-    let mut bytes = vec![0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A];
-    let mut ihdr = b"IHDR".to_vec();
-    ihdr.extend_from_slice(&width.to_be_bytes());
-    ihdr.extend_from_slice(&height.to_be_bytes());
-    ihdr.extend_from_slice(&[8, 2, 0, 0, 0]);
-    bytes.extend_from_slice(&13u32.to_be_bytes());
-    bytes.extend_from_slice(&ihdr);
-    bytes.extend_from_slice(&crc32(&ihdr).to_be_bytes());
-    for chunk in [&b"IDAT"[..], &b"IEND"[..]] {
-        bytes.extend_from_slice(&0u32.to_be_bytes());
-        bytes.extend_from_slice(chunk);
-        bytes.extend_from_slice(&crc32(chunk).to_be_bytes());
-    }
-    bytes
-}
-
 #[test]
 fn an_8000_by_8000_input_is_refused_by_the_size_limit() {
     // The test assumes the 40 MP limit.
     const { assert!(8000u64 * 8000 > MAX_PIXELS) };
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("huge.png");
-    std::fs::write(&path, png_header(8000, 8000)).unwrap();
+    std::fs::write(&path, common::png_header(8000, 8000)).unwrap();
     let e = load_image(&path).expect_err("8000×8000 must be refused");
     assert_clear_error(&e, &["huge.png", "8000×8000", "limit"]);
     // The same through the scene builder (what the command line and the editor call).

@@ -58,11 +58,7 @@ impl OnnxDepth {
             )));
         };
         let session = OnnxSession::load(&manifest.model_path)?;
-        let manifest_name = manifest
-            .manifest_path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
+        let manifest_name = manifest.file_name();
         let mismatch =
             |message: String| session.error(format!("{message} (manifest {manifest_name})"));
 

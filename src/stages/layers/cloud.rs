@@ -1,6 +1,7 @@
 //! The layered point cloud: every layer lifted through the canvas camera.
 
 use super::LayeredScene;
+use super::morph::bounding_box;
 use crate::error::{Error, Result};
 use crate::geometry::{Intrinsics, View};
 use crate::raster::{GrayRaster, MaskRaster, Raster, Rgb, RgbRaster};
@@ -40,16 +41,16 @@ pub fn density_strides(scene: &LayeredScene, canvas: &Intrinsics, views: &[View]
         .layers
         .iter()
         .map(|layer| {
-            let (w, h) = layer.mask.size();
-            let mut bbox: Option<[usize; 4]> = None;
-            for y in 0..h {
-                for x in 0..w {
-                    if layer.covers(x, y) {
-                        let b = bbox.get_or_insert([x, y, x, y]);
-                        *b = [b[0].min(x), b[1].min(y), b[2].max(x), b[3].max(y)];
-                    }
-                }
-            }
+            // The box of `mask ∪ inpainted` is the union of their boxes.
+            let bbox = match (bounding_box(&layer.mask), bounding_box(&layer.inpainted)) {
+                (Some(a), Some(b)) => Some([
+                    a[0].min(b[0]),
+                    a[1].min(b[1]),
+                    a[2].max(b[2]),
+                    a[3].max(b[3]),
+                ]),
+                (a, b) => a.or(b),
+            };
             let (Some([x0, y0, x1, y1]), false) = (bbox, views.is_empty()) else {
                 return 1;
             };
