@@ -85,7 +85,7 @@ fn main() -> Result<()> {
                     false,
                 )?;
                 println!(
-                    "{stem}: horizon {:.3} ({}), haziness {:.2}, border coherence {:.3}, depth {:.2}–{:.2}",
+                    "{stem}: horizon {:.3} ({}), haziness {:.2}, border coherence {:.3}, object structure {:.3}, object weight {:.2}, depth {:.2}–{:.2}",
                     a.horizon,
                     if a.horizon_detected {
                         "from sky"
@@ -94,6 +94,8 @@ fn main() -> Result<()> {
                     },
                     a.haziness,
                     a.border_coherence,
+                    a.object_structure,
+                    a.object_weight,
                     e.depth.data().iter().copied().fold(f32::INFINITY, f32::min),
                     e.depth.data().iter().copied().fold(0.0f32, f32::max),
                 );

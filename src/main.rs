@@ -672,21 +672,7 @@ fn render_one(
     if autocruise {
         // Fly the auto-pilot over the scene, then rebuild with its keyframes so the canvas is
         // outpainted for exactly that path (load and depth are re-used from the cache).
-        let (w, h) = makeit4d::export::output_size(&project, &scene);
-        let (iw, ih) = scene.input.rgb.size();
-        let k = scene
-            .intrinsics
-            .scaled(w as f32 / iw as f32, h as f32 / ih as f32);
-        let cruise = makeit4d::path::autocruise(
-            &scene.cloud,
-            &k,
-            w,
-            h,
-            &scene.scale,
-            &makeit4d::path::AutocruiseParams::default(),
-            project.output.frames,
-            &progress.sub(0.0, 0.1),
-        )?;
+        let cruise = makeit4d::scene::autocruise(&project, &scene, &progress.sub(0.0, 0.1))?;
         bar.suspend(|| eprintln!("{cruise}"));
         project.camera.path = CameraPath::Keyframes(cruise.keyframes);
         scene = builder.build(&project, &progress.sub(0.0, 0.1))?;

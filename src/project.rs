@@ -141,6 +141,9 @@ pub struct CameraSettings {
     pub hfov_deg: f32,
     /// The camera path.
     pub path: CameraPath,
+    /// Parameters of the autocruise suggestion (`render --preset autocruise`, the editor's
+    /// Autocruise button); the path it suggests becomes `path`'s keyframes.
+    pub autocruise: crate::path::AutocruiseParams,
 }
 
 impl Default for CameraSettings {
@@ -148,6 +151,7 @@ impl Default for CameraSettings {
         Self {
             hfov_deg: 60.0,
             path: CameraPath::default(),
+            autocruise: crate::path::AutocruiseParams::default(),
         }
     }
 }
@@ -214,6 +218,7 @@ impl Project {
                 self.camera.hfov_deg
             )));
         }
+        self.camera.autocruise.validate()?;
         self.layers.params.validate()?;
         self.render.validate()
     }

@@ -606,7 +606,6 @@ fn apply_input_alpha(cloud: &mut PointCloud, alpha: &GrayRaster, layout: &Canvas
     // Fully transparent points make nothing: the renderer skips alpha 0.
 }
 
-/// Sizes the canvas from the path and completes colour and depth beyond the photo.
 /// Every frame's view of `project`'s camera path at the output size: the input camera
 /// (`intrinsics`, for an `input_size` photo) scaled to `output_size`. The canvas stage sizes the
 /// canvas from them, the cloud stage its density, and export renders them.
@@ -625,6 +624,32 @@ pub fn path_views(
         .views(&out_k, ow, scale, project.output.frames)
 }
 
+/// Flies autocruise (`project.camera.autocruise`, `project.output.frames` frames) over
+/// `scene`'s cloud, with the input camera at the output size. Its suggested keyframes are meant
+/// to become the project's path.
+pub fn autocruise(
+    project: &Project,
+    scene: &Scene,
+    progress: &Progress,
+) -> Result<crate::path::AutocruiseResult> {
+    let (w, h) = crate::export::output_size(project, scene);
+    let (iw, ih) = scene.input.rgb.size();
+    let k = scene
+        .intrinsics
+        .scaled(w as f32 / iw as f32, h as f32 / ih as f32);
+    crate::path::autocruise(
+        &scene.cloud,
+        &k,
+        w,
+        h,
+        &scene.scale,
+        &project.camera.autocruise,
+        project.output.frames,
+        progress,
+    )
+}
+
+/// Sizes the canvas from the path and completes colour and depth beyond the photo.
 #[allow(clippy::too_many_arguments)]
 fn build_canvas(
     project: &Project,

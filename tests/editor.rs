@@ -388,3 +388,52 @@ fn ui_frame_times_during_a_rebuild() {
     let (n, mean, max) = h.state().frame_times().stats(true);
     println!("App::ui alone while building: {n} frames, mean {mean:.2} ms, max {max:.1} ms");
 }
+
+/// Camera tab: "Fly autocruise" replaces the preset with the flight's suggested keyframes (a
+/// key every 10 frames plus the last, the first at the input view), one undoable edit.
+#[test]
+fn autocruise_button_makes_keyframes() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = fast_project(dir.path());
+    let mut p = Project::load(&file).unwrap();
+    p.output.frames = 12;
+    p.save(&file).unwrap();
+    let Some(mut h) = harness(file) else {
+        return;
+    };
+    let limit = Duration::from_secs(600);
+    wait_idle(&mut h, limit);
+    h.get_by_label("6 Camera").click();
+    h.step();
+    h.get_by_label("Fly autocruise").click();
+    let start = Instant::now();
+    while matches!(
+        h.state().project().unwrap().camera.path,
+        CameraPath::Preset(_)
+    ) {
+        assert!(
+            start.elapsed() < limit,
+            "autocruise did not finish: {:?}",
+            h.state().notices()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+        h.step();
+    }
+    let CameraPath::Keyframes(keys) = &h.state().project().unwrap().camera.path else {
+        unreachable!()
+    };
+    let frames: Vec<f64> = keys.keys.iter().map(|k| k.frame).collect();
+    assert_eq!(frames, vec![0.0, 10.0, 11.0]);
+    assert_eq!(keys.keys[0].position, glam::DVec3::ZERO);
+    assert!(keys.keys[2].position.z > 0.0, "it flies forward: {keys:?}");
+    wait_idle(&mut h, limit);
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
+    h.step();
+    assert!(
+        matches!(
+            h.state().project().unwrap().camera.path,
+            CameraPath::Preset(_)
+        ),
+        "one undo brings the preset back"
+    );
+}

@@ -16,7 +16,7 @@ use super::worker::{
     SceneSnapshot, SceneWorker,
 };
 use crate::geometry::View;
-use crate::path::{CameraPath, Keyframe};
+use crate::path::{CameraPath, Keyframe, KeyframePath};
 use crate::project::Project;
 use crate::render::gpu::RendererChoice;
 use crate::scene::{FramePositions, Stage};
@@ -718,6 +718,25 @@ impl EditorApp {
         self.preview.fly = FlyCamera::default();
     }
 
+    /// Makes an autocruise flight's keyframes the path (one undo step), unless the project
+    /// changed since the scene it flew over was built: then the flight is stale.
+    fn apply_cruise(&mut self, generation: u64, keyframes: KeyframePath, report: &str) {
+        let Some(doc) = &self.doc else { return };
+        let current = self
+            .snapshot
+            .as_ref()
+            .is_some_and(|s| s.generation == generation && s.project.camera == doc.project.camera);
+        if !current {
+            self.notify("the project changed while autocruise flew: press Fly autocruise again");
+            return;
+        }
+        let mut project = doc.project.clone();
+        project.camera.path = CameraPath::Keyframes(keyframes);
+        self.apply_edit("Autocruise", project);
+        self.timeline.selected_key = None;
+        self.notify(report.trim_end().to_string());
+    }
+
     // ---- Per-frame work ----
 
     fn handle_events(&mut self) {
@@ -784,6 +803,11 @@ impl EditorApp {
                         p.on_message(&m);
                     }
                 }
+                Event::Cruise {
+                    generation,
+                    keyframes,
+                    report,
+                } => self.apply_cruise(generation, keyframes, &report),
                 Event::ExportDone(summary) => {
                     let mut text = summary.to_string();
                     for w in &summary.warnings {
@@ -1066,6 +1090,7 @@ impl EditorApp {
     fn handle_request(&mut self, request: Request) {
         match request {
             Request::SuggestMotion => self.send(Command::SuggestMotion),
+            Request::Autocruise => self.send(Command::Autocruise),
             Request::Export {
                 out_dir,
                 options,

@@ -53,6 +53,9 @@ pub enum Command {
     },
     /// Suggest motion for the canvas of the current scene.
     SuggestMotion,
+    /// Fly autocruise over the current scene (its project's autocruise settings, frame count
+    /// and output size).
+    Autocruise,
     /// Render the project's frames into a folder (building the scene first if needed).
     Export {
         /// The project to render.
@@ -71,6 +74,8 @@ pub enum JobKind {
     Build,
     /// Suggesting motion.
     Suggest,
+    /// Flying autocruise.
+    Autocruise,
     /// Exporting frames.
     Export,
 }
@@ -81,6 +86,7 @@ impl JobKind {
         match self {
             JobKind::Build => "building",
             JobKind::Suggest => "suggesting motion",
+            JobKind::Autocruise => "autocruise",
             JobKind::Export => "exporting",
         }
     }
@@ -118,6 +124,15 @@ pub enum Event {
     },
     /// The suggested motion (never applied by the worker).
     Suggestion(MotionSpec),
+    /// The autocruise path (never applied by the worker): its keyframes and its report.
+    Cruise {
+        /// The scene generation it flew over.
+        generation: u64,
+        /// The suggested keyframes.
+        keyframes: crate::path::KeyframePath,
+        /// The multi-line report (distance, obstacles, warnings).
+        report: String,
+    },
     /// An export finished.
     ExportDone(RenderSummary),
     /// An export failed or was cancelled.
@@ -449,6 +464,32 @@ fn scene_thread(
                                 "motion suggestion failed: {}",
                                 one_line(&e)
                             ))),
+                        }
+                    }
+                }
+            }
+            Command::Autocruise => {
+                let snapshot = lock(&shared.scene).clone();
+                match snapshot {
+                    None => send(Event::Error(
+                        "no scene yet: wait for the build to finish, then ask again".into(),
+                    )),
+                    Some(s) => {
+                        let result = job(&shared, &ctx, JobKind::Autocruise, pool, |progress| {
+                            crate::scene::autocruise(&s.project, &s.scene, progress)
+                        });
+                        match result {
+                            Ok(cruise) => send(Event::Cruise {
+                                generation: s.generation,
+                                report: cruise.to_string(),
+                                keyframes: cruise.keyframes,
+                            }),
+                            Err(crate::Error::Cancelled) => {
+                                send(Event::Cancelled(JobKind::Autocruise))
+                            }
+                            Err(e) => {
+                                send(Event::Error(format!("autocruise failed: {}", one_line(&e))))
+                            }
                         }
                     }
                 }

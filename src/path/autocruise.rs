@@ -47,8 +47,12 @@
 //! * Free-space steering (`free_space_steering`, forward only): when the way straight ahead
 //!   (horizontally) is blocked within `lookahead_distance`, both the look and the move target
 //!   `x` move toward the image column whose horizontal direction has the longest free travel
-//!   (same swept-sphere test as below, 9 columns), in proportion to how blocked the way ahead
-//!   is. The method itself only turns toward open sky, which a scene without sky never offers.
+//!   (same swept-sphere test as below, 17 columns; compared beyond the lookahead too, so that
+//!   a corridor whose far end is open wins over trees that merely stand past the lookahead),
+//!   with a weight that grows with how blocked the way ahead is (full once the clearance is
+//!   under 3/4 of the lookahead), and at the faster blend rate `steering_lerp`, in azimuth
+//!   only. The method itself only turns toward open sky, which a scene without sky never
+//!   offers.
 //! * Obstacles: the camera is a sphere of radius `stop_distance` (near depths) that must not
 //!   touch any point of the cloud (the thinned cloud of the analysis render, all of it, seen or
 //!   not: a camera turned away from a wall must not back into it). Sweeping the sphere along
@@ -89,7 +93,15 @@ use std::fmt;
 pub const BALANCE_EPSILON: f32 = 1e-4;
 
 /// Candidate directions per side tried by free-space steering (columns `x = 0.5 ± 0.4·k/n`).
-const STEERING_CANDIDATES_PER_SIDE: usize = 4;
+const STEERING_CANDIDATES_PER_SIDE: usize = 8;
+
+/// Blockage of the way ahead (`1 − clearance/lookahead`) at which free-space steering has its
+/// full weight; below it the weight ramps up from 0 in proportion.
+const STEERING_FULL_BLOCKAGE: f32 = 0.25;
+
+/// How much farther (relative) a side column of free-space steering must get than the best
+/// one nearer the centre to be chosen.
+const STEERING_MARGIN: f64 = 0.05;
 
 /// A stopped camera moves again once its speed factor reaches this multiple of
 /// [`AutocruiseParams::stop_speed_factor`].
@@ -155,12 +167,18 @@ pub struct AutocruiseParams {
     pub stop_speed_factor: f32,
     /// Steering toward free space, `[0, 1]`: when the way straight ahead (horizontally) is
     /// blocked within `lookahead_distance`, the look target `x` moves toward the image column
-    /// whose horizontal direction has the longest free travel, in proportion to this weight
-    /// times how blocked the way ahead is. 0 is the method as published (sky balance only).
+    /// whose horizontal direction gets farthest, by this weight times a ramp of how blocked
+    /// the way ahead is (full under 3/4 of the lookahead). 0 is the method as published (sky
+    /// balance only).
     /// Forward flight only.
     pub free_space_steering: f32,
     /// How far ahead free-space steering looks, near depths.
     pub lookahead_distance: f32,
+    /// Blend rate of the look and move directions per auto-pilot step while free-space
+    /// steering turns the camera (at full blockage; `looklerp`/`movelerp` when the way ahead is
+    /// free). The method's `looklerp` (0.05) turns a camera by a few degrees in a hundred
+    /// frames, too slowly to take a path that bends away from a tree.
+    pub steering_lerp: f32,
     /// Points that must block the way before they count as an obstacle.
     pub obstacle_min_points: usize,
     /// A suggested keyframe every this many frames (plus the last frame).
@@ -193,6 +211,7 @@ impl Default for AutocruiseParams {
             obstacle_min_points: 3,
             free_space_steering: 1.0,
             lookahead_distance: 3.0,
+            steering_lerp: 0.5,
             keyframe_interval: 10,
             splat: SplatSettings::default(),
         }
@@ -242,6 +261,7 @@ impl AutocruiseParams {
             ("maximum sky fraction", self.sky_fraction_max),
             ("stop speed factor", self.stop_speed_factor),
             ("free-space steering", self.free_space_steering),
+            ("steering lerp", self.steering_lerp),
         ] {
             unit(name, v)?;
         }
@@ -592,52 +612,78 @@ pub fn autocruise(
             (rotation * ray.as_dvec3()).normalize()
         };
         let stop = params.stop_distance as f64 * near;
+        let mut steering = 0.0f32;
         if params.free_space_steering > 0.0 && params.direction == CruiseDirection::Forward {
             let lookahead = params.lookahead_distance as f64 * near;
-            let clearance_at = |x: f32| -> f64 {
+            // Free travel along the horizontal direction of column `x` (infinite when
+            // nothing is in the way), and that direction.
+            let heading = {
+                let h = ray_world(0.5, 0.5);
+                (h - h.dot(world_down) * world_down)
+                    .try_normalize()
+                    .unwrap_or(h)
+            };
+            let clearance_at = |x: f32| -> (f64, DVec3) {
                 let horizontal = ray_world(x, 0.5);
                 let horizontal = (horizontal - horizontal.dot(world_down) * world_down)
                     .try_normalize()
                     .unwrap_or(horizontal);
-                sphere_clearance(
+                let c = sphere_clearance(
                     &preview,
                     position,
                     horizontal,
                     stop,
                     params.obstacle_min_points,
                 )
-                .map_or(lookahead, |c| c.min(lookahead))
+                .unwrap_or(f64::INFINITY);
+                (c, horizontal)
             };
-            let centre = clearance_at(0.5);
+            let centre = clearance_at(0.5).0;
             let blocked = (1.0 - centre / lookahead).clamp(0.0, 1.0) as f32;
             if blocked > 0.0 {
-                // Candidates from the centre outwards, so ties keep the straighter course.
+                // The column that gets farthest along the current heading before it is
+                // blocked (free travel × cos of the turn: a wall across the way is equally far
+                // in every direction, a corridor is not), beyond the lookahead too (a forest
+                // path is blocked far away, the trees beside it near). A side must beat the
+                // best so far by STEERING_MARGIN; candidates go from the centre outwards, so
+                // near-ties keep the straighter course.
                 let mut best = (0.5f32, centre);
                 for k in 1..=STEERING_CANDIDATES_PER_SIDE {
                     let offset = 0.4 * k as f32 / STEERING_CANDIDATES_PER_SIDE as f32;
                     for x in [0.5 - offset, 0.5 + offset] {
-                        let c = clearance_at(x);
-                        if c > best.1 {
-                            best = (x, c);
+                        let (c, direction) = clearance_at(x);
+                        let progress = c * direction.dot(heading).max(0.0);
+                        if progress > best.1 * (1.0 + STEERING_MARGIN) {
+                            best = (x, progress);
                         }
                     }
                 }
-                let weight = params.free_space_steering.min(1.0) * blocked;
+                let weight = params.free_space_steering.min(1.0)
+                    * (blocked / STEERING_FULL_BLOCKAGE).min(1.0);
                 look_x += weight * (best.0 - look_x);
                 move_x += weight * (best.0 - move_x);
+                if best.0 != 0.5 {
+                    steering = weight;
+                }
             }
         }
         let new_look = ray_world(look_x, balance.look_y);
         let new_move = ray_world(move_x, move_y);
-        let ll = per_frame_rate(params.looklerp, params.frames_per_step);
-        let ml = per_frame_rate(params.movelerp, params.frames_per_step);
-        look = ((1.0 - ll) * look + ll * new_look)
-            .try_normalize()
-            .unwrap_or(look);
+        // Free-space steering turns faster than the method's blend, in azimuth only: the
+        // elevation keeps the method's pace (a forest has no sky, and the method would tilt up
+        // to look for it).
+        let steer = |rate: f32| {
+            let turn = rate + steering * (params.steering_lerp - rate).max(0.0);
+            (
+                per_frame_rate(rate, params.frames_per_step),
+                per_frame_rate(turn, params.frames_per_step),
+            )
+        };
+        let (ll, look_turn) = steer(params.looklerp);
+        let (ml, move_turn) = steer(params.movelerp);
+        look = blend_direction(look, new_look, ll, look_turn, world_down);
         look = limit_pitch(look, world_down, max_pitch);
-        motion = ((1.0 - ml) * motion + ml * new_move)
-            .try_normalize()
-            .unwrap_or(look);
+        motion = blend_direction(motion, new_move, ml, move_turn, world_down);
 
         // Obstacles along the motion.
         let travel_world = motion * sign;
@@ -768,6 +814,27 @@ fn sphere_clearance(
     }
     let (_, v, _) = blocking.select_nth_unstable_by(k - 1, f64::total_cmp);
     Some(*v)
+}
+
+/// `normalise((1 − rate)·current + rate·target)` (the method's blend), then, when `turn_rate`
+/// exceeds `rate`, a further turn about `down` that brings the azimuth the rest of the way to
+/// the target's at `turn_rate` in all: the remaining azimuth difference shrinks by
+/// `(1 − turn_rate)/(1 − rate)`. `turn_rate ≤ rate` is the method's blend alone.
+fn blend_direction(current: DVec3, target: DVec3, rate: f64, turn_rate: f64, down: DVec3) -> DVec3 {
+    let blended = ((1.0 - rate) * current + rate * target)
+        .try_normalize()
+        .unwrap_or(current);
+    if turn_rate <= rate || rate >= 1.0 {
+        return blended;
+    }
+    let horizontal = |v: DVec3| (v - v.dot(down) * down).try_normalize();
+    let (Some(from), Some(to)) = (horizontal(blended), horizontal(target)) else {
+        return blended;
+    };
+    // Signed azimuth from `from` to `to` about `down`.
+    let angle = from.cross(to).dot(down).atan2(from.dot(to));
+    let extra = angle * (1.0 - (1.0 - turn_rate) / (1.0 - rate));
+    (DQuat::from_axis_angle(down, extra) * blended).normalize()
 }
 
 /// `look` with its elevation above the plane perpendicular to `down` limited to `±max_pitch`
@@ -956,6 +1023,35 @@ pub(crate) mod tests {
         let nan = Raster::new(3, 3, f32::NAN);
         let b = skyline_balance(&nan, None, &p);
         assert!(b.look_x.is_finite() && b.sky_fraction == 1.0);
+    }
+
+    #[test]
+    fn blend_direction_turns_the_azimuth_only() {
+        let down = DVec3::Y;
+        let towards = |deg: f64| DVec3::new(deg.to_radians().sin(), 0.0, deg.to_radians().cos());
+        let azimuth = |v: DVec3| v.x.atan2(v.z).to_degrees();
+        // No extra turn: the method's normalised blend, exactly.
+        let (a, b) = (towards(0.0), towards(40.0));
+        let plain = blend_direction(a, b, 0.25, 0.25, down);
+        assert!((plain - (0.75 * a + 0.25 * b).normalize()).length() < 1e-12);
+        // Rate 0, turn 0.5: half of the azimuth.
+        let half = blend_direction(a, b, 0.0, 0.5, down);
+        assert!((azimuth(half) - 20.0).abs() < 1e-9, "{half}");
+        // Rate 0.5, turn 0.75: the blend goes to 20° (symmetric vectors), then the remaining
+        // 20° shrinks by (1 − 0.75)/(1 − 0.5) = 1/2: 30°.
+        let more = blend_direction(a, b, 0.5, 0.75, down);
+        assert!((azimuth(more) - 30.0).abs() < 1e-9, "{}", azimuth(more));
+        // Turning to the left (negative azimuth) works the same way round.
+        let left = blend_direction(a, towards(-40.0), 0.0, 0.5, down);
+        assert!((azimuth(left) + 20.0).abs() < 1e-9);
+        // The elevation keeps the blend's: a target 30° up turns half-way in azimuth only.
+        let up = DVec3::new(0.0, -0.5, 3f64.sqrt() / 2.0);
+        let target = DQuat::from_axis_angle(down, 40f64.to_radians()) * up;
+        let v = blend_direction(a, target, 0.0, 0.5, down);
+        assert!((v - a).length() > 0.1 && v.y.abs() < 1e-12, "{v}");
+        // Straight up or down has no azimuth: the blend alone.
+        let vertical = blend_direction(a, -down, 0.1, 0.9, down);
+        assert!((vertical - (0.9 * a - 0.1 * down).normalize()).length() < 1e-12);
     }
 
     #[test]
@@ -1391,14 +1487,50 @@ pub(crate) mod tests {
                     pair[1].world_from_camera.translation - pair[0].world_from_camera.translation;
                 assert!(step.length() <= per_frame_step * 1.0001);
             }
-            // The method's own pacing flies into the trees and stops there.
-            let fast = cruise(&photo, &per_frame(), 60);
+            // At the method's own pacing, without free-space steering the camera flies at the
+            // trees and slows down in front of them; with steering it goes around them.
+            let method = AutocruiseParams {
+                free_space_steering: 0.0,
+                ..per_frame()
+            };
+            let fast = cruise(&photo, &method, 60);
             assert_finite(&fast);
-            assert!(
-                fast.stopped_at.is_some() || fast.slowed_at.is_some(),
-                "{fast}"
-            );
+            let steered = cruise(&photo, &per_frame(), 60);
+            let closest = |r: &AutocruiseResult| {
+                r.frames
+                    .iter()
+                    .filter_map(|f| f.clearance)
+                    .fold(f32::INFINITY, f32::min)
+            };
+            assert!(fast.slowed_at.is_some(), "{fast}");
+            assert!(steered.slowed_at.is_none(), "{steered}");
+            assert!(closest(&steered) > 2.0 * closest(&fast), "{steered}{fast}");
             assert_eq!(result, cruise(&photo, &params, 60));
+        }
+
+        /// The path enters the forest left of the centre (its far end is near column 0.3 of
+        /// the photo), the way straight ahead runs into a trunk: the camera turns left onto the
+        /// path and follows it, neither straight into the trees nor up into the canopy.
+        #[test]
+        fn forest_path_cruise_takes_the_path() {
+            let photo = photo("forest_path_320.jpg");
+            let result = cruise(&photo, &AutocruiseParams::default(), 120);
+            let end = result.views[119].world_from_camera;
+            let forward = end.forward();
+            // The column of the input photo the camera ends up facing.
+            let k = photo.intrinsics;
+            let column = (k.cx + k.fx * forward.x / forward.z + 0.5) / photo.size.0 as f32;
+            assert!((0.2..0.4).contains(&column), "column {column}\n{result}");
+            // Level: the method's tilt toward the missing sky stays slow.
+            assert!(forward.y.abs() < 0.1, "{forward}");
+            // Travelling that way too: the last 20 frames move left and forward.
+            let a = result.views[99].world_from_camera.translation;
+            let step = end.translation - a;
+            let heading = (k.cx + k.fx * step.x / step.z + 0.5) / photo.size.0 as f32;
+            assert!(
+                (0.2..0.45).contains(&heading),
+                "heading column {heading}\n{result}"
+            );
         }
 
         /// Renders a few frames of the autocruise path of two photos to

@@ -4,7 +4,9 @@
 
 use super::{PanelContext, Request, StagePanel, Tab, committed, placeholder_ui};
 use crate::geometry::{Intrinsics, View};
-use crate::path::{CameraPath, Ease, Interpolation, Preset, PresetKind};
+use crate::path::{
+    AutocruiseParams, CameraPath, CruiseDirection, Ease, Interpolation, Preset, PresetKind,
+};
 use crate::project::Project;
 use crate::scene::Scene;
 use eframe::egui::{self, Color32, Ui};
@@ -29,6 +31,81 @@ pub fn path_views(project: &Project, scene: &Scene) -> (crate::Result<Vec<View>>
         .path
         .views(&k, ow, &scene.scale, project.output.frames);
     (views, (ow, oh))
+}
+
+/// The autocruise button and its main settings: the flight replaces the path with its
+/// suggested keyframes (one undo step), to be edited key by key.
+fn autocruise_ui(ui: &mut Ui, cx: &mut PanelContext<'_>) {
+    ui.heading("Autocruise");
+    let params = cx.project.camera.autocruise;
+    let busy = cx.job.kind.is_some();
+    if ui
+        .add_enabled(
+            !busy && cx.snapshot.is_some(),
+            egui::Button::new("Fly autocruise"),
+        )
+        .on_hover_text(
+            "Fly the auto-pilot over the scene (steering to open sky and around obstacles) and make its suggested keyframes the path",
+        )
+        .on_disabled_hover_text("wait for the scene to finish building")
+        .clicked()
+    {
+        cx.requests.push(Request::Autocruise);
+    }
+    let mut forward = params.direction == CruiseDirection::Forward;
+    ui.horizontal(|ui| {
+        ui.radio_value(&mut forward, true, "fly in");
+        ui.radio_value(&mut forward, false, "fly out");
+    });
+    let direction = if forward {
+        CruiseDirection::Forward
+    } else {
+        CruiseDirection::Backward
+    };
+    if direction != params.direction {
+        cx.edit("Autocruise direction", |p| {
+            p.camera.autocruise.direction = direction
+        });
+    }
+    type Field = fn(&mut AutocruiseParams) -> &mut f32;
+    let sliders: [(&str, &str, std::ops::RangeInclusive<f32>, Field); 4] = [
+        (
+            "speed",
+            "distance per auto-pilot step, near depths",
+            0.0..=1.0,
+            |a| &mut a.speed,
+        ),
+        (
+            "frames per step",
+            "output frames each auto-pilot step is spread over",
+            1.0..=120.0,
+            |a| &mut a.frames_per_step,
+        ),
+        (
+            "steering",
+            "how strongly the camera turns away from obstacles toward free space (0 = the published method)",
+            0.0..=1.0,
+            |a| &mut a.free_space_steering,
+        ),
+        (
+            "lookahead",
+            "how far ahead obstacles make it turn, near depths",
+            0.5..=10.0,
+            |a| &mut a.lookahead_distance,
+        ),
+    ];
+    for (name, help, range, field) in sliders {
+        let mut copy = params;
+        let value = *field(&mut copy);
+        if let Some(v) = committed(ui, name, value, |ui, v| {
+            ui.add(egui::Slider::new(v, range).text(name))
+                .on_hover_text(help)
+        }) {
+            cx.edit("Autocruise setting", |p| {
+                *field(&mut p.camera.autocruise) = v
+            });
+        }
+    }
 }
 
 /// The Camera tab.
@@ -390,6 +467,8 @@ impl StagePanel for CameraPanel {
                 }
             }
         }
+        ui.separator();
+        autocruise_ui(ui, cx);
         ui.separator();
         ui.label(
             egui::RichText::new(

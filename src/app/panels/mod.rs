@@ -66,6 +66,8 @@ impl Tab {
 pub enum Request {
     /// Compute the automatic motion suggestion.
     SuggestMotion,
+    /// Fly autocruise over the scene and make its keyframes the path.
+    Autocruise,
     /// Start an export.
     Export {
         /// Target folder.

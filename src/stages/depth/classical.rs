@@ -62,7 +62,8 @@ pub struct ClassicalDepthParams {
     /// structures above the horizon are not all at the same depth. Default 0.3.
     pub background_ramp: f32,
     /// Colour step (sum of absolute RGB differences between vertically adjacent working
-    /// pixels) at which the pop-up carry is halved. Default 0.1.
+    /// pixels) at which the pop-up carry is halved. Default 0.2 (bark and foliage texture below it;
+    /// 0.1 cut tree trunks off from the ground they stand on).
     pub popup_edge: f32,
     /// How far a vertical structure carries its ground-contact nearness upward before it
     /// fades, fraction of the image height. Default 1.0.
@@ -83,6 +84,15 @@ pub struct ClassicalDepthParams {
     /// Width of the border band sampled as "background", fraction of the shorter side.
     /// Default 0.05.
     pub border_band: f32,
+    /// Blur radius (Gaussian σ, fraction of the longer working side) of the object cue's
+    /// structure test. Default 0.06.
+    pub object_structure_sigma: f32,
+    /// Object-cue structure (the share of its variance that survives that blur: 1 = whole
+    /// regions, 0 = pixel-scale speckle) below which the cue is off: a cue that only follows
+    /// texture (moss, foliage, gravel) marks no object. Default 0.15.
+    pub object_structure_onset: f32,
+    /// Object-cue structure at which the cue has its full weight. Default 0.25.
+    pub object_structure_full: f32,
     /// Weight of the haze cue when the image is fully hazy. Default 0.5.
     pub haze_weight: f32,
     /// Median normalised dark channel at which the haze cue starts to count. Default 0.5.
@@ -114,7 +124,7 @@ impl Default for ClassicalDepthParams {
             sky_below_horizon: 0.05,
             ground_weight: 0.5,
             background_ramp: 0.3,
-            popup_edge: 0.1,
+            popup_edge: 0.2,
             popup_carry: 1.0,
             object_weight: 1.0,
             object_colour_scale: 0.4,
@@ -122,6 +132,9 @@ impl Default for ClassicalDepthParams {
             object_coherence_onset: 0.2,
             object_coherence_full: 0.4,
             border_band: 0.05,
+            object_structure_sigma: 0.06,
+            object_structure_onset: 0.15,
+            object_structure_full: 0.25,
             haze_weight: 0.5,
             haze_onset: 0.5,
             haze_full: 0.75,
@@ -162,6 +175,7 @@ impl ClassicalDepthParams {
             ("haze_weight", self.haze_weight),
             ("background_ramp", self.background_ramp),
             ("border_band", self.border_band),
+            ("object_structure_sigma", self.object_structure_sigma),
             ("refine_radius", self.refine_radius),
             ("sky_min_luma", self.sky_min_luma),
             ("sky_max_texture", self.sky_max_texture),
@@ -183,6 +197,14 @@ impl ClassicalDepthParams {
         {
             return Err(Error::invalid(
                 "object_coherence_full must be greater than object_coherence_onset",
+            ));
+        }
+        if !(self.object_structure_onset.is_finite()
+            && self.object_structure_full.is_finite()
+            && self.object_structure_full > self.object_structure_onset)
+        {
+            return Err(Error::invalid(
+                "object_structure_full must be greater than object_structure_onset",
             ));
         }
         if !(self.haze_full.is_finite() && self.haze_full > self.haze_onset) {
@@ -225,6 +247,10 @@ pub struct ClassicalAnalysis {
     pub haziness: f32,
     /// Mean similarity of two border samples in the object cue's kernel, `[0, 1]`.
     pub border_coherence: f32,
+    /// Share of the object cue's variance at region scale, `[0, 1]` ([`cue_structure`]).
+    pub object_structure: f32,
+    /// Weight of the object cue in the fusion, after both reliability tests.
+    pub object_weight: f32,
     /// Hard sky mask at working resolution, as 0/1.
     pub sky_work: GrayRaster,
     /// Position cue (ground plane + pop-up), nearness `[0, 1]`.
@@ -312,9 +338,14 @@ impl ClassicalDepth {
                 *o *= 1.0 - sky_like;
             }
         }
+        let object_structure =
+            cue_structure(&object_work, p.object_structure_sigma * ww.max(wh) as f32);
         let object_share = ((border_coherence - p.object_coherence_onset)
             / (p.object_coherence_full - p.object_coherence_onset))
-            .clamp(0.0, 1.0);
+            .clamp(0.0, 1.0)
+            * ((object_structure - p.object_structure_onset)
+                / (p.object_structure_full - p.object_structure_onset))
+                .clamp(0.0, 1.0);
         progress.report(0.6, "depth: cues");
         progress.check()?;
 
@@ -400,6 +431,8 @@ impl ClassicalDepth {
             horizon_detected,
             haziness,
             border_coherence,
+            object_structure,
+            object_weight: wo,
             sky_work,
             position_work,
             object_work,
@@ -712,6 +745,27 @@ fn object_cue(
         coarse.sample_bilinear(x as f32 / 2.0, y as f32 / 2.0)
     });
     (cue, coherence)
+}
+
+/// How much of a cue's variance is structure at region scale rather than pixel-scale speckle:
+/// `var(G_σ ∗ c) / var(c)` for a Gaussian blur of `sigma_px`, in `[0, 1]` (0 for a constant
+/// cue). A cue made of whole regions keeps most of its variance under the blur; one that
+/// follows texture averages out.
+pub fn cue_structure(cue: &GrayRaster, sigma_px: f32) -> f32 {
+    let variance = |r: &GrayRaster| {
+        let n = r.len().max(1) as f64;
+        let mean = r.data().iter().map(|&v| v as f64).sum::<f64>() / n;
+        r.data()
+            .iter()
+            .map(|&v| (v as f64 - mean).powi(2))
+            .sum::<f64>()
+            / n
+    };
+    let total = variance(cue);
+    if total.is_nan() || total <= 1e-12 {
+        return 0.0;
+    }
+    (variance(&gaussian_blur(cue, sigma_px)) / total).clamp(0.0, 1.0) as f32
 }
 
 /// Atmospheric light `A` of the dark channel prior: the mean colour of the brightest 0.1 %
@@ -1093,6 +1147,54 @@ mod tests {
         let mid = median_depth(&e.depth, [0.2, 0.5, 0.8, 0.6]);
         let near = median_depth(&e.depth, [0.2, 0.9, 0.8, 1.0]);
         assert!(near < mid, "{near} {mid}");
+    }
+
+    #[test]
+    fn cue_structure_known_answers() {
+        // Constant: no variance, 0 by definition.
+        assert_eq!(cue_structure(&Raster::new(16, 16, 0.7), 2.0), 0.0);
+        // No blur keeps all of the variance.
+        let halves = Raster::from_fn(64, 64, |x, _| if x < 32 { 0.0 } else { 1.0 });
+        assert!((cue_structure(&halves, 0.0) - 1.0).abs() < 1e-6);
+        // Two halves (whole regions) keep most of it; a one-pixel checkerboard (texture)
+        // averages out: a 5-tap-wide Gaussian leaves ≈ (Σ(−1)^i g_i)² ≈ 0.
+        let s = cue_structure(&halves, 2.0);
+        assert!(s > 0.85 && s < 1.0, "{s}");
+        let checker = Raster::from_fn(64, 64, |x, y| ((x + y) % 2) as f32);
+        let c = cue_structure(&checker, 2.0);
+        assert!(c < 1e-3, "{c}");
+        // NaN-free on a one-pixel cue.
+        assert_eq!(cue_structure(&Raster::new(1, 1, 0.3), 5.0), 0.0);
+    }
+
+    /// The object cue follows whole objects on the Aloe pair (a plant against a plain
+    /// background) and only texture in the forest: the structure test keeps it on the first and
+    /// turns it off on the second, where it would make every fern and bark patch an object.
+    #[test]
+    fn object_cue_is_off_where_it_only_follows_texture() {
+        let analyse = |name: &str| {
+            let img = load_test_photo(name);
+            let (w, h) = img.size();
+            estimator()
+                .analyse(&img, &intrinsics(w, h), &Progress::none())
+                .unwrap()
+        };
+        let aloe = analyse("aloe_left_q.jpg");
+        let forest = analyse("forest_path_320.jpg");
+        assert!(aloe.object_structure > 0.25, "{}", aloe.object_structure);
+        assert!(aloe.object_weight > 0.5, "{}", aloe.object_weight);
+        assert!(
+            forest.object_structure < 0.15,
+            "{}",
+            forest.object_structure
+        );
+        assert_eq!(forest.object_weight, 0.0);
+        // And the onset/full pair is validated like the others.
+        let bad = ClassicalDepthParams {
+            object_structure_full: 0.1,
+            ..ClassicalDepthParams::default()
+        };
+        assert!(bad.validate().is_err());
     }
 
     #[test]
