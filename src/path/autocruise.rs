@@ -49,9 +49,9 @@
 //!   `x` move toward the image column whose horizontal direction has the longest free travel
 //!   (same swept-sphere test as below, 17 columns; compared beyond the lookahead too, so that
 //!   a corridor whose far end is open wins over trees that merely stand past the lookahead),
-//!   with a weight that grows with how blocked the way ahead is (full once the clearance is
-//!   under 3/4 of the lookahead), and at the faster blend rate `steering_lerp`, in azimuth
-//!   only. The method itself only turns toward open sky, which a scene without sky never
+//!   in proportion to how blocked the way ahead is, and at the faster blend rate
+//!   `steering_lerp`, in azimuth only (a full weight, whatever the blockage, turned the camera
+//!   on evening_glow 30° toward the open lake and past the canvas). The method itself only turns toward open sky, which a scene without sky never
 //!   offers.
 //! * Obstacles: the camera is a sphere of radius `stop_distance` (near depths) that must not
 //!   touch any point of the cloud (the thinned cloud of the analysis render, all of it, seen or
@@ -94,10 +94,6 @@ pub const BALANCE_EPSILON: f32 = 1e-4;
 
 /// Candidate directions per side tried by free-space steering (columns `x = 0.5 ± 0.4·k/n`).
 const STEERING_CANDIDATES_PER_SIDE: usize = 8;
-
-/// Blockage of the way ahead (`1 − clearance/lookahead`) at which free-space steering has its
-/// full weight; below it the weight ramps up from 0 in proportion.
-const STEERING_FULL_BLOCKAGE: f32 = 0.25;
 
 /// How much farther (relative) a side column of free-space steering must get than the best
 /// one nearer the centre to be chosen.
@@ -167,8 +163,8 @@ pub struct AutocruiseParams {
     pub stop_speed_factor: f32,
     /// Steering toward free space, `[0, 1]`: when the way straight ahead (horizontally) is
     /// blocked within `lookahead_distance`, the look target `x` moves toward the image column
-    /// whose horizontal direction gets farthest, by this weight times a ramp of how blocked
-    /// the way ahead is (full under 3/4 of the lookahead). 0 is the method as published (sky
+    /// whose horizontal direction gets farthest, in proportion to this weight times how
+    /// blocked the way ahead is (`1 − clearance/lookahead`). 0 is the method as published (sky
     /// balance only).
     /// Forward flight only.
     pub free_space_steering: f32,
@@ -615,8 +611,10 @@ pub fn autocruise(
         let mut steering = 0.0f32;
         if params.free_space_steering > 0.0 && params.direction == CruiseDirection::Forward {
             let lookahead = params.lookahead_distance as f64 * near;
-            // Free travel along the horizontal direction of column `x` (infinite when
-            // nothing is in the way), and that direction.
+            // Free travel along the horizontal direction of column `x`, and that direction.
+            // Nothing in the way counts as the lookahead, not as infinite: a direction out of
+            // the scene's content is unknown, not free (infinite, it pulled the camera on
+            // evening_glow 25° to the side, out of the canvas).
             let heading = {
                 let h = ray_world(0.5, 0.5);
                 (h - h.dot(world_down) * world_down)
@@ -635,7 +633,7 @@ pub fn autocruise(
                     stop,
                     params.obstacle_min_points,
                 )
-                .unwrap_or(f64::INFINITY);
+                .unwrap_or(lookahead);
                 (c, horizontal)
             };
             let centre = clearance_at(0.5).0;
@@ -658,8 +656,7 @@ pub fn autocruise(
                         }
                     }
                 }
-                let weight = params.free_space_steering.min(1.0)
-                    * (blocked / STEERING_FULL_BLOCKAGE).min(1.0);
+                let weight = params.free_space_steering.min(1.0) * blocked;
                 look_x += weight * (best.0 - look_x);
                 move_x += weight * (best.0 - move_x);
                 if best.0 != 0.5 {
