@@ -51,8 +51,8 @@
 //!   a corridor whose far end is open wins over trees that merely stand past the lookahead),
 //!   in proportion to how blocked the way ahead is, and at the faster blend rate
 //!   `steering_lerp`, in azimuth only (a full weight, whatever the blockage, turned the camera
-//!   on evening_glow 30° toward the open lake and past the canvas). The method itself only turns toward open sky, which a scene without sky never
-//!   offers.
+//!   on evening_glow 30° toward the open lake and past the canvas). The method itself only
+//!   turns toward open sky, which a scene without sky never offers.
 //! * Obstacles: the camera is a sphere of radius `stop_distance` (near depths) that must not
 //!   touch any point of the cloud (the thinned cloud of the analysis render, all of it, seen or
 //!   not: a camera turned away from a wall must not back into it). Sweeping the sphere along
@@ -613,30 +613,21 @@ pub fn autocruise(
             let lookahead = params.lookahead_distance as f64 * near;
             // Free travel along the horizontal direction of column `x`, and that direction.
             // Nothing in the way counts as the lookahead, not as infinite: a direction out of
-            // the scene's content is unknown, not free (infinite, it pulled the camera on
-            // evening_glow 25° to the side, out of the canvas).
-            let heading = {
-                let h = ray_world(0.5, 0.5);
-                (h - h.dot(world_down) * world_down)
-                    .try_normalize()
-                    .unwrap_or(h)
-            };
+            // the scene's content is unknown, not free.
             let clearance_at = |x: f32| -> (f64, DVec3) {
-                let horizontal = ray_world(x, 0.5);
-                let horizontal = (horizontal - horizontal.dot(world_down) * world_down)
-                    .try_normalize()
-                    .unwrap_or(horizontal);
+                let ray = ray_world(x, 0.5);
+                let direction = horizontal(ray, world_down).unwrap_or(ray);
                 let c = sphere_clearance(
                     &preview,
                     position,
-                    horizontal,
+                    direction,
                     stop,
                     params.obstacle_min_points,
                 )
                 .unwrap_or(lookahead);
-                (c, horizontal)
+                (c, direction)
             };
-            let centre = clearance_at(0.5).0;
+            let (centre, heading) = clearance_at(0.5);
             let blocked = (1.0 - centre / lookahead).clamp(0.0, 1.0) as f32;
             if blocked > 0.0 {
                 // The column that gets farthest along the current heading before it is
@@ -824,14 +815,18 @@ fn blend_direction(current: DVec3, target: DVec3, rate: f64, turn_rate: f64, dow
     if turn_rate <= rate || rate >= 1.0 {
         return blended;
     }
-    let horizontal = |v: DVec3| (v - v.dot(down) * down).try_normalize();
-    let (Some(from), Some(to)) = (horizontal(blended), horizontal(target)) else {
+    let (Some(from), Some(to)) = (horizontal(blended, down), horizontal(target, down)) else {
         return blended;
     };
     // Signed azimuth from `from` to `to` about `down`.
     let angle = from.cross(to).dot(down).atan2(from.dot(to));
     let extra = angle * (1.0 - (1.0 - turn_rate) / (1.0 - rate));
     (DQuat::from_axis_angle(down, extra) * blended).normalize()
+}
+
+/// The unit direction of `v` in the plane perpendicular to `down`; `None` along `down`.
+fn horizontal(v: DVec3, down: DVec3) -> Option<DVec3> {
+    (v - v.dot(down) * down).try_normalize()
 }
 
 /// `look` with its elevation above the plane perpendicular to `down` limited to `±max_pitch`
