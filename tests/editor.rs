@@ -437,3 +437,67 @@ fn autocruise_button_makes_keyframes() {
         "one undo brings the preset back"
     );
 }
+
+/// Every tab, with the inspector's optional fields shown (keyframe editor, output size, frame
+/// range), names every widget a user can act on: a screen reader and `get_by_label` reach them.
+#[test]
+fn every_tab_names_its_widgets() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(mut h) = harness(fast_project(dir.path())) else {
+        return;
+    };
+    let limit = Duration::from_secs(600);
+    wait_idle(&mut h, limit);
+    let tabs = [
+        "1 Input",
+        "2 Canvas",
+        "3 Depth",
+        "4 Layers",
+        "5 Motion",
+        "6 Camera",
+        "7 Preview",
+        "8 Export",
+    ];
+    let check = |h: &mut Harness<'_, EditorApp>, tab: &str| {
+        h.step();
+        h.step();
+        let unnamed = h.unnamed_widgets();
+        assert!(unnamed.is_empty(), "{tab}: unnamed widgets {unnamed:#?}");
+    };
+    for tab in tabs {
+        h.get_by_label(tab).click();
+        check(&mut h, tab);
+    }
+    h.get_by_label("6 Camera").click();
+    h.step();
+    h.get_by_label("Edit as keyframes").click();
+    wait_idle(&mut h, limit);
+    // A selected key shows its timing controls under the timeline too.
+    h.get_by_label("frame 0").click();
+    check(&mut h, "6 Camera, keyframes");
+    let CameraPath::Keyframes(keys) = &h.state().project().unwrap().camera.path else {
+        panic!("keyframes")
+    };
+    let keys = keys.keys.len();
+    // One per key in the inspector's table, one under the timeline for the selected key.
+    let eases = h
+        .query_all_by_role_and_label(egui::accesskit::Role::ComboBox, "ease")
+        .count();
+    assert_eq!(eases, keys + 1);
+    h.get_by_label("8 Export").click();
+    h.step();
+    h.get_by_label("Size of the photo").click();
+    h.step();
+    h.step();
+    h.get_by_label("Only a range of frames").click();
+    h.step();
+    h.step();
+    check(&mut h, "8 Export, size and range");
+    for shown in ["width", "height", "from", "to"] {
+        assert!(
+            h.query_by_role_and_label(egui::accesskit::Role::SpinButton, shown)
+                .is_some(),
+            "{shown}: the field is reachable by its label"
+        );
+    }
+}

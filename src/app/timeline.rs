@@ -80,9 +80,10 @@ pub fn timeline_ui(ui: &mut Ui, cx: &mut PanelContext<'_>) {
         }
         ui.checkbox(&mut cx.timeline.looping, "Loop");
         let mut f = cx.timeline.frame;
-        ui.label("Frame");
+        let label = ui.label("Frame");
         if ui
             .add(egui::DragValue::new(&mut f).range(0..=frames - 1))
+            .labelled_by(label.id)
             .changed()
         {
             cx.timeline.seek(f);
@@ -127,7 +128,7 @@ fn keyframe_controls_ui(ui: &mut Ui, cx: &mut PanelContext<'_>) {
     ui.separator();
     ui.label(format!("key {} at frame {}", i + 1, key.frame));
     let mut interpolation = key.interpolation;
-    egui::ComboBox::from_id_salt("key-interpolation")
+    egui::ComboBox::from_label("interpolation")
         .selected_text(interpolation.name())
         .show_ui(ui, |ui| {
             for v in Interpolation::ALL {
@@ -135,7 +136,7 @@ fn keyframe_controls_ui(ui: &mut Ui, cx: &mut PanelContext<'_>) {
             }
         });
     let mut ease = key.ease;
-    egui::ComboBox::from_id_salt("key-ease")
+    egui::ComboBox::from_label("ease")
         .selected_text(ease.name())
         .show_ui(ui, |ui| {
             for v in Ease::ALL {

@@ -417,8 +417,8 @@ impl StagePanel for CameraPanel {
                 order.sort_by(|&a, &b| k.keys[a].frame.total_cmp(&k.keys[b].frame));
                 egui::Grid::new("keys").striped(true).show(ui, |ui| {
                     ui.label("frame");
-                    ui.label("interpolation");
-                    ui.label("ease");
+                    let interpolation_header = ui.label("interpolation").id;
+                    let ease_header = ui.label("ease").id;
                     ui.end_row();
                     for i in order {
                         let key = k.keys[i];
@@ -437,7 +437,9 @@ impl StagePanel for CameraPanel {
                                 for v in Interpolation::ALL {
                                     ui.selectable_value(&mut interpolation, v, v.name());
                                 }
-                            });
+                            })
+                            .response
+                            .labelled_by(interpolation_header);
                         let mut ease = key.ease;
                         egui::ComboBox::from_id_salt(("ease", i))
                             .selected_text(ease.name())
@@ -445,7 +447,9 @@ impl StagePanel for CameraPanel {
                                 for v in Ease::ALL {
                                     ui.selectable_value(&mut ease, v, v.name());
                                 }
-                            });
+                            })
+                            .response
+                            .labelled_by(ease_header);
                         if ui.small_button("x").on_hover_text("Delete key").clicked() {
                             crate::app::timeline::delete_key(cx, i);
                         }

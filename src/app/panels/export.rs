@@ -128,9 +128,14 @@ impl StagePanel for ExportPanel {
         if let (Some(w), Some(h)) = (out.width, out.height)
             && let Some(v) = committed(ui, "out-size", (w, h), |ui, v| {
                 ui.horizontal(|ui| {
-                    let a = ui.add(egui::DragValue::new(&mut v.0).range(16..=8192));
-                    ui.label("×");
-                    let b = ui.add(egui::DragValue::new(&mut v.1).range(16..=8192));
+                    let width = ui.label("width");
+                    let a = ui
+                        .add(egui::DragValue::new(&mut v.0).range(16..=8192))
+                        .labelled_by(width.id);
+                    let height = ui.label("height");
+                    let b = ui
+                        .add(egui::DragValue::new(&mut v.1).range(16..=8192))
+                        .labelled_by(height.id);
                     a.union(b)
                 })
                 .inner
@@ -143,8 +148,9 @@ impl StagePanel for ExportPanel {
         }
         if let Some(v) = committed(ui, "export-frames", out.frames, |ui, v| {
             ui.horizontal(|ui| {
-                ui.label("frames");
+                let label = ui.label("frames");
                 ui.add(egui::DragValue::new(v).range(1..=10_000))
+                    .labelled_by(label.id)
             })
             .inner
         }) {
@@ -152,8 +158,9 @@ impl StagePanel for ExportPanel {
         }
         if let Some(v) = committed(ui, "export-fps", out.fps, |ui, v| {
             ui.horizontal(|ui| {
-                ui.label("fps");
+                let label = ui.label("fps");
                 ui.add(egui::DragValue::new(v).range(1.0..=120.0))
+                    .labelled_by(label.id)
             })
             .inner
         }) {
@@ -162,9 +169,12 @@ impl StagePanel for ExportPanel {
         ui.checkbox(&mut self.range_on, "Only a range of frames");
         if self.range_on {
             ui.horizontal(|ui| {
-                ui.add(egui::DragValue::new(&mut self.range.0).range(0..=out.frames - 1));
-                ui.label("..");
-                ui.add(egui::DragValue::new(&mut self.range.1).range(1..=out.frames));
+                let from = ui.label("from");
+                ui.add(egui::DragValue::new(&mut self.range.0).range(0..=out.frames - 1))
+                    .labelled_by(from.id);
+                let to = ui.label("to");
+                ui.add(egui::DragValue::new(&mut self.range.1).range(1..=out.frames))
+                    .labelled_by(to.id);
                 ui.label("(end exclusive)");
             });
         }

@@ -54,8 +54,9 @@ impl StagePanel for InputPanel {
         ui.heading("Output");
         if let Some(v) = committed(ui, "frames", cx.project.output.frames, |ui, v| {
             ui.horizontal(|ui| {
-                ui.label("frames");
+                let label = ui.label("frames");
                 ui.add(egui::DragValue::new(v).range(1..=10_000))
+                    .labelled_by(label.id)
             })
             .inner
         }) {
@@ -63,8 +64,9 @@ impl StagePanel for InputPanel {
         }
         if let Some(v) = committed(ui, "fps", cx.project.output.fps, |ui, v| {
             ui.horizontal(|ui| {
-                ui.label("fps");
+                let label = ui.label("fps");
                 ui.add(egui::DragValue::new(v).range(1.0..=120.0))
+                    .labelled_by(label.id)
             })
             .inner
         }) {
@@ -83,8 +85,8 @@ impl StagePanel for InputPanel {
         }
         if let Some(v) = committed(ui, "seed", cx.project.inpaint.seed, |ui, v| {
             ui.horizontal(|ui| {
-                ui.label("seed");
-                ui.add(egui::DragValue::new(v))
+                let label = ui.label("seed");
+                ui.add(egui::DragValue::new(v)).labelled_by(label.id)
             })
             .inner
         }) {

@@ -298,9 +298,10 @@ impl StagePanel for LayersPanel {
             for (i, &threshold) in t.iter().enumerate().take(interior).skip(1) {
                 let overridden = overrides.get(i).copied().flatten().is_some();
                 ui.horizontal(|ui| {
-                    ui.label(format!("d{}", i + 1));
+                    let label = ui.label(format!("d{}", i + 1));
                     if let Some(v) = committed(ui, &format!("thr{i}"), threshold, |ui, v| {
                         ui.add(egui::DragValue::new(v).speed(0.01).range(1e-3..=1e6))
+                            .labelled_by(label.id)
                     }) {
                         cx.edit("Set layer threshold", |p| {
                             set_override(&mut p.layers.params.overrides, i, v)
