@@ -448,23 +448,15 @@ fn every_tab_names_its_widgets() {
     };
     let limit = Duration::from_secs(600);
     wait_idle(&mut h, limit);
-    let tabs = [
-        "1 Input",
-        "2 Canvas",
-        "3 Depth",
-        "4 Layers",
-        "5 Motion",
-        "6 Camera",
-        "7 Preview",
-        "8 Export",
-    ];
+    let tabs = makeit4d::app::panels::tab_labels();
+    assert_eq!(tabs.len(), 8);
     let check = |h: &mut Harness<'_, EditorApp>, tab: &str| {
         h.step();
         h.step();
         let unnamed = h.unnamed_widgets();
         assert!(unnamed.is_empty(), "{tab}: unnamed widgets {unnamed:#?}");
     };
-    for tab in tabs {
+    for tab in &tabs {
         h.get_by_label(tab).click();
         check(&mut h, tab);
     }

@@ -86,22 +86,13 @@ fn regenerate_screenshots() {
     }
     wait(&mut h, "the motion build", EditorApp::is_idle);
 
-    let tabs = [
-        "1 Input",
-        "2 Canvas",
-        "3 Depth",
-        "4 Layers",
-        "5 Motion",
-        "6 Camera",
-        "7 Preview",
-        "8 Export",
-    ];
+    let tabs = makeit4d::app::panels::tab_labels();
     h.state_mut().seek(30);
     for (i, label) in tabs.iter().enumerate() {
         h.get_by_label(label).click();
         h.remove_cursor();
         h.state_mut().clear_notices();
-        if *label == "7 Preview" || *label == "6 Camera" {
+        if label == "7 Preview" || label == "6 Camera" {
             wait(&mut h, "the preview", |a| {
                 a.hole_fractions().contains_key(&30)
             });
@@ -120,7 +111,7 @@ fn regenerate_screenshots() {
         );
         let name = label
             .split_once(' ')
-            .map_or(*label, |(_, n)| n)
+            .map_or(label.as_str(), |(_, n)| n)
             .to_lowercase();
         let path = out.join(format!("{:02}-{name}.png", i + 1));
         image.save(&path).unwrap();

@@ -1214,7 +1214,7 @@ impl EditorApp {
         ui.horizontal(|ui| {
             for (i, panel) in self.panels.iter().enumerate() {
                 let selected = self.tab == panel.tab();
-                let text = RichText::new(format!("{} {}", i + 1, panel.title())).size(15.0);
+                let text = RichText::new(super::panels::tab_label(i, panel.title())).size(15.0);
                 if ui.selectable_label(selected, text).clicked() {
                     self.tab = panel.tab();
                 }

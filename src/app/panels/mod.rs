@@ -286,6 +286,21 @@ pub fn all_panels() -> Vec<Box<dyn StagePanel>> {
     ]
 }
 
+/// The tab button's text for the panel at `index` (0-based) with `title`: its number (the
+/// keyboard shortcut) and its title, e.g. "4 Layers".
+pub fn tab_label(index: usize, title: &str) -> String {
+    format!("{} {title}", index + 1)
+}
+
+/// The tab buttons' texts, in tab order.
+pub fn tab_labels() -> Vec<String> {
+    all_panels()
+        .iter()
+        .enumerate()
+        .map(|(i, p)| tab_label(i, p.title()))
+        .collect()
+}
+
 /// A value widget bound to a project setting that proposes one edit per gesture: while the
 /// user drags (or types into) the widget its value lives in temporary UI memory, and the edit
 /// is made when the gesture ends. Returns the committed value.
