@@ -113,6 +113,42 @@ impl ImageView {
     pub fn scale(&self) -> f32 {
         self.rect.width() / self.size[0].max(1.0)
     }
+
+    /// Follows a brush gesture on `response` into `stroke` (image pixels, a point each time the
+    /// pointer has moved more than one pixel; a click is a one-point stroke). Returns the
+    /// finished stroke when the gesture ends, leaving `stroke` empty.
+    pub fn track_stroke(
+        &self,
+        ui: &Ui,
+        response: &Response,
+        stroke: &mut Vec<[f32; 2]>,
+    ) -> Option<Vec<[f32; 2]>> {
+        if response.drag_started_by(egui::PointerButton::Primary)
+            && let Some(p) = ui.input(|i| i.pointer.press_origin())
+        {
+            *stroke = vec![self.to_image(p)];
+        }
+        let pointer = response.interact_pointer_pos().or(response.hover_pos());
+        if response.dragged_by(egui::PointerButton::Primary)
+            && let Some(p) = pointer
+        {
+            let q = self.to_image(p);
+            if stroke
+                .last()
+                .is_none_or(|l| (l[0] - q[0]).hypot(l[1] - q[1]) > 1.0)
+            {
+                stroke.push(q);
+            }
+        }
+        if response.clicked()
+            && stroke.is_empty()
+            && let Some(p) = pointer
+        {
+            stroke.push(self.to_image(p));
+        }
+        ((response.drag_stopped() || response.clicked()) && !stroke.is_empty())
+            .then(|| std::mem::take(stroke))
+    }
 }
 
 /// Allocates the whole available area, draws `texture` fitted into it (zoomed and panned by

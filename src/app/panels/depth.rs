@@ -115,31 +115,10 @@ impl StagePanel for DepthPanel {
                 }
             }
             DepthTool::Brush(kind) => {
-                if response.drag_started_by(egui::PointerButton::Primary)
-                    && let Some(p) = ui.input(|i| i.pointer.press_origin())
-                {
-                    self.stroke = vec![view.to_image(p)];
-                }
-                if primary && let Some(p) = response.interact_pointer_pos() {
-                    let q = view.to_image(p);
-                    if self
-                        .stroke
-                        .last()
-                        .is_none_or(|l| (l[0] - q[0]).hypot(l[1] - q[1]) > 1.0)
-                    {
-                        self.stroke.push(q);
-                    }
-                }
-                if response.clicked()
-                    && self.stroke.is_empty()
-                    && let Some(p) = response.interact_pointer_pos().or(response.hover_pos())
-                {
-                    self.stroke.push(view.to_image(p));
-                }
-                if (response.drag_stopped() || response.clicked()) && !self.stroke.is_empty() {
+                if let Some(points) = view.track_stroke(ui, &response, &mut self.stroke) {
                     let stroke = DepthStroke {
                         kind,
-                        points: std::mem::take(&mut self.stroke),
+                        points,
                         radius_px: self.radius_px,
                         strength: self.strength,
                     };

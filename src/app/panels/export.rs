@@ -1,7 +1,10 @@
 //! Export: folder, PNG bit depth, size, fps, frame range, passes, video; progress and cancel.
 //! Runs the command line's `render_sequence` on the scene thread.
 
-use super::{PanelContext, PanelMessage, Request, StagePanel, Tab, committed, placeholder_ui};
+use super::{
+    PanelContext, PanelMessage, Request, StagePanel, Tab, committed, frames_and_fps_ui,
+    placeholder_ui,
+};
 use crate::app::worker::JobKind;
 use crate::export::{ExportOptions, Passes, VideoFormat, VideoOptions};
 use eframe::egui::{self, Ui};
@@ -146,26 +149,7 @@ impl StagePanel for ExportPanel {
                 p.output.height = Some(v.1);
             });
         }
-        if let Some(v) = committed(ui, "export-frames", out.frames, |ui, v| {
-            ui.horizontal(|ui| {
-                let label = ui.label("frames");
-                ui.add(egui::DragValue::new(v).range(1..=10_000))
-                    .labelled_by(label.id)
-            })
-            .inner
-        }) {
-            cx.edit("Frame count", |p| p.output.frames = v);
-        }
-        if let Some(v) = committed(ui, "export-fps", out.fps, |ui, v| {
-            ui.horizontal(|ui| {
-                let label = ui.label("fps");
-                ui.add(egui::DragValue::new(v).range(1.0..=120.0))
-                    .labelled_by(label.id)
-            })
-            .inner
-        }) {
-            cx.edit("Frame rate", |p| p.output.fps = v);
-        }
+        frames_and_fps_ui(ui, cx);
         ui.checkbox(&mut self.range_on, "Only a range of frames");
         if self.range_on {
             ui.horizontal(|ui| {

@@ -1,7 +1,9 @@
 //! The photo and the settings every stage shares: field of view, output size and timing,
 //! inpainting quality.
 
-use super::{PanelContext, StagePanel, Tab, committed, scene_image_ui};
+use super::{
+    PanelContext, StagePanel, Tab, committed, frames_and_fps_ui, labelled, scene_image_ui,
+};
 use crate::app::viewport::ViewTransform;
 use crate::stages::inpaint::InpaintPreset;
 use eframe::egui::{self, Sense, Ui};
@@ -52,26 +54,7 @@ impl StagePanel for InputPanel {
         }
         ui.separator();
         ui.heading("Output");
-        if let Some(v) = committed(ui, "frames", cx.project.output.frames, |ui, v| {
-            ui.horizontal(|ui| {
-                let label = ui.label("frames");
-                ui.add(egui::DragValue::new(v).range(1..=10_000))
-                    .labelled_by(label.id)
-            })
-            .inner
-        }) {
-            cx.edit("Frame count", |p| p.output.frames = v);
-        }
-        if let Some(v) = committed(ui, "fps", cx.project.output.fps, |ui, v| {
-            ui.horizontal(|ui| {
-                let label = ui.label("fps");
-                ui.add(egui::DragValue::new(v).range(1.0..=120.0))
-                    .labelled_by(label.id)
-            })
-            .inner
-        }) {
-            cx.edit("Frame rate", |p| p.output.fps = v);
-        }
+        frames_and_fps_ui(ui, cx);
         ui.separator();
         ui.heading("Inpainting");
         let mut preset = cx.project.inpaint.preset;
@@ -84,11 +67,7 @@ impl StagePanel for InputPanel {
             cx.edit("Inpaint quality", |p| p.inpaint.preset = preset);
         }
         if let Some(v) = committed(ui, "seed", cx.project.inpaint.seed, |ui, v| {
-            ui.horizontal(|ui| {
-                let label = ui.label("seed");
-                ui.add(egui::DragValue::new(v)).labelled_by(label.id)
-            })
-            .inner
+            labelled(ui, "seed", egui::DragValue::new(v))
         }) {
             cx.edit("Inpaint seed", |p| p.inpaint.seed = v);
         }

@@ -327,6 +327,31 @@ where
     }
 }
 
+/// A label and the widget it names, side by side: the label is the widget's accessible name
+/// (what a screen reader says, what `get_by_label` finds).
+pub fn labelled(ui: &mut Ui, text: &str, widget: impl egui::Widget) -> Response {
+    ui.horizontal(|ui| {
+        let label = ui.label(text);
+        ui.add(widget).labelled_by(label.id)
+    })
+    .inner
+}
+
+/// The output's frame count and frame rate, each one edit per gesture (Input and Export tabs).
+pub fn frames_and_fps_ui(ui: &mut Ui, cx: &mut PanelContext<'_>) {
+    let out = cx.project.output;
+    if let Some(v) = committed(ui, "frames", out.frames, |ui, v| {
+        labelled(ui, "frames", egui::DragValue::new(v).range(1..=10_000))
+    }) {
+        cx.edit("Frame count", |p| p.output.frames = v);
+    }
+    if let Some(v) = committed(ui, "fps", out.fps, |ui, v| {
+        labelled(ui, "fps", egui::DragValue::new(v).range(1.0..=120.0))
+    }) {
+        cx.edit("Frame rate", |p| p.output.fps = v);
+    }
+}
+
 /// Shows a centred hint where a view has nothing to show yet.
 pub fn placeholder_ui(ui: &mut Ui, text: &str) {
     ui.centered_and_justified(|ui| {

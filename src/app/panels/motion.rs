@@ -254,34 +254,12 @@ impl StagePanel for MotionPanel {
             painter.circle_filled(c, 3.0, Color32::YELLOW);
         }
         // Tools.
-        let primary = response.dragged_by(egui::PointerButton::Primary);
         let pointer = response.interact_pointer_pos().or(response.hover_pos());
         match self.tool {
             MotionTool::Paint | MotionTool::Erase | MotionTool::Freeze => {
-                if response.drag_started_by(egui::PointerButton::Primary)
-                    && let Some(p) = ui.input(|i| i.pointer.press_origin())
-                {
-                    self.stroke = vec![view.to_image(p)];
-                }
-                if primary && let Some(p) = pointer {
-                    let q = view.to_image(p);
-                    if self
-                        .stroke
-                        .last()
-                        .is_none_or(|l| (l[0] - q[0]).hypot(l[1] - q[1]) > 1.0)
-                    {
-                        self.stroke.push(q);
-                    }
-                }
-                if response.clicked()
-                    && self.stroke.is_empty()
-                    && let Some(p) = pointer
-                {
-                    self.stroke.push(view.to_image(p));
-                }
-                if (response.drag_stopped() || response.clicked()) && !self.stroke.is_empty() {
+                if let Some(points) = view.track_stroke(ui, &response, &mut self.stroke) {
                     let stroke = Stroke {
-                        points: std::mem::take(&mut self.stroke),
+                        points,
                         radius: self.radius,
                         hardness: self.hardness,
                         erase: self.tool == MotionTool::Erase,
