@@ -107,6 +107,37 @@ enum EvalCommand {
     /// Novel-view synthesis on a stereo pair: render the right view from the left image, with
     /// the paper's ablations as rows.
     Nvs(EvalNvsArgs),
+    /// Magnification: a still camera zooming into (and out of) real high-resolution photos, the
+    /// renderer against bicubic, bilinear, nearest and area resampling of the same input.
+    Zoom(EvalZoomArgs),
+}
+
+#[derive(Args, Debug)]
+struct EvalZoomArgs {
+    /// High-resolution originals (each is halved to make the input); default
+    /// ../shared/data/hires/*.jpg and ../shared/data/photos/evening_glow_2560.jpg, those present.
+    photos: Vec<PathBuf>,
+    /// Zoom factors (focal length multipliers), comma-separated.
+    #[arg(long, value_delimiter = ',', default_values_t = makeit4d::eval::zoom::DEFAULT_ZOOMS)]
+    zoom: Vec<f32>,
+    /// Reconstruction kernel of the renderer.
+    #[arg(long, value_enum, default_value = "catmull-rom")]
+    kernel: KernelArg,
+    /// Inpainting preset of the scenes: draft, preview or final.
+    #[arg(long, default_value = "draft")]
+    inpaint_preset: String,
+    /// Write a crop strip (ground truth | bicubic | ours) per photo and zoom into this folder.
+    #[arg(long)]
+    crops: Option<PathBuf>,
+    /// Print JSON instead of a markdown table.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum KernelArg {
+    Tent,
+    CatmullRom,
 }
 
 #[derive(Args, Debug)]
@@ -484,6 +515,7 @@ fn main() -> ExitCode {
         Command::Depth(args) => depth(args, cancel),
         Command::Eval(EvalCommand::Depth(args)) => eval_depth(args, cancel),
         Command::Eval(EvalCommand::Nvs(args)) => eval_nvs(args, cancel),
+        Command::Eval(EvalCommand::Zoom(args)) => eval_zoom(args, cancel),
         Command::Bench(BenchCommand::Depth(args)) => bench_depth(args),
         Command::Bench(BenchCommand::Inpaint(args)) => bench_inpaint(args, cancel),
         Command::Bench(BenchCommand::Motion(args)) => bench_motion(args),
@@ -833,6 +865,39 @@ fn eval_nvs(args: EvalNvsArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
     }
     let (bar, progress) = progress_bar(cancel);
     let table = eval_nvs(&pair, &options, &progress);
+    bar.finish_and_clear();
+    let table = table?;
+    if args.json {
+        println!("{}", table.to_json()?);
+    } else {
+        print!("{}", table.to_markdown());
+    }
+    Ok(())
+}
+
+fn eval_zoom(args: EvalZoomArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::eval::zoom::{ZoomOptions, default_photos, eval_zoom};
+    let photos = if args.photos.is_empty() {
+        let shared = std::env::current_dir()?.join("../shared/data");
+        default_photos(&shared)
+    } else {
+        args.photos.clone()
+    };
+    if photos.is_empty() {
+        bail!("eval zoom: no photos given and none found in ../shared/data/hires");
+    }
+    let mut options = ZoomOptions {
+        zooms: args.zoom.clone(),
+        crops: args.crops.clone(),
+        ..ZoomOptions::default()
+    };
+    options.project.inpaint.preset = args.inpaint_preset.parse()?;
+    options.project.render.kernel = match args.kernel {
+        KernelArg::Tent => makeit4d::render::SplatKernel::Tent,
+        KernelArg::CatmullRom => makeit4d::render::SplatKernel::CatmullRom,
+    };
+    let (bar, progress) = progress_bar(cancel);
+    let table = eval_zoom(&photos, &options, &progress);
     bar.finish_and_clear();
     let table = table?;
     if args.json {

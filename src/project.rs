@@ -362,7 +362,7 @@ mod tests {
             ),
             (
                 r#"{"version": 1, "input": "a", "render": {"k": 99}}"#,
-                "K = 99",
+                "k (surfaces per pixel) = 99",
             ),
         ];
         for (json, needle) in cases {

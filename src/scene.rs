@@ -27,6 +27,7 @@ use crate::path::SceneScale;
 use crate::progress::Progress;
 use crate::project::Project;
 use crate::raster::{GrayRaster, MaskRaster, Raster, RgbRaster, quantile};
+pub use crate::render::FramePositions;
 use crate::render::blend::{DEFAULT_SHARPNESS, symmetric_blend};
 use crate::render::{Frame, FrameRenderer};
 use crate::stages::depth::{DepthEstimator, DepthStageOutput, run_depth_stage};
@@ -785,9 +786,8 @@ impl Scene {
         width: usize,
         height: usize,
     ) -> Result<Frame> {
-        self.render_frame_with(frame_index, |positions| {
-            renderer.render(view, width, height, positions)
-        })
+        let positions = self.frame_positions(frame_index)?;
+        renderer.render_frame(view, width, height, &positions)
     }
 
     /// [`Scene::render_frame`] with any render of the cloud: `render` is called with the
@@ -841,26 +841,5 @@ impl Scene {
             backward,
             t: f.t,
         })
-    }
-}
-
-/// The positions one output frame renders (see [`Scene::frame_positions`]). When both clouds
-/// are given the frame is their symmetric blend at time `t` with
-/// [`crate::render::blend::DEFAULT_SHARPNESS`]; when one is, that render alone; when neither,
-/// the cloud's own positions.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct FramePositions {
-    /// The forward cloud's positions, one per point, when it contributes.
-    pub forward: Option<Vec<glam::Vec3>>,
-    /// The backward cloud's positions, one per point, when it contributes.
-    pub backward: Option<Vec<glam::Vec3>>,
-    /// Blend time `t ∈ [0, 1]`: the backward render's share.
-    pub t: f32,
-}
-
-impl FramePositions {
-    /// A frame of a still scene: the cloud's own positions.
-    pub fn still() -> Self {
-        Self::default()
     }
 }

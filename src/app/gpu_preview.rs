@@ -770,7 +770,7 @@ mod tests {
         };
         assert_eq!(prepare(&bad), 0);
         let error = preview.take_error().expect("the error reaches the UI");
-        assert!(error.contains('K'), "{error}");
+        assert!(error.contains("splat k"), "{error}");
         assert!(preview.take_error().is_none(), "reported once");
         assert_eq!(prepare(&good), 0, "stopped after the error");
         preview.reset();

@@ -8,6 +8,7 @@
 pub mod bench;
 pub mod nvs;
 pub mod plot;
+pub mod zoom;
 
 use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};

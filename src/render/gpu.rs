@@ -1,44 +1,36 @@
-//! The GPU splat renderer (wgpu 30, WGSL in `shaders/`), a faithful port of [`super::cpu`].
+//! The GPU surface splatter (wgpu 30, WGSL in `shaders/`), a port of [`super::cpu`].
 //!
-//! **Technique: a tiled compute rasteriser with exact per-pixel K-lists.** Four compute passes
+//! **Technique: a tiled compute rasteriser with per-pixel surface passes.** Four compute passes
 //! (`shaders/splat.wgsl`):
 //!
-//! 1. `project` — one invocation per point: camera transform, the footprint radius rule
-//!    `r = r0·max(|J·t_u|, |J·t_v|)` capped at `max_stretch` times the paper's fronto-parallel
-//!    radius and clamped to `[min, max]` (as `cpu::splat_radius_px`), culling; writes `(u, v, z, r)` and
-//!    counts the point into every 16×16 tile its disc reaches (atomic add on a per-tile counter).
+//! 1. `project` — one invocation per point: camera transform, the footprint `M'` (as
+//!    [`super::cpu::footprint`]: the tangents through the projection's Jacobian, singular values clamped
+//!    to the pixel prefilter and the stretch cap), depth tolerance, culling; writes the splat
+//!    and counts it into every 16×16 tile its kernel support reaches (atomic add per tile).
 //! 2. `scan` — one workgroup turns the tile counts into list offsets (exclusive prefix sum).
 //! 3. `scatter` — one invocation per point appends its index to each of its tile lists.
 //! 4. `raster` — one workgroup per tile, one invocation per pixel. The tile's list is streamed
-//!    through workgroup memory 256 discs at a time. Per batch, first every invocation takes one
-//!    disc and records it at the tile pixels inside its span (workgroup atomics), so the work
-//!    follows the covered pixels as on the CPU instead of discs × 256 pixels; then every pixel
-//!    runs the reference's test (`d² < r²`, weight `α·(1 − d²/r²)`) and sorted insertion on its
-//!    candidates, keeping the K nearest by `(depth, point index)` in a private array (a pixel
-//!    with more than 32 candidates in one batch tests the whole batch instead). Finally it
-//!    composites front to back and writes colour `C/A`, coverage `A` and depth `Σ w z T / A`.
-//!
-//! Why this and not per-pixel atomics: WGSL has only 32-bit integer atomics, so an atomic
-//! K-nearest selection needs K passes over all points with a quantised depth key (K× the work
-//! and not the reference's ordering), whereas a tile list lets every pixel run the reference's
-//! own insertion on exact float keys. The design is the one the CPU renderer already uses
-//! (project → bin into 16×16 tiles → per-tile K-lists), so the two stay comparable line by line;
-//! the WGSL mirrors each float expression of `render::cpu` in the same order.
+//!    through workgroup memory 128 splats at a time; per batch, first every invocation takes
+//!    one splat and records it at the tile pixels inside its support box (workgroup atomics),
+//!    so the work follows the covered pixels as on the CPU, then every pixel evaluates its
+//!    candidates. As in the reference, a visibility pass finds each pixel's nearest covering
+//!    depth, then one pass per surface sums the surface's samples (kernel-weighted colour,
+//!    coverage, depth) and finds the next surface behind it, until every pixel of the tile is
+//!    opaque or has nothing behind; surfaces are composited front to back.
 //!
 //! **Determinism.** The tile lists and the per-pixel candidate lists are filled by atomics, so
-//! their order varies from run to run, but nothing downstream depends on it: the K-list keeps
-//! the K smallest keys of a total order (depth, then point index), which is the same set in the
-//! same order whatever the insertion order, and each candidate's weight is computed from its own
-//! disc alone. There are no float atomics; the only other atomic is a `min` over depth bit
-//! patterns in the time blend, which is order-free. The same input on the same adapter therefore
-//! gives the same bytes.
+//! their order varies from run to run. Nothing downstream depends on it: the visibility pass is
+//! a minimum, surface membership follows from it, and the surface sums are integers (weights in
+//! units of 2⁻¹⁵, colours in 8 bits, depth offsets in units of 2⁻¹² of the surface's depth),
+//! whose sums are exact in any order. The only other atomic is a `min` over depth bit patterns in
+//! the time blend, which is order-free. The same input on the same adapter therefore gives the
+//! same bytes.
 //!
-//! **Where it can differ from the CPU reference.** Only in float rounding: a GPU compiler may
-//! fuse multiply-adds and WGSL division need not be correctly rounded, so `u`, `v`, `z` and `r`
-//! can differ in the last bits, which can flip a pixel that sits exactly on a disc edge or
-//! reorder two discs at equal depth. On lavapipe the renders are bit-identical to the CPU
-//! renderer in every test (PSNR ∞); the time blend differs by ≤ 1e-6 (`exp`/`log`). The tests
-//! assert PSNR ≥ 40 dB and coverage/depth agreement, and the bench prints the PSNR per cell.
+//! **Where it can differ from the CPU reference.** The fixed-point sums (8-bit colours: at most
+//! half a level, ≈ 54 dB; coverage to 2⁻¹⁵), and float rounding: a GPU compiler may fuse
+//! multiply-adds and WGSL division need not be correctly rounded, which can move a pixel that sits
+//! exactly on a support edge. The tests assert PSNR ≥ 40 dB and coverage/depth agreement, and the
+//! bench prints the PSNR per cell.
 //!
 //! **Buffers.** Point data (positions, tangents, alphas, colours, and each point's source pixel
 //! size from `cpu::source_pixel_size`, which does not depend on the view) is uploaded once per
@@ -49,9 +41,9 @@
 //!
 //! **Speed.** On hardware every pass is a plain streaming kernel and a frame costs a few
 //! memory passes over the cloud. On lavapipe (Mesa's CPU Vulkan), which is what CI and the
-//! 2-core development VM have, a frame is 2.5–8× slower than the CPU renderer (`render::bench`),
-//! mostly workgroup barriers and the private K-list arrays, which lavapipe keeps in scratch
-//! memory; so [`RendererChoice::Auto`] takes the CPU renderer on a software adapter.
+//! 2-core development VM have, a frame is several times slower than the CPU renderer
+//! (`render::bench`), mostly workgroup barriers; so [`RendererChoice::Auto`] takes the CPU
+//! renderer on a software adapter.
 //!
 //! **Editor use.** [`GpuSplatter`] can be built from an existing `wgpu::Device`/`Queue`
 //! ([`GpuContext::from_device`], e.g. egui_wgpu's render state) and only records passes into a
@@ -64,7 +56,7 @@ use crate::error::{Error, Result};
 use crate::geometry::{View, WorldToCamera};
 use crate::raster::Raster;
 use crate::render::cpu::{CpuRenderer, source_pixel_size};
-use crate::render::{Frame, FrameRenderer, SplatSettings};
+use crate::render::{Frame, FramePositions, FrameRenderer, SplatKernel, SplatSettings};
 use crate::stages::points::PointCloud;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -75,8 +67,6 @@ use std::sync::mpsc;
 const TILE: usize = 16;
 /// Invocations per workgroup of the per-point and per-pixel passes.
 const WORKGROUP: usize = 256;
-// The K-lists in splat.wgsl hold `MAX_K = 16` entries.
-const _: () = assert!(crate::render::cpu::MAX_K == 16);
 
 const SPLAT_WGSL: &str = include_str!("../../shaders/splat.wgsl");
 const BLEND_WGSL: &str = include_str!("../../shaders/blend.wgsl");
@@ -183,7 +173,8 @@ struct CameraUniform {
     threads_per_row: u32,
     slot: u32,
     max_stretch: f32,
-    pad: [f32; 3],
+    kernel: u32,
+    pad: [f32; 2],
 }
 const _: () = assert!(std::mem::size_of::<CameraUniform>() == 144);
 
@@ -256,6 +247,8 @@ struct CloudBuffers {
     colours: wgpu::Buffer,
     /// `cpu::source_pixel_size` of each point (view-independent, computed on upload).
     source_pixel_size: wgpu::Buffer,
+    /// Each point's layer, plus 65536 when its colour was observed (`point_meta` in splat.wgsl).
+    meta: wgpu::Buffer,
 }
 
 /// Per-slot buffers.
@@ -414,12 +407,19 @@ impl GpuSplatter {
             )));
         }
         self.check_binding("point positions", (n * 12) as u64)?;
-        // The same function the CPU renderer calls, so the radius rule matches bit for bit.
+        // The same function the CPU renderer calls, so the footprint cap matches bit for bit.
         let pixel_sizes: Vec<f32> = cloud
             .positions
             .par_iter()
             .zip(&cloud.tangent_u)
             .map(|(&p, &t)| source_pixel_size(p, t))
+            .collect();
+        let meta: Vec<u32> = (0..n)
+            .map(|i| {
+                let layer = u32::from(cloud.layer.get(i).copied().unwrap_or(0));
+                let observed = !cloud.inpainted.get(i).copied().unwrap_or(false);
+                layer | (u32::from(observed) << 16)
+            })
             .collect();
         let device = self.context.device.clone();
         let queue = self.context.queue.clone();
@@ -437,6 +437,7 @@ impl GpuSplatter {
                 alphas: upload("alphas", bytemuck::cast_slice(&cloud.alphas)),
                 colours: upload("colours", bytemuck::cast_slice(&cloud.colours)),
                 source_pixel_size: upload("source pixel size", bytemuck::cast_slice(&pixel_sizes)),
+                meta: upload("point meta", bytemuck::cast_slice(&meta)),
             })
         })?;
         self.cloud = Some(cloud_buffers);
@@ -564,7 +565,11 @@ impl GpuSplatter {
             threads_per_row,
             slot: slot.index() as u32,
             max_stretch: self.settings.max_stretch,
-            pad: [0.0; 3],
+            kernel: match self.settings.kernel {
+                SplatKernel::Tent => 0,
+                SplatKernel::CatmullRom => 1,
+            },
+            pad: [0.0; 2],
         };
         let queue = &self.context.queue;
         let s = &self.slots[slot.index()];
@@ -627,6 +632,7 @@ impl GpuSplatter {
                 (8, &self.tile_offsets.buffer),
                 (9, &self.entries.buffer),
                 (11, &frame.buffer),
+                (13, &cloud.meta),
             ],
         );
         encoder.clear_buffer(&self.tile_counts.buffer, 0, Some((n_tiles * 4) as u64));
@@ -1055,7 +1061,8 @@ impl GpuSplatter {
     }
 
     fn ensure_grow_points(&mut self, n: usize) -> Result<()> {
-        let bytes = padded((n * 16) as u64);
+        // Three vec4 per point (see `splats` in splat.wgsl).
+        let bytes = padded((n * 48) as u64);
         self.check_binding("projected points", bytes)?;
         grow_to(&self.context.device, &mut self.splats, "splats", bytes);
         Ok(())
@@ -1219,6 +1226,30 @@ impl FrameRenderer for GpuRenderer {
         positions: Option<&[Vec3]>,
     ) -> Result<Frame> {
         self.splatter.render(view, width, height, positions)
+    }
+
+    /// The symmetric animation's two clouds are rendered and blended on the GPU, with one
+    /// readback.
+    fn render_frame(
+        &mut self,
+        view: &View,
+        width: usize,
+        height: usize,
+        positions: &FramePositions,
+    ) -> Result<Frame> {
+        match (&positions.forward, &positions.backward) {
+            (Some(f), Some(b)) => self.splatter.render_symmetric(
+                view,
+                width,
+                height,
+                f,
+                b,
+                positions.t,
+                crate::render::blend::DEFAULT_SHARPNESS,
+            ),
+            (Some(p), None) | (None, Some(p)) => self.render(view, width, height, Some(p)),
+            (None, None) => self.render(view, width, height, None),
+        }
     }
 }
 

@@ -4,6 +4,7 @@
 use super::{FlyCamera, PanelContext, StagePanel, Tab, committed, placeholder_ui};
 use crate::app::gpu_preview::{GpuFrame, pixel_size};
 use crate::app::viewport::{ViewTransform, image_layout_ui};
+use crate::render::SplatKernel;
 use crate::render::gpu::RendererChoice;
 use eframe::egui::{self, Key, Sense, Ui};
 
@@ -200,14 +201,33 @@ impl StagePanel for PreviewPanel {
         ui.heading("Splatting");
         let r = cx.project.render;
         if let Some(v) = committed(ui, "radius", r.radius_scale, |ui, v| {
-            ui.add(egui::Slider::new(v, 0.5..=3.0).text("radius r0"))
+            ui.add(egui::Slider::new(v, 0.5..=3.0).text("kernel scale r0"))
         }) {
             cx.edit("Splat radius", |p| p.render.radius_scale = v);
         }
         if let Some(v) = committed(ui, "k", r.k, |ui, v| {
-            ui.add(egui::Slider::new(v, 1..=crate::render::cpu::MAX_K).text("points per pixel K"))
+            ui.add(egui::Slider::new(v, 1..=crate::render::cpu::MAX_K).text("surfaces per pixel"))
         }) {
-            cx.edit("Splat K", |p| p.render.k = v);
+            cx.edit("Splat surfaces", |p| p.render.k = v);
         }
+        let mut kernel = r.kernel;
+        egui::ComboBox::from_label("reconstruction kernel")
+            .selected_text(kernel_name(kernel))
+            .show_ui(ui, |ui| {
+                for k in [SplatKernel::CatmullRom, SplatKernel::Tent] {
+                    ui.selectable_value(&mut kernel, k, kernel_name(k));
+                }
+            });
+        if kernel != r.kernel {
+            cx.edit("Splat kernel", |p| p.render.kernel = kernel);
+        }
+    }
+}
+
+/// The kernel as the Preview inspector names it.
+fn kernel_name(kernel: SplatKernel) -> &'static str {
+    match kernel {
+        SplatKernel::CatmullRom => "Catmull-Rom (sharp)",
+        SplatKernel::Tent => "tent (bilinear)",
     }
 }
