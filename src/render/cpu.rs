@@ -5,49 +5,59 @@
 //! long. Through the Jacobian `J` of the target projection they give the 2×2 matrix
 //! `M = r0·J·[t_u t_v]`, the point's source-pixel grid as seen in the target view. A pixel at
 //! offset `d` from the point's centre is at `s = M'⁻¹·d` in that grid, and the point weighs
-//! `w = α·g·k(s_x)·k(s_y)` there, `k` the [`SplatKernel`] (tent or Catmull-Rom). Where the
-//! footprint is magnified this is plain interpolation: for a pure zoom of a photo the tent gives
-//! exactly bilinear and Catmull-Rom exactly bicubic interpolation, and in the input view (`M = I`)
-//! every pixel receives only its own point, so the photo is reproduced exactly.
+//! `w = α·g·k_γu(s_x)·k_γv(s_y)` there, `k_γ = tent + γ·(k − tent)` with `k` the
+//! [`SplatKernel`]. Where the footprint is magnified (`γ = 1` from one pixel per source pixel on)
+//! this is plain interpolation: a pure zoom of a photo is exactly bicubic (Catmull-Rom) or
+//! bilinear (tent) interpolation, and in the input view (`M = I`) every pixel receives only its own
+//! point, so the photo is reproduced exactly. Under minification (`γ = 0` below ½ pixel per source
+//! pixel, linear between) the tent is used: at ½× it is exactly the 2×2 area average, where
+//! Catmull-Rom's lobes would alias.
 //!
-//! **EWA low-pass.** `M' = U·diag(σ')·Vᵀ` is `M = U·diag(σ)·Vᵀ` with its singular values clamped
-//! to `[min_radius_px, cap]`: a point that covers less than a pixel in some direction (a fly-out,
-//! the far layers of every move) is widened to the pixel's own footprint, and its weight scaled by
-//! `g = min(1, σ₁σ₂ / (σ'₁σ'₂))`, the area it really covers, so that a minified surface is an area
-//! average and a sub-pixel object gets partial coverage instead of sparkling. Clamping rather than
-//! convolving (`MMᵀ + I`, Heckbert's resampling filter) keeps magnified and 1:1 views as sharp as
-//! interpolation. `cap` is `max_stretch` times the paper's fronto-parallel size `r0·z_src/z_tgt`
-//! (and at most `max_radius_px`), so a depth edge the estimator smoothed into a steep ramp cannot
-//! splat as a huge blob. A degenerate footprint (zero or non-finite tangents) falls back to the
-//! fronto-parallel one; an edge-on point (`σ₂ → 0`) gets `g → 0`.
+//! **EWA low-pass.** `M'` is `M` with each column (each source axis) that is shorter than
+//! `min_radius_px` on screen lengthened by the smallest whole factor that reaches it
+//! ([`dilation`]), and the point's weight scaled by `g = |det M| / |det M'|`, the area it really
+//! covers: a minified surface (a fly-out, the far layers of every move) is then an area average
+//! whose coverage stays exactly 1 (a whole dilation keeps the kernel a partition of unity over the
+//! point lattice), and a sub-pixel object gets partial coverage instead of sparkling. Columns
+//! longer than `cap` are shortened to it: `max_stretch` times the paper's fronto-parallel size
+//! `r0·z_src/z_tgt` (at most `max_radius_px`), so a depth edge the estimator smoothed into a steep
+//! ramp cannot splat as a blob. A footprint whose columns are nearly parallel (seen edge-on) keeps
+//! a smallest singular value of half the prefilter; degenerate tangents (zero or not finite) fall
+//! back to the fronto-parallel footprint.
 //!
-//! **Normalised blending within a surface, "over" between surfaces.** Per pixel, the nearest
+//! **Normalised blending within a surface, coverage between surfaces.** Per pixel, the nearest
 //! point whose coverage weight (the tent, `w_c = α·g·tent(s_x)·tent(s_y)`) is at least
-//! [`MIN_VISIBLE_WEIGHT`] defines the front surface at depth `z₁`. Every point within its own
-//! depth tolerance of `z₁` (`|z − z₁| ≤ τ`, see below) is a sample of that surface, and they are
-//! averaged: colour `Σ w·c / Σ w` (the kernel weights), depth `Σ w_c·z / Σ w_c`, coverage
-//! `a = min(1, Σ w_c)`. The next surface is the nearest point behind the first's tolerance, and so
-//! on for up to `k` surfaces, composited front to back with "over":
-//! `C = Σ_s a_s·c_s·Π_{j<s}(1 − a_j)`, `A = Σ_s a_s·Π_{j<s}(1 − a_j)`; the written colour is
-//! `C / A`. So a surface's edge is anti-aliased (partial `a`) over what lies behind it, and a
-//! surface's own points never occlude each other. With Catmull-Rom, where a surface's samples do
-//! not surround the pixel (its edge) the negative lobes can make `Σ w` small; the colour then
-//! fades to the tent's average (`Σ w_c·c / Σ w_c`) as `Σ w / Σ w_c` falls from ¾ to ¼.
+//! [`MIN_VISIBLE_WEIGHT`] defines the front surface at depth `z₁`. A point is a sample of that
+//! surface when its depth is within its own tolerance of `z₁` (`|z − z₁| ≤ τ`, below) and it is of
+//! the same layer, or both it and the front point were observed in the photo (a surface that
+//! continues across a layer threshold; a synthesised point of another layer is what that layer
+//! shows *behind* this one). The samples are averaged: colour `Σ ρ·w·c / Σ ρ·w` (`ρ = 1` for
+//! observed points, [`SYNTHESISED_COLOUR_WEIGHT`] for synthesised ones, so the photo's colour
+//! dominates where both reach a pixel), depth `Σ w_c·z / Σ w_c`, opacity `α_s = Σ w_c / Σ g·tent`,
+//! covered share `γ_s = min(1, Σ g·tent)`. The next surface is the nearest point behind, and so on
+//! for up to `k` surfaces, front to back: each takes `a_s = α_s·min(γ_s, B)` of what is left of
+//! the pixel (`B` starts at 1 and loses `a_s`), `C = Σ a_s·c_s`, `A = Σ a_s`, and the written
+//! colour is `C / A`. Coverages of adjacent surfaces add (they are disjoint parts of the pixel;
+//! "over" would let what lies behind leak through between them), a nearer surface hides what it
+//! covers, an edge is anti-aliased over what lies behind it, and transparent points composite as
+//! with "over". With Catmull-Rom, where a surface's samples do not surround the pixel (its edge)
+//! the negative lobes can make `Σ w` small; the colour then fades to the tent's average
+//! (`Σ ρ·w_c·c / Σ ρ·w_c`) as `Σ w / Σ w_c` falls from ¾ to ¼.
 //!
 //! **Depth tolerance.** Two samples of one surface that both reach a pixel are at most two kernel
 //! supports apart in the source grid, so their depths differ by at most
-//! `2·R·ω·(|t_u,z| + |t_v,z|)` (`R` the kernel's support, `ω = max σ'/σ` the widening, `t_z` the
-//! tangents' depth in the target camera). A point's tolerance is that, at most
+//! `2·R·ω·(|t_u,z| + |t_v,z|)` (`R` the kernel's support, `ω` the prefilter's widening, `t_z`
+//! the tangents' depth in the target camera). A point's tolerance is that, at most
 //! [`SAME_SURFACE_RELATIVE_DEPTH`]` · z` (a steeper step is an occlusion), plus 1 % of `z`.
 //!
-//! **Determinism.** Every per-pixel quantity is order-free (a minimum, then sums over a set that
-//! the minimum fixes), and the sums run in point order (tiles keep point order), so the output
-//! does not depend on how rayon schedules the work: the same input gives the same bytes.
+//! **Determinism.** Every per-pixel quantity is a minimum or a sum over a set that the minimum
+//! fixes, and the sums run in point order (tiles keep point order), so the output does not depend
+//! on how rayon schedules the work: the same input gives the same bytes.
 //!
 //! **Speed.** Points are projected in parallel chunks, each chunk's splats sorted into 16×16
 //! tiles (a counting sort that keeps point order), and rows of tiles are rasterised in parallel,
 //! each straight into the output rows it owns. A tile runs one visibility pass over its splats
-//! and then one pass per surface, and stops as soon as every pixel is opaque or has nothing
+//! and then one pass per surface, and stops as soon as every pixel is covered or has nothing
 //! behind: interior tiles take two passes, tiles on an edge three.
 
 use crate::error::{Error, Result};

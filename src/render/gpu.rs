@@ -441,8 +441,10 @@ impl GpuSplatter {
             })
         })?;
         self.cloud = Some(cloud_buffers);
-        // Most discs reach one tile; start the lists at 1.5 entries per point.
-        let guess = (n + n / 2).max(1 << 16);
+        // A kernel's support box (±2 source pixels for Catmull-Rom) reaches one or two tiles at
+        // 1:1 and more when magnified; start the lists at 3 entries per point (a render that needs
+        // more grows them and is redone).
+        let guess = (3 * n).max(1 << 16);
         let guess = guess.min((self.max_binding() / 4) as usize);
         self.ensure_entries(guess)?;
         self.ensure_grow_points(n)?;
