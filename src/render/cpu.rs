@@ -212,7 +212,8 @@ fn footprint_from_columns(a: Vec2, b: Vec2, lo: f32, cap: f32, kernel: SplatKern
     let floor = EDGE_ON_FLOOR * lo;
     let s1 = columns_largest_singular_value(a2, b2);
     let s2 = det2 / s1;
-    if !(s2 >= floor) {
+    // (`s2` is NaN only for a NaN column, which `footprint` never passes.)
+    if s2.is_nan() || s2 < floor {
         let (u1, v1) = singular_vectors(a2, b2, s1);
         let (u2, v2) = (Vec2::new(-u1.y, u1.x), Vec2::new(-v1.y, v1.x));
         // M' = s1·u1·v1ᵀ + floor·u2·v2ᵀ (sign of the second term immaterial: symmetric kernel).
@@ -401,7 +402,8 @@ impl<'a> Projector<'a> {
         let f = footprint(k, p, tu, tv, pixel, self.settings)?;
         let [ex, ey] = f.extent;
         let scale = alpha.min(1.0) * f.area;
-        if !(scale > 0.0)
+        if scale.is_nan()
+            || scale <= 0.0
             || u + ex < -0.5
             || v + ey < -0.5
             || u - ex > self.width - 0.5
@@ -816,9 +818,9 @@ pub fn render_cpu_with(
                                     sums.coverage += w_c;
                                     sums.coverage_weight += cw;
                                     sums.kernel += kw;
-                                    for i in 0..3 {
-                                        sums.coverage_colour[i] += cw * c[i];
-                                        sums.kernel_colour[i] += kw * c[i];
+                                    for (i, v) in c.iter().enumerate() {
+                                        sums.coverage_colour[i] += cw * v;
+                                        sums.kernel_colour[i] += kw * v;
                                     }
                                     sums.depth += w_c * s.z;
                                 }
