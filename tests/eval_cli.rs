@@ -1,4 +1,4 @@
-//! `makeit4d eval nvs` and `makeit4d bench scene` end to end on the small copies in tests/data.
+//! `makeit4d eval nvs`, `eval zoom` and `bench scene` end to end on the small copies in tests/data.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -161,4 +161,57 @@ fn bench_scene_writes_table_json_and_plot() {
     assert_eq!((png.width(), png.height()), (900, 520));
     // The frames went to a temporary folder, not into the output.
     assert!(!out_dir.join("frames").exists());
+}
+
+#[test]
+fn eval_zoom_scores_the_renderer_against_resampling() {
+    // The 320-px sample is the "original"; its half is the input.
+    let dir = tempfile::tempdir().unwrap();
+    let out = exe()
+        .args(["eval", "zoom"])
+        .arg(data("evening_glow_320.jpg"))
+        .args([
+            "--zoom",
+            "0.5,2",
+            "--inpaint-preset",
+            "draft",
+            "--json",
+            "--crops",
+        ])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let rows = json["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 2);
+    for row in rows {
+        let zoom = row["zoom"].as_f64().unwrap();
+        let ours = row["ours"].as_f64().unwrap();
+        let bilinear = row["bilinear"].as_f64().unwrap();
+        let nearest = row["nearest"].as_f64().unwrap();
+        assert!(ours.is_finite() && ours > 20.0, "{row}");
+        if zoom > 1.0 {
+            // A surface, not discs: at least as sharp as nearest-neighbour upsampling and within
+            // a little of bilinear even on a 160-px input full of depth edges.
+            assert!(ours > nearest, "{row}");
+            assert!(ours > bilinear - 1.0, "{row}");
+            assert!(row["area"].is_null());
+        } else {
+            assert!(row["area"].as_f64().is_some(), "{row}");
+        }
+    }
+    assert!(dir.path().join("evening_glow_320_x2.png").is_file());
+    assert_eq!(json["means"].as_array().unwrap().len(), 2);
+    // Bad zooms are one-line errors.
+    let out = exe()
+        .args(["eval", "zoom"])
+        .arg(data("evening_glow_320.jpg"))
+        .args(["--zoom", "0"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
 }
