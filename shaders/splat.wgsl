@@ -73,9 +73,12 @@ const DEPTH_ONE: f32 = 4096.0;
 @group(0) @binding(4) var<storage, read> alphas: array<f32>;
 // sRGB colour, 3 floats per point.
 @group(0) @binding(5) var<storage, read> colours: array<f32>;
-// Three vec4 per point: `(u, v, z, tolerance)`, `M'⁻¹` row-major,
-// `(extent_x, extent_y, g, 1024·1023·γ_u + 1023·γ_v)`; `g = 0` marks a culled point.
+// Per point: `(u, v, z, tolerance)`; `M'⁻¹` row-major; `(extent_x, extent_y, g,
+// 1024·1023·γ_u + 1023·γ_v)`, `g = 0` marking a culled point (three buffers, so that each stays
+// within the binding size limit for as many points as before).
 @group(0) @binding(6) var<storage, read_write> splats: array<vec4<f32>>;
+@group(0) @binding(14) var<storage, read_write> splat_inverse: array<vec4<f32>>;
+@group(0) @binding(15) var<storage, read_write> splat_extra: array<vec4<f32>>;
 // Per tile: the number of discs (after `project`), then the write cursor (after `scan`).
 @group(0) @binding(7) var<storage, read_write> tile_counts: array<atomic<u32>>;
 // Per tile: the start of its list in `entries`; one extra word holds the total.
@@ -364,9 +367,9 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let s = project_point(i);
-    splats[3u * i] = s.a;
-    splats[3u * i + 1u] = s.inverse;
-    splats[3u * i + 2u] = s.c;
+    splats[i] = s.a;
+    splat_inverse[i] = s.inverse;
+    splat_extra[i] = s.c;
     if s.c.z <= 0.0 {
         return;
     }
@@ -422,8 +425,8 @@ fn scatter(@builtin(global_invocation_id) gid: vec3<u32>) {
     if i >= camera.point_count {
         return;
     }
-    let a = splats[3u * i];
-    let c = splats[3u * i + 2u];
+    let a = splats[i];
+    let c = splat_extra[i];
     if c.z <= 0.0 {
         return;
     }
@@ -547,7 +550,12 @@ fn visit(px: ptr<function, Pixel>, q: u32, x: f32, y: f32, pass_index: u32) {
     let dy = y - a.y;
     let sx = m.x * dx + m.y * dy;
     let sy = m.z * dx + m.w * dy;
-    let gamma = vec2<f32>(floor(c.w / 1024.0), c.w - 1024.0 * floor(c.w / 1024.0)) / 1023.0;
+    // The front surface (pass 1) with the kernel; visibility and the surfaces behind with the
+    // tent (`cpu::render_cpu_with`).
+    var gamma = vec2<f32>(0.0);
+    if pass_index == 1u {
+        gamma = vec2<f32>(floor(c.w / 1024.0), c.w - 1024.0 * floor(c.w / 1024.0)) / 1023.0;
+    }
     let kw = kernel_weights(sx, sy, gamma);
     if kw.x == 0.0 && kw.y == 0.0 {
         return;
@@ -662,9 +670,9 @@ fn tile_pass(
         }
         if li < BATCH && j < end {
             let index = entries[j];
-            batch_a[li] = splats[3u * index];
-            batch_inverse[li] = splats[3u * index + 1u];
-            batch_c[li] = splats[3u * index + 2u];
+            batch_a[li] = splats[index];
+            batch_inverse[li] = splat_inverse[index];
+            batch_c[li] = splat_extra[index];
             batch_meta[li] = vec2<u32>(index, point_meta[index]);
         }
         workgroupBarrier();
@@ -755,7 +763,7 @@ fn raster(
         if workgroupUniformLoad(&open_total) == 0u {
             break;
         }
-        tile_pass(&px, 1u, start, end, li, tile_x0, tile_y0, tile_x1, tile_y1, open, x, y);
+        tile_pass(&px, min(s + 1u, 2u), start, end, li, tile_x0, tile_y0, tile_x1, tile_y1, open, x, y);
         if open {
             finish_surface(&px);
         }

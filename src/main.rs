@@ -134,6 +134,16 @@ struct EvalZoomArgs {
     json: bool,
 }
 
+#[derive(Args, Debug)]
+struct BenchRenderArgs {
+    /// Reconstruction kernel of both renderers.
+    #[arg(long, value_enum, default_value = "catmull-rom")]
+    kernel: KernelArg,
+    /// CPU only.
+    #[arg(long)]
+    no_gpu: bool,
+}
+
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 enum KernelArg {
     Tent,
@@ -225,7 +235,7 @@ enum BenchCommand {
     Motion(BenchMotionArgs),
     /// Renderers: frames/s and points/s for 0.5 M, 2 M and 8 M points at 720p and 1080p, GPU
     /// and CPU side by side, with the CPU bandwidth floor.
-    Render,
+    Render(BenchRenderArgs),
     /// Every stage for each inpainting preset on each photo: seconds, peak memory, quality
     /// against the final preset; writes bench.md, bench.json and quality_vs_time.png.
     Scene(BenchSceneArgs),
@@ -519,7 +529,7 @@ fn main() -> ExitCode {
         Command::Bench(BenchCommand::Depth(args)) => bench_depth(args),
         Command::Bench(BenchCommand::Inpaint(args)) => bench_inpaint(args, cancel),
         Command::Bench(BenchCommand::Motion(args)) => bench_motion(args),
-        Command::Bench(BenchCommand::Render) => bench_render(),
+        Command::Bench(BenchCommand::Render(args)) => bench_render(args),
         Command::Inpaint(args) => inpaint(args, cancel),
         Command::Bench(BenchCommand::Scene(args)) => bench_scene(args, cancel),
         Command::Bench(BenchCommand::SceneCase(args)) => bench_scene_case(args),
@@ -1151,8 +1161,13 @@ fn bench_motion(args: BenchMotionArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn bench_render() -> anyhow::Result<()> {
-    let options = makeit4d::render::bench::BenchOptions::default();
+fn bench_render(args: BenchRenderArgs) -> anyhow::Result<()> {
+    let mut options = makeit4d::render::bench::BenchOptions::default();
+    options.settings.kernel = match args.kernel {
+        KernelArg::Tent => makeit4d::render::SplatKernel::Tent,
+        KernelArg::CatmullRom => makeit4d::render::SplatKernel::CatmullRom,
+    };
+    options.gpu = !args.no_gpu;
     let table = makeit4d::render::bench::bench_render(&options, |line| eprintln!("{line}"))?;
     print!("{table}");
     Ok(())

@@ -35,7 +35,8 @@
 //! observed points, [`SYNTHESISED_COLOUR_WEIGHT`] for synthesised ones, so the photo's colour
 //! dominates where both reach a pixel), depth `Σ w_c·z / Σ w_c`, opacity `α_s = Σ w_c / Σ g·tent`,
 //! covered share `γ_s = min(1, Σ g·tent)`. The next surface is the nearest point behind, and so on
-//! for up to `k` surfaces, front to back: each takes `a_s = α_s·min(γ_s, B)` of what is left of
+//! for up to `k` surfaces (the ones behind the front surface, seen only through partial coverage,
+//! are averaged with the tent), front to back: each takes `a_s = α_s·min(γ_s, B)` of what is left of
 //! the pixel (`B` starts at 1 and loses `a_s`), `C = Σ a_s·c_s`, `A = Σ a_s`, and the written
 //! colour is `C / A`. Coverages of adjacent surfaces add (they are disjoint parts of the pixel;
 //! "over" would let what lies behind leak through between them), a nearer surface hides what it
@@ -99,6 +100,8 @@ pub struct Footprint {
     pub inverse: [f32; 4],
     /// Half-extents of the kernel's support box on screen, pixels.
     pub extent: [f32; 2],
+    /// Half-extents of the tent's support box on screen, pixels (`|M'₀₀| + |M'₀₁|`, …).
+    pub tent_extent: [f32; 2],
     /// `g`: the share of the widened footprint the point really covers, in `[0, 1]`.
     pub area: f32,
     /// `ω ≥ 1`: how much the prefilter widened the footprint (capped at 10⁶).
@@ -246,6 +249,7 @@ fn footprint_from_columns(a: Vec2, b: Vec2, lo: f32, cap: f32, kernel: SplatKern
     Footprint {
         inverse,
         extent,
+        tent_extent: [m[0].abs() + m[1].abs(), m[2].abs() + m[3].abs()],
         area,
         widen: widen.clamp(1.0, 1e6),
         sharpness: gamma,
@@ -335,8 +339,9 @@ struct Splat {
     tol: f32,
     /// `M'⁻¹`, row-major.
     inverse: [f32; 4],
-    /// Support half-extents, pixels.
+    /// Support half-extents, pixels: of the kernel, of the tent.
     extent: [f32; 2],
+    tent_extent: [f32; 2],
     /// `α·g`.
     scale: f32,
     /// `g`.
@@ -424,6 +429,7 @@ impl<'a> Projector<'a> {
             ),
             inverse: f.inverse,
             extent: f.extent,
+            tent_extent: f.tent_extent,
             scale,
             area: f.area,
             sharpness: f.sharpness,
@@ -783,7 +789,7 @@ pub fn render_cpu_with(
                 };
                 // Visibility: the nearest point that covers each pixel.
                 for s in tile_splats() {
-                    for_each_covered(s, &tile, width, height, kernel, |p, t, _| {
+                    for_each_covered(s, &tile, width, height, None, |p, t, _| {
                         let w_c = s.scale * t;
                         let px = &mut pixels[p];
                         let key = SurfaceKey::of(s);
@@ -792,14 +798,30 @@ pub fn render_cpu_with(
                         }
                     });
                 }
-                // One pass per surface, front to back.
-                for _ in 0..surfaces {
+                // One pass per surface, front to back: the front surface with the kernel, the
+                // ones behind it (seen only through an edge's partial coverage) with the tent.
+                for surface in 0..surfaces {
                     if !pixels.iter().any(PixelState::open) {
                         break;
                     }
+                    let shape = (surface == 0).then_some(kernel);
+                    // The tile's nearest and farthest current surface: a splat nearer than
+                    // every one (beyond its tolerance) plays no part, and one farther than every
+                    // one can only be the next surface (its tent is enough). Neither changes
+                    // the result, only the work.
+                    let (z_lo, z_hi) = pixels
+                        .iter()
+                        .filter(|px| px.open())
+                        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), px| {
+                            (lo.min(px.cur.z), hi.max(px.cur.z))
+                        });
                     for s in tile_splats() {
+                        if s.z + s.tol < z_lo {
+                            continue;
+                        }
+                        let shape = if s.z - s.tol > z_hi { None } else { shape };
                         let c = values[s.index as usize];
-                        for_each_covered(s, &tile, width, height, kernel, |p, t, k| {
+                        for_each_covered(s, &tile, width, height, shape, |p, t, k| {
                             let (w_c, w) = (s.scale * t, s.scale * k);
                             let px = &mut pixels[p];
                             if !px.open() {
@@ -865,20 +887,26 @@ struct TileRect {
 }
 
 /// Calls `f(pixel in tile, tent, kernel)` (the kernels' values, before the point's `α·g`) for
-/// every pixel of `tile` inside the splat's support where either is non-zero.
+/// every pixel of `tile` inside the splat's support where either is non-zero; with `kernel`
+/// `None` only the tent's support is visited and the kernel is the tent.
 #[inline]
 fn for_each_covered(
     s: &Splat,
     tile: &TileRect,
     width: usize,
     height: usize,
-    kernel: SplatKernel,
+    kernel: Option<SplatKernel>,
     mut f: impl FnMut(usize, f32, f32),
 ) {
-    let Some((x0, x1)) = pixel_span(s.u, s.extent[0], width) else {
+    let extent = if kernel.is_some() {
+        s.extent
+    } else {
+        s.tent_extent
+    };
+    let Some((x0, x1)) = pixel_span(s.u, extent[0], width) else {
         return;
     };
-    let Some((y0, y1)) = pixel_span(s.v, s.extent[1], height) else {
+    let Some((y0, y1)) = pixel_span(s.v, extent[1], height) else {
         return;
     };
     let x0 = x0.max(tile.x0);
@@ -892,7 +920,13 @@ fn for_each_covered(
             let dx = x as f32 - s.u;
             let sx = m0 * dx + m1 * dy;
             let sy = m2 * dx + m3 * dy;
-            let (w_c, w) = kernel_weights(sx, sy, s.sharpness, kernel);
+            let (w_c, w) = match kernel {
+                Some(kernel) => kernel_weights(sx, sy, s.sharpness, kernel),
+                None => {
+                    let t = tent(sx) * tent(sy);
+                    (t, t)
+                }
+            };
             if w_c == 0.0 && w == 0.0 {
                 continue;
             }

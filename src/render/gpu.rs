@@ -284,6 +284,8 @@ pub struct GpuSplatter {
     pipelines: Pipelines,
     cloud: Option<CloudBuffers>,
     splats: Grow,
+    splat_inverse: Grow,
+    splat_extra: Grow,
     tile_counts: Grow,
     tile_offsets: Grow,
     entries: Grow,
@@ -359,6 +361,8 @@ impl GpuSplatter {
                 pipelines,
                 cloud: None,
                 splats: grow_new(&device, "splats", 16),
+                splat_inverse: grow_new(&device, "splat inverses", 16),
+                splat_extra: grow_new(&device, "splat extras", 16),
                 tile_counts: grow_new(&device, "tile counts", 16),
                 tile_offsets: grow_new(&device, "tile offsets", 16),
                 entries: grow_new(&device, "tile entries", 16),
@@ -604,6 +608,8 @@ impl GpuSplatter {
                 (6, &self.splats.buffer),
                 (7, &self.tile_counts.buffer),
                 (12, &cloud.source_pixel_size),
+                (14, &self.splat_inverse.buffer),
+                (15, &self.splat_extra.buffer),
             ],
         );
         let scan = group(
@@ -622,6 +628,7 @@ impl GpuSplatter {
                 (6, &self.splats.buffer),
                 (7, &self.tile_counts.buffer),
                 (9, &self.entries.buffer),
+                (15, &self.splat_extra.buffer),
             ],
         );
         let raster = group(
@@ -635,6 +642,8 @@ impl GpuSplatter {
                 (9, &self.entries.buffer),
                 (11, &frame.buffer),
                 (13, &cloud.meta),
+                (14, &self.splat_inverse.buffer),
+                (15, &self.splat_extra.buffer),
             ],
         );
         encoder.clear_buffer(&self.tile_counts.buffer, 0, Some((n_tiles * 4) as u64));
@@ -1063,10 +1072,13 @@ impl GpuSplatter {
     }
 
     fn ensure_grow_points(&mut self, n: usize) -> Result<()> {
-        // Three vec4 per point (see `splats` in splat.wgsl).
-        let bytes = padded((n * 48) as u64);
+        // One vec4 per point in each of the three splat buffers (see `splats` in splat.wgsl).
+        let bytes = padded((n * 16) as u64);
         self.check_binding("projected points", bytes)?;
-        grow_to(&self.context.device, &mut self.splats, "splats", bytes);
+        let device = &self.context.device;
+        grow_to(device, &mut self.splats, "splats", bytes);
+        grow_to(device, &mut self.splat_inverse, "splat inverses", bytes);
+        grow_to(device, &mut self.splat_extra, "splat extras", bytes);
         Ok(())
     }
 
