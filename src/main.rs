@@ -150,6 +150,15 @@ enum KernelArg {
     CatmullRom,
 }
 
+impl From<KernelArg> for makeit4d::render::SplatKernel {
+    fn from(k: KernelArg) -> Self {
+        match k {
+            KernelArg::Tent => Self::Tent,
+            KernelArg::CatmullRom => Self::CatmullRom,
+        }
+    }
+}
+
 #[derive(Args, Debug)]
 struct EvalNvsArgs {
     /// The left image (the input).
@@ -195,6 +204,9 @@ struct EvalNvsArgs {
     /// Also write each row's right view into this folder.
     #[arg(long)]
     save: Option<PathBuf>,
+    /// Reconstruction kernel of the renderer (scene rows).
+    #[arg(long, value_enum, default_value = "catmull-rom")]
+    kernel: KernelArg,
     /// Print JSON instead of a markdown table.
     #[arg(long)]
     json: bool,
@@ -868,6 +880,7 @@ fn eval_nvs(args: EvalNvsArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
         save_dir: args.save.clone(),
         ..NvsOptions::default()
     };
+    options.render.kernel = args.kernel.into();
 
     if let Some(m) = &args.depth_model {
         options.depth_settings.method = makeit4d::stages::depth::DepthMethod::Onnx;
@@ -902,10 +915,7 @@ fn eval_zoom(args: EvalZoomArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> 
         ..ZoomOptions::default()
     };
     options.project.inpaint.preset = args.inpaint_preset.parse()?;
-    options.project.render.kernel = match args.kernel {
-        KernelArg::Tent => makeit4d::render::SplatKernel::Tent,
-        KernelArg::CatmullRom => makeit4d::render::SplatKernel::CatmullRom,
-    };
+    options.project.render.kernel = args.kernel.into();
     let (bar, progress) = progress_bar(cancel);
     let table = eval_zoom(&photos, &options, &progress);
     bar.finish_and_clear();
@@ -1163,10 +1173,7 @@ fn bench_motion(args: BenchMotionArgs) -> anyhow::Result<()> {
 
 fn bench_render(args: BenchRenderArgs) -> anyhow::Result<()> {
     let mut options = makeit4d::render::bench::BenchOptions::default();
-    options.settings.kernel = match args.kernel {
-        KernelArg::Tent => makeit4d::render::SplatKernel::Tent,
-        KernelArg::CatmullRom => makeit4d::render::SplatKernel::CatmullRom,
-    };
+    options.settings.kernel = args.kernel.into();
     options.gpu = !args.no_gpu;
     let table = makeit4d::render::bench::bench_render(&options, |line| eprintln!("{line}"))?;
     print!("{table}");

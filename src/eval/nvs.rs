@@ -392,6 +392,8 @@ pub struct NvsOptions {
     pub save_dir: Option<PathBuf>,
     /// Layer settings of the scene methods (the project default unless changed).
     pub layer_params: crate::stages::layers::LayerParams,
+    /// Splat settings of the scene methods (the project default unless changed).
+    pub render: SplatSettings,
 }
 
 impl Default for NvsOptions {
@@ -407,6 +409,7 @@ impl Default for NvsOptions {
             methods: NvsMethod::ALL.to_vec(),
             save_dir: None,
             layer_params: crate::stages::layers::LayerParams::default(),
+            render: SplatSettings::default(),
         }
     }
 }
@@ -604,6 +607,7 @@ pub fn nvs_project(
     project.inpaint.seed = options.seed;
     project.layers.layer_depth = layer_depth;
     project.layers.params = options.layer_params.clone();
+    project.render = options.render;
     match method {
         NvsMethod::NoOutpaint => project.canvas.enabled = false,
         NvsMethod::NoLayerInpaint => project.layers.inpaint = false,
