@@ -61,6 +61,8 @@ const WEIGHT_ONE: f32 = 32768.0;
 // `cpu::SYNTHESISED_COLOUR_WEIGHT`, `cpu::EDGE_ON_FLOOR`.
 const SYNTHESISED_COLOUR_WEIGHT: f32 = 0.0625;
 const EDGE_ON_FLOOR: f32 = 0.5;
+// `cpu::MAX_ANISOTROPY`.
+const MAX_ANISOTROPY: f32 = 4.0;
 const COLOUR_ONE: f32 = 255.0;
 const DEPTH_ONE: f32 = 4096.0;
 
@@ -202,8 +204,8 @@ fn footprint_from_columns(a: vec2<f32>, b: vec2<f32>, lo: f32, cap: f32) -> Foot
     var m = vec4<f32>(a2.x, b2.x, a2.y, b2.y);
     var det2 = abs(m.x * m.w - m.y * m.z);
     var widen = max(fa, fb);
-    let floor_value = EDGE_ON_FLOOR * lo;
     let s1 = largest_singular_value(a2, b2);
+    let floor_value = max(EDGE_ON_FLOOR * lo, s1 / MAX_ANISOTROPY);
     let s2 = det2 / s1;
     if !(s2 >= floor_value) {
         // `cpu::singular_vectors`.

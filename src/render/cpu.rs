@@ -111,6 +111,11 @@ pub struct Footprint {
     pub sharpness: [f32; 2],
 }
 
+/// Largest ratio of a footprint's singular values: a point stretched along one axis (a depth
+/// edge smoothed into a ramp, a surface seen at a grazing angle) is at least a quarter as wide
+/// across, so neighbouring streaks overlap instead of leaving cracks between them.
+pub const MAX_ANISOTROPY: f32 = 4.0;
+
 /// Smallest singular value a footprint keeps, as a share of `min_radius_px`: the prefilter
 /// widens short tangents, this floor catches footprints that are thin because their tangents are
 /// nearly parallel (a surface seen edge-on).
@@ -211,8 +216,10 @@ fn footprint_from_columns(a: Vec2, b: Vec2, lo: f32, cap: f32, kernel: SplatKern
     let mut m = [a2.x, b2.x, a2.y, b2.y];
     let mut det2 = (m[0] * m[3] - m[1] * m[2]).abs();
     let mut widen = fa.max(fb);
-    // Nearly parallel tangents: raise the smallest singular value to the floor.
-    let floor = EDGE_ON_FLOOR * lo;
+    // Nearly parallel tangents, or a footprint stretched far more along one axis than the
+    // other: raise the smallest singular value to the floor.
+    let s1 = columns_largest_singular_value(a2, b2);
+    let floor = (EDGE_ON_FLOOR * lo).max(s1 / MAX_ANISOTROPY);
     let s1 = columns_largest_singular_value(a2, b2);
     let s2 = det2 / s1;
     // (`s2` is NaN only for a NaN column, which `footprint` never passes.)
