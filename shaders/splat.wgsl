@@ -72,7 +72,6 @@ const DEPTH_ONE: f32 = 4096.0;
 // World-space footprint tangents, 3 floats per point.
 @group(0) @binding(2) var<storage, read> tangent_u: array<f32>;
 @group(0) @binding(3) var<storage, read> tangent_v: array<f32>;
-@group(0) @binding(4) var<storage, read> alphas: array<f32>;
 // sRGB colour, 3 floats per point.
 @group(0) @binding(5) var<storage, read> colours: array<f32>;
 // Per point: `(u, v, z, tolerance)`; `M'⁻¹` row-major; `(extent_x, extent_y, g,
@@ -91,10 +90,10 @@ const DEPTH_ONE: f32 = 4096.0;
 @group(0) @binding(10) var<storage, read_write> stats: array<u32>;
 // The frame, planar: colour `C/A` (3 floats per pixel), then coverage, then depth.
 @group(0) @binding(11) var<storage, read_write> frame: array<f32>;
-// World size of one source pixel at each point (`cpu::source_pixel_size`, computed on upload).
-@group(0) @binding(12) var<storage, read> source_pixel_size: array<f32>;
-// Per point: its layer, plus 65536 when its colour was observed (not synthesised).
-@group(0) @binding(13) var<storage, read> point_meta: array<u32>;
+// Per point: its layer plus 65536 when its colour was observed (not synthesised), its alpha's
+// bits, and the bits of the world size of one source pixel at it (`cpu::source_pixel_size`,
+// computed on upload). One buffer, so that no pass binds more than 8 storage buffers.
+@group(0) @binding(13) var<storage, read> point_meta: array<vec4<u32>>;
 
 fn is_finite(x: f32) -> bool {
     return (bitcast<u32>(x) & 0x7f800000u) != 0x7f800000u;
@@ -302,7 +301,8 @@ fn depth_tolerance(z: f32, tu_z: f32, tv_z: f32, widen: f32, support_px: f32) ->
 
 // Point `i` as a splat (as `cpu::Projector::splat`); `c.z = 0` when it is culled.
 fn project_point(i: u32) -> Splat {
-    let alpha = alphas[i];
+    let info = point_meta[i];
+    let alpha = bitcast<f32>(info.y);
     if !(alpha > 0.0) {
         return culled();
     }
@@ -319,7 +319,7 @@ fn project_point(i: u32) -> Splat {
     }
     let tu = rotate(load3_tangent_u(i));
     let tv = rotate(load3_tangent_v(i));
-    let f = footprint(p, tu, tv, source_pixel_size[i]);
+    let f = footprint(p, tu, tv, bitcast<f32>(info.z));
     let ex = f.extra.x;
     let ey = f.extra.y;
     let scale = min(alpha, 1.0) * f.extra.z;
@@ -565,7 +565,7 @@ fn visit(px: ptr<function, Pixel>, q: u32, x: f32, y: f32, pass_index: u32) {
     let info = batch_meta[q];
     let index = info.x;
     let key = Key(a.z, info.y & 0xffffu, info.y >= 65536u);
-    let scale = min(alphas[index], 1.0) * c.z;
+    let scale = min(bitcast<f32>(point_meta[index].y), 1.0) * c.z;
     let w_c = scale * kw.x;
     let w = scale * kw.y;
     if pass_index == 0u {
@@ -675,7 +675,7 @@ fn tile_pass(
             batch_a[li] = splats[index];
             batch_inverse[li] = splat_inverse[index];
             batch_c[li] = splat_extra[index];
-            batch_meta[li] = vec2<u32>(index, point_meta[index]);
+            batch_meta[li] = vec2<u32>(index, point_meta[index].x);
         }
         workgroupBarrier();
         let count = min(BATCH, end - base);

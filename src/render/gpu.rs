@@ -243,11 +243,9 @@ struct CloudBuffers {
     positions: wgpu::Buffer,
     tangent_u: wgpu::Buffer,
     tangent_v: wgpu::Buffer,
-    alphas: wgpu::Buffer,
     colours: wgpu::Buffer,
-    /// `cpu::source_pixel_size` of each point (view-independent, computed on upload).
-    source_pixel_size: wgpu::Buffer,
-    /// Each point's layer, plus 65536 when its colour was observed (`point_meta` in splat.wgsl).
+    /// Each point's layer (plus 65536 when its colour was observed), its alpha's bits and the
+    /// bits of its `cpu::source_pixel_size` (view-independent) (`point_meta` in splat.wgsl).
     meta: wgpu::Buffer,
 }
 
@@ -411,6 +409,7 @@ impl GpuSplatter {
             )));
         }
         self.check_binding("point positions", (n * 12) as u64)?;
+        self.check_binding("point data", (n * 16) as u64)?;
         // The same function the CPU renderer calls, so the footprint cap matches bit for bit.
         let pixel_sizes: Vec<f32> = cloud
             .positions
@@ -418,11 +417,16 @@ impl GpuSplatter {
             .zip(&cloud.tangent_u)
             .map(|(&p, &t)| source_pixel_size(p, t))
             .collect();
-        let meta: Vec<u32> = (0..n)
+        let meta: Vec<[u32; 4]> = (0..n)
             .map(|i| {
                 let layer = u32::from(cloud.layer.get(i).copied().unwrap_or(0));
                 let observed = !cloud.inpainted.get(i).copied().unwrap_or(false);
-                layer | (u32::from(observed) << 16)
+                [
+                    layer | (u32::from(observed) << 16),
+                    cloud.alphas[i].to_bits(),
+                    pixel_sizes[i].to_bits(),
+                    0,
+                ]
             })
             .collect();
         let device = self.context.device.clone();
@@ -438,9 +442,7 @@ impl GpuSplatter {
                 positions: upload("positions", bytemuck::cast_slice(&cloud.positions)),
                 tangent_u: upload("tangent u", bytemuck::cast_slice(&cloud.tangent_u)),
                 tangent_v: upload("tangent v", bytemuck::cast_slice(&cloud.tangent_v)),
-                alphas: upload("alphas", bytemuck::cast_slice(&cloud.alphas)),
                 colours: upload("colours", bytemuck::cast_slice(&cloud.colours)),
-                source_pixel_size: upload("source pixel size", bytemuck::cast_slice(&pixel_sizes)),
                 meta: upload("point meta", bytemuck::cast_slice(&meta)),
             })
         })?;
@@ -604,10 +606,9 @@ impl GpuSplatter {
                 (1, position_buffer),
                 (2, &cloud.tangent_u),
                 (3, &cloud.tangent_v),
-                (4, &cloud.alphas),
+                (13, &cloud.meta),
                 (6, &self.splats.buffer),
                 (7, &self.tile_counts.buffer),
-                (12, &cloud.source_pixel_size),
                 (14, &self.splat_inverse.buffer),
                 (15, &self.splat_extra.buffer),
             ],
@@ -635,7 +636,6 @@ impl GpuSplatter {
             &p.raster,
             &[
                 (0, &s.camera),
-                (4, &cloud.alphas),
                 (5, &cloud.colours),
                 (6, &self.splats.buffer),
                 (8, &self.tile_offsets.buffer),
