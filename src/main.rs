@@ -890,10 +890,19 @@ fn eval_nvs(args: EvalNvsArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
     let table = eval_nvs(&pair, &options, &progress);
     bar.finish_and_clear();
     let table = table?;
-    if args.json {
-        println!("{}", table.to_json()?);
+    print_table(args.json, || table.to_json(), || table.to_markdown())
+}
+
+/// Prints an evaluation table as JSON or markdown.
+fn print_table(
+    json: bool,
+    as_json: impl FnOnce() -> makeit4d::Result<String>,
+    as_markdown: impl FnOnce() -> String,
+) -> anyhow::Result<()> {
+    if json {
+        println!("{}", as_json()?);
     } else {
-        print!("{}", table.to_markdown());
+        print!("{}", as_markdown());
     }
     Ok(())
 }
@@ -920,12 +929,7 @@ fn eval_zoom(args: EvalZoomArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> 
     let table = eval_zoom(&photos, &options, &progress);
     bar.finish_and_clear();
     let table = table?;
-    if args.json {
-        println!("{}", table.to_json()?);
-    } else {
-        print!("{}", table.to_markdown());
-    }
-    Ok(())
+    print_table(args.json, || table.to_json(), || table.to_markdown())
 }
 
 fn bench_scene(args: BenchSceneArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
