@@ -3,7 +3,7 @@
 //!
 //! The clouds are lifted images (a ground plane below a horizon, standing slabs with depth edges,
 //! far hills above; random colours from a fixed seed), rendered from a fly-in pose (forward and
-//! slightly turned), so discs stretch, overlap and occlude as in a real render.
+//! slightly turned), so footprints stretch, overlap and occlude as in a real render.
 
 use crate::error::Result;
 use crate::geometry::{Intrinsics, Pose, View};

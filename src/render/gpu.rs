@@ -35,7 +35,7 @@
 //! **Buffers.** Point data (positions, tangents, alphas, colours, and each point's source pixel
 //! size from `cpu::source_pixel_size`, which does not depend on the view) is uploaded once per
 //! [`GpuSplatter::set_cloud`]; a frame writes one camera uniform and, for animation, a position
-//! buffer ([`GpuSplatter::upload_positions`]). Scratch (projected discs, tile counters and lists)
+//! buffer ([`GpuSplatter::upload_positions`]). Scratch (projected splats, tile counters and lists)
 //! is shared by all renders and grows on demand: the tile-list capacity is a guess that the scan
 //! checks, and a render that needed more is redone once after growing it.
 //!

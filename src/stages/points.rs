@@ -3,9 +3,9 @@
 //! Stored as a structure of arrays so that renderers stream only what they need. Each point also
 //! carries its *footprint*: the world-space vectors to its right and lower neighbours on the
 //! same surface (`tangent_u`, `tangent_v`). Projected into a target view they give the size of
-//! the area the point must cover there, which is where the splat radius comes from
+//! the area the point must cover there, which is where the splat footprint comes from
 //! (`render::cpu`): in the input view every footprint is exactly one pixel, so the input view is
-//! reproduced sharply, and stretched views get larger discs instead of cracks.
+//! reproduced sharply, and stretched views get longer footprints instead of cracks.
 
 use crate::error::{Error, Result};
 use crate::geometry::Intrinsics;
@@ -173,7 +173,7 @@ impl PointCloud {
                         (None, None) => fronto,
                     };
                     // Long tangents (grazing surfaces, or depth edges smoothed into ramps)
-                    // are kept: the renderer caps the disc relative to the paper's
+                    // are kept: the renderer caps the footprint relative to the paper's
                     // fronto-parallel radius in each target view.
                     let t = unit_in_source(t);
                     if t.is_finite() { t } else { fronto }
