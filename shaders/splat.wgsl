@@ -50,10 +50,10 @@ const TILE: u32 = 16u;
 const BATCH: u32 = 128u;
 // `geometry::MIN_DEPTH`.
 const MIN_DEPTH: f32 = 1e-6;
-// `cpu::MIN_VISIBLE_WEIGHT`, `cpu::OPAQUE_TRANSMITTANCE`, `cpu::BASE_RELATIVE_TOLERANCE`,
+// `cpu::MIN_VISIBLE_WEIGHT`, `cpu::OPAQUE_REMAINDER`, `cpu::BASE_RELATIVE_TOLERANCE`,
 // `points::SAME_SURFACE_RELATIVE_DEPTH`.
 const MIN_VISIBLE_WEIGHT: f32 = 0.000244140625;
-const OPAQUE_TRANSMITTANCE: f32 = 0.000244140625;
+const OPAQUE_REMAINDER: f32 = 0.000244140625;
 const BASE_RELATIVE_TOLERANCE: f32 = 0.01;
 const SAME_SURFACE_RELATIVE_DEPTH: f32 = 0.1;
 // Fixed-point scales of the surface sums: weights, colours (8 bits) and relative depth offsets.
@@ -534,7 +534,7 @@ struct Pixel {
 }
 
 fn pixel_open(px: ptr<function, Pixel>) -> bool {
-    return (*px).cur.z < 3.0e38 && (*px).budget > OPAQUE_TRANSMITTANCE;
+    return (*px).cur.z < 3.0e38 && (*px).budget > OPAQUE_REMAINDER;
 }
 
 // Tests the splat in batch slot `q` against pixel `(x, y)`: in the visibility pass (`pass == 0`)

@@ -28,7 +28,7 @@ use crate::metrics::psnr_masked;
 use crate::path::{CameraPath, Interpolation, Keyframe, KeyframePath};
 use crate::progress::Progress;
 use crate::project::Project;
-use crate::raster::{MaskRaster, Raster, RgbRaster};
+use crate::raster::{BoxAverage, MaskRaster, Raster, RgbRaster};
 use crate::render::cpu::CpuRenderer;
 use crate::render::{FrameRenderer, SplatKernel};
 use crate::scene::SceneBuilder;
@@ -210,22 +210,12 @@ impl ZoomTable {
 
 /// The 2× area downsample of `original` (its width and height rounded down to even).
 pub fn downsample_2x(original: &RgbRaster) -> RgbRaster {
-    let (w, h) = (original.width() / 2, original.height() / 2);
-    Raster::from_fn(w, h, |x, y| {
-        let mut c = [0.0f32; 3];
-        for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-            let p = original.at(2 * x + dx, 2 * y + dy);
-            for i in 0..3 {
-                c[i] += 0.25 * p[i];
-            }
-        }
-        c
-    })
+    BoxAverage::box_reduce(original, 2, 2)
 }
 
-/// `image` quantised to 8 bits per channel (as a PNG stores it).
+/// `image` quantised to 8 bits per channel, exactly as an 8-bit PNG stores it.
 pub fn quantise_8bit(image: &RgbRaster) -> RgbRaster {
-    image.map(|c| c.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() / 255.0))
+    image.map(|c| c.map(|v| f32::from(image_io::unit_to_u8(v)) / 255.0))
 }
 
 /// A 1-D resampling kernel of the baselines.
@@ -448,13 +438,16 @@ pub fn eval_zoom(
             || photo.display().to_string(),
             |n| n.to_string_lossy().into_owned(),
         );
+        // One stage graph per photo: the load and depth stages are shared by every zoom (only
+        // the canvas and what follows depend on the path).
+        let mut builder = SceneBuilder::new();
         for (zi, &zoom) in options.zooms.iter().enumerate() {
             let step = (pi * options.zooms.len() + zi) as f32;
             let sub = progress.sub(step / steps, (step + 1.0) / steps);
             sub.check()?;
             sub.report(0.0, &format!("{name} ×{zoom}"));
             let project = zoom_project(&options.project, &input_path, (w, h), zoom);
-            let scene = SceneBuilder::new().build(&project, &sub.sub(0.0, 0.9))?;
+            let scene = builder.build(&project, &sub.sub(0.0, 0.9))?;
             let evaluator = project.camera.path.evaluator(
                 &scene.intrinsics,
                 w,

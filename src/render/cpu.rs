@@ -21,9 +21,10 @@
 //! point lattice), and a sub-pixel object gets partial coverage instead of sparkling. Columns
 //! longer than `cap` are shortened to it: `max_stretch` times the paper's fronto-parallel size
 //! `r0·z_src/z_tgt` (at most `max_radius_px`), so a depth edge the estimator smoothed into a steep
-//! ramp cannot splat as a blob. A footprint whose columns are nearly parallel (seen edge-on) keeps
-//! a smallest singular value of half the prefilter; degenerate tangents (zero or not finite) fall
-//! back to the fronto-parallel footprint.
+//! ramp cannot splat as a blob. A footprint keeps a smallest singular value of at least half the
+//! prefilter (columns nearly parallel: seen edge-on) and of at least a quarter of its largest
+//! ([`MAX_ANISOTROPY`]: streaks overlap instead of cracking); degenerate tangents (zero or not
+//! finite) fall back to the fronto-parallel footprint.
 //!
 //! **Normalised blending within a surface, coverage between surfaces.** Per pixel, the nearest
 //! point whose coverage weight (the tent, `w_c = α·g·tent(s_x)·tent(s_y)`) is at least
@@ -80,8 +81,8 @@ pub const MAX_K: usize = 16;
 /// add to one at any weight). Keeps the far fringes of kernels from each opening a surface.
 pub const MIN_VISIBLE_WEIGHT: f32 = 1.0 / 4096.0;
 
-/// Transmittance below which a pixel is opaque and takes no more surfaces.
-pub const OPAQUE_TRANSMITTANCE: f32 = 1.0 / 4096.0;
+/// Share of a pixel left uncovered below which it is opaque and takes no more surfaces.
+pub const OPAQUE_REMAINDER: f32 = 1.0 / 4096.0;
 
 /// Colour weight of a synthesised (inpainted or outpainted) point relative to an observed one
 /// in the same surface: where both reach a pixel (the seam between a layer's photo pixels and
@@ -220,7 +221,6 @@ fn footprint_from_columns(a: Vec2, b: Vec2, lo: f32, cap: f32, kernel: SplatKern
     // other: raise the smallest singular value to the floor.
     let s1 = columns_largest_singular_value(a2, b2);
     let floor = (EDGE_ON_FLOOR * lo).max(s1 / MAX_ANISOTROPY);
-    let s1 = columns_largest_singular_value(a2, b2);
     let s2 = det2 / s1;
     // (`s2` is NaN only for a NaN column, which `footprint` never passes.)
     if s2.is_nan() || s2 < floor {
@@ -645,7 +645,7 @@ impl PixelState {
     /// True while the pixel has a surface to accumulate and is not yet opaque.
     #[inline]
     fn open(&self) -> bool {
-        self.cur.z < f32::INFINITY && self.budget > OPAQUE_TRANSMITTANCE
+        self.cur.z < f32::INFINITY && self.budget > OPAQUE_REMAINDER
     }
 
     /// Composites the accumulated surface in front of what is behind and moves to the next one:
@@ -1218,35 +1218,17 @@ mod tests {
         })
     }
 
-    /// Separable interpolation of `image` at `(x, y)` with `kernel` (taps clamped to the edge).
-    fn interpolate(image: &Raster<[f32; 3]>, x: f32, y: f32, kernel: SplatKernel) -> [f32; 3] {
-        let (x0, y0) = (x.floor() as i64, y.floor() as i64);
-        let mut out = [0.0f32; 3];
-        for j in -2..=3 {
-            let wy = kernel.weight_1d(y - (y0 + j) as f32);
-            for i in -2..=3 {
-                let w = wy * kernel.weight_1d(x - (x0 + i) as f32);
-                if w == 0.0 {
-                    continue;
-                }
-                let xi = (x0 + i).clamp(0, image.width() as i64 - 1) as usize;
-                let yi = (y0 + j).clamp(0, image.height() as i64 - 1) as usize;
-                let c = image.at(xi, yi);
-                for ch in 0..3 {
-                    out[ch] += w * c[ch];
-                }
-            }
-        }
-        out
-    }
-
     #[test]
     fn pure_zoom_of_a_textured_plane_is_interpolation() {
+        use crate::eval::zoom::Resample;
         let (w, h) = (40, 30);
         let k = Intrinsics::from_hfov(w, h, 50.0);
         let image = texture(w, h);
         let cloud = textured_plane(&image, &k);
-        for kernel in [SplatKernel::Tent, SplatKernel::CatmullRom] {
+        for (kernel, resample) in [
+            (SplatKernel::Tent, Resample::Bilinear),
+            (SplatKernel::CatmullRom, Resample::Bicubic),
+        ] {
             for zoom in [1.6f32, 2.0, 3.0] {
                 let zk = Intrinsics {
                     fx: k.fx * zoom,
@@ -1272,7 +1254,7 @@ mod tests {
                         {
                             continue;
                         }
-                        let want = interpolate(&image, sx, sy, kernel);
+                        let want = crate::eval::zoom::sample(&image, sx, sy, resample);
                         let got = f.colour.at(x, y);
                         for ch in 0..3 {
                             worst = worst.max((got[ch] - want[ch]).abs());
@@ -1415,13 +1397,16 @@ mod tests {
             cx: 0.0,
             cy: 0.0,
         };
-        let f = render_cpu(&cloud, None, &view(zoom), 3, 1, &tent).unwrap();
-        let mid = f.colour.at(1, 0);
-        assert!(
-            (mid[0] - 0.5).abs() < 1e-5 && (mid[2] - 0.5).abs() < 1e-5,
-            "{mid:?}"
-        );
-        assert!((f.coverage.at(1, 0) - 1.0).abs() < 1e-5);
+        // The middle pixel: half red, half blue, fully covered.
+        let half_and_half = |f: &Frame| {
+            let mid = f.colour.at(1, 0);
+            assert!(
+                (mid[0] - 0.5).abs() < 1e-5 && (mid[2] - 0.5).abs() < 1e-5,
+                "{mid:?}"
+            );
+            assert!((f.coverage.at(1, 0) - 1.0).abs() < 1e-5);
+        };
+        half_and_half(&render_cpu(&cloud, None, &view(zoom), 3, 1, &tent).unwrap());
         // Half a source pixel to the left of the first point the surface covers half the pixel.
         let f = render_cpu(
             &cloud,
@@ -1440,12 +1425,7 @@ mod tests {
         cloud.tangent_u[1] *= 10.0;
         cloud.tangent_v[1] *= 10.0;
         let f = render_cpu(&cloud, None, &view(zoom), 3, 1, &tent).unwrap();
-        let mid = f.colour.at(1, 0);
-        assert!(
-            (mid[0] - 0.5).abs() < 1e-5 && (mid[2] - 0.5).abs() < 1e-5,
-            "{mid:?}"
-        );
-        assert!((f.coverage.at(1, 0) - 1.0).abs() < 1e-5);
+        half_and_half(&f);
         assert!(
             (f.depth.at(1, 0) - 22.0).abs() < 1e-3,
             "{}",

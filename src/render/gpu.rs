@@ -32,8 +32,9 @@
 //! exactly on a support edge. The tests assert PSNR ≥ 40 dB and coverage/depth agreement, and the
 //! bench prints the PSNR per cell.
 //!
-//! **Buffers.** Point data (positions, tangents, alphas, colours, and each point's source pixel
-//! size from `cpu::source_pixel_size`, which does not depend on the view) is uploaded once per
+//! **Buffers.** Point data (positions, tangents, colours, and per point its layer, observed flag,
+//! alpha and source pixel size from `cpu::source_pixel_size`, which does not depend on the view;
+//! no pass binds more than 8 storage buffers, the common device limit) is uploaded once per
 //! [`GpuSplatter::set_cloud`]; a frame writes one camera uniform and, for animation, a position
 //! buffer ([`GpuSplatter::upload_positions`]). Scratch (projected splats, tile counters and lists)
 //! is shared by all renders and grows on demand: the tile-list capacity is a guess that the scan
