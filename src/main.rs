@@ -135,6 +135,22 @@ struct EvalZoomArgs {
 }
 
 #[derive(Args, Debug)]
+struct BenchEditorArgs {
+    /// The photo or project to open (default: ../shared/data/photos/forest_path.jpg when
+    /// present, else tests/data/evening_glow_320.jpg).
+    photo: Option<PathBuf>,
+    /// Seconds of playback to measure.
+    #[arg(long, default_value_t = 6.0)]
+    playback_seconds: f64,
+    /// Give up on one edit after this many seconds.
+    #[arg(long, default_value_t = 300.0)]
+    limit: f64,
+    /// Print JSON instead of markdown.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Args, Debug)]
 struct BenchRenderArgs {
     /// Reconstruction kernel of both renderers.
     #[arg(long, value_enum, default_value = "catmull-rom")]
@@ -248,6 +264,9 @@ enum BenchCommand {
     /// Renderers: frames/s and points/s for 0.5 M, 2 M and 8 M points at 720p and 1080p, GPU
     /// and CPU side by side, with the CPU bandwidth floor.
     Render(BenchRenderArgs),
+    /// The editor, headless (its real workers, CPU preview): seconds from each edit to the
+    /// first picture, the edit's scene and the final quality; playback frames/s.
+    Editor(BenchEditorArgs),
     /// Every stage for each inpainting preset on each photo: seconds, peak memory, quality
     /// against the final preset; writes bench.md, bench.json and quality_vs_time.png.
     Scene(BenchSceneArgs),
@@ -542,6 +561,7 @@ fn main() -> ExitCode {
         Command::Bench(BenchCommand::Inpaint(args)) => bench_inpaint(args, cancel),
         Command::Bench(BenchCommand::Motion(args)) => bench_motion(args),
         Command::Bench(BenchCommand::Render(args)) => bench_render(args),
+        Command::Bench(BenchCommand::Editor(args)) => bench_editor(args),
         Command::Inpaint(args) => inpaint(args, cancel),
         Command::Bench(BenchCommand::Scene(args)) => bench_scene(args, cancel),
         Command::Bench(BenchCommand::SceneCase(args)) => bench_scene_case(args),
@@ -1172,6 +1192,42 @@ fn bench_motion(args: BenchMotionArgs) -> anyhow::Result<()> {
         "\nloop memory: {:.1} MB",
         t.memory_bytes as f64 / (1024.0 * 1024.0)
     );
+    Ok(())
+}
+
+fn bench_editor(args: BenchEditorArgs) -> anyhow::Result<()> {
+    let photo = match args.photo {
+        Some(p) => p,
+        None => {
+            let shared = PathBuf::from("../shared/data/photos/forest_path.jpg");
+            if shared.is_file() {
+                shared
+            } else {
+                PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/evening_glow_320.jpg")
+            }
+        }
+    };
+    if !photo.is_file() {
+        anyhow::bail!("{}: no such file", photo.display());
+    }
+    if !(args.limit.is_finite()
+        && args.limit > 0.0
+        && args.playback_seconds.is_finite()
+        && args.playback_seconds >= 0.0)
+    {
+        anyhow::bail!("--limit must be > 0 and --playback-seconds ≥ 0");
+    }
+    let options = makeit4d::app::bench::EditorBenchOptions {
+        open: photo.clone(),
+        limit: std::time::Duration::from_secs_f64(args.limit),
+        playback_seconds: args.playback_seconds,
+    };
+    let rows = makeit4d::app::bench::run(&options, |row| eprintln!("{row:?}"))?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+    } else {
+        print!("{}", makeit4d::app::bench::to_markdown(&rows, &photo));
+    }
     Ok(())
 }
 

@@ -161,24 +161,112 @@ pub struct Scene {
     pub warnings: Vec<String>,
 }
 
+/// How many outputs each stage keeps, keyed by the stage's inputs: returning to an earlier state
+/// (undo, redo, deleting the key just added, switching a count back) finds every stage cached.
+/// Three entries of a 1280×800 scene's heaviest stages take about 1 GiB together.
+pub const CACHE_ENTRIES: usize = 3;
+
 struct Slot<T> {
     key: u64,
+    /// The canvas stage's inputs other than the layout (0 for the other stages).
+    base: u64,
     value: Arc<T>,
 }
 
-/// Builds scenes and keeps each stage's last output for reuse.
+/// One stage's cached outputs, least recently used first.
+struct StageCache<T> {
+    entries: Vec<Slot<T>>,
+}
+
+impl<T> Default for StageCache<T> {
+    fn default() -> Self {
+        Self {
+            entries: Vec::new(),
+        }
+    }
+}
+
+impl<T> StageCache<T> {
+    /// The output for `key`, now the most recently used.
+    fn get(&mut self, key: u64) -> Option<Arc<T>> {
+        let i = self.entries.iter().position(|s| s.key == key)?;
+        let slot = self.entries.remove(i);
+        let value = slot.value.clone();
+        self.entries.push(slot);
+        Some(value)
+    }
+
+    /// The most recently used entry that `keep` accepts: `(key, value)`.
+    fn newest(&self, keep: impl Fn(&Slot<T>) -> bool) -> Option<(u64, Arc<T>)> {
+        self.entries
+            .iter()
+            .rev()
+            .find(|s| keep(s))
+            .map(|s| (s.key, s.value.clone()))
+    }
+
+    /// Stores `value` under `key`, dropping the least recently used entry beyond
+    /// [`CACHE_ENTRIES`].
+    fn put(&mut self, key: u64, base: u64, value: Arc<T>) {
+        self.entries.retain(|s| s.key != key);
+        self.entries.push(Slot { key, base, value });
+        if self.entries.len() > CACHE_ENTRIES {
+            self.entries.remove(0);
+        }
+    }
+}
+
 #[derive(Default)]
-pub struct SceneBuilder {
-    load: Option<Slot<LoadedImage>>,
-    depth: Option<Slot<DepthStageOutput>>,
-    canvas: Option<Slot<Canvas>>,
-    layers: Option<Slot<crate::stages::layers::LayerPlan>>,
-    inpaint: Option<Slot<LayeredScene>>,
-    layer_depth: Option<Slot<LayeredScene>>,
-    cloud: Option<Slot<PointCloud>>,
-    motion: Option<Slot<Option<Arc<PreparedMotion>>>>,
+struct Stats {
     runs: std::collections::BTreeMap<Stage, usize>,
     seconds: std::collections::BTreeMap<Stage, f64>,
+}
+
+impl Stats {
+    fn ran(&mut self, stage: Stage, started: std::time::Instant) {
+        *self.runs.entry(stage).or_insert(0) += 1;
+        self.seconds.insert(stage, started.elapsed().as_secs_f64());
+    }
+}
+
+/// `cache`'s output for `key`, or — unless `dry` — `run`'s, stored. `Err(stage)` only when
+/// `dry` and the stage would have to run.
+fn cached<T>(
+    cache: &mut StageCache<T>,
+    stats: &mut Stats,
+    stage: Stage,
+    key: u64,
+    dry: bool,
+    progress: &Progress,
+    run: impl FnOnce(&Progress) -> Result<T>,
+) -> Result<std::result::Result<Arc<T>, Stage>> {
+    if let Some(v) = cache.get(key) {
+        return Ok(Ok(v));
+    }
+    if dry {
+        return Ok(Err(stage));
+    }
+    let started = std::time::Instant::now();
+    progress.report(0.0, stage.name());
+    let v = Arc::new(run(progress)?);
+    stats.ran(stage, started);
+    cache.put(key, 0, v.clone());
+    Ok(Ok(v))
+}
+
+/// Builds scenes and keeps each stage's recent outputs for reuse ([`CACHE_ENTRIES`] per stage).
+#[derive(Default)]
+pub struct SceneBuilder {
+    load: StageCache<LoadedImage>,
+    depth: StageCache<DepthStageOutput>,
+    canvas: StageCache<Canvas>,
+    layers: StageCache<crate::stages::layers::LayerPlan>,
+    inpaint: StageCache<LayeredScene>,
+    layer_depth: StageCache<LayeredScene>,
+    cloud: StageCache<PointCloud>,
+    motion: StageCache<Option<Arc<PreparedMotion>>>,
+    stats: Stats,
+    grow_canvas: bool,
 }
 
 /// Hashes `parts` (serialised as JSON) together with the upstream key.
@@ -216,30 +304,89 @@ pub fn scene_scale(depth: &GrayRaster, sky: &GrayRaster) -> Result<SceneScale> {
     }
 }
 
+/// True when `outer` holds `inner`'s whole canvas around a photo `w × h` wide (every pad at
+/// least as wide).
+fn layout_covers(outer: &CanvasLayout, inner: &CanvasLayout, (w, h): (usize, usize)) -> bool {
+    outer.left_pad >= inner.left_pad
+        && outer.top_pad >= inner.top_pad
+        && outer.right_pad(w) >= inner.right_pad(w)
+        && outer.bottom_pad(h) >= inner.bottom_pad(h)
+}
+
+/// The smallest layout that covers both `a` and `b` (the wider pad on each side).
+fn layout_union(a: &CanvasLayout, b: &CanvasLayout, (w, h): (usize, usize)) -> CanvasLayout {
+    let (l, t) = (a.left_pad.max(b.left_pad), a.top_pad.max(b.top_pad));
+    let (r, bt) = (
+        a.right_pad(w).max(b.right_pad(w)),
+        a.bottom_pad(h).max(b.bottom_pad(h)),
+    );
+    CanvasLayout {
+        left_pad: l,
+        top_pad: t,
+        width: l + w + r,
+        height: t + h + bt,
+    }
+}
+
 impl SceneBuilder {
-    /// An empty cache.
+    /// An empty cache. Every build gets exactly the canvas its path needs (the command line's
+    /// and the evaluations' rule: the same project always gives the same frames).
     pub fn new() -> Self {
         Self::default()
     }
 
+    /// An empty cache whose canvas only grows (the editor's rule): a camera path that fits the
+    /// canvas of an earlier build reuses it and every stage after it, and one that needs more
+    /// outpaints only the new margin around it. [`SceneBuilder::build_exact`] still builds the
+    /// exact canvas (exports).
+    pub fn growing() -> Self {
+        Self {
+            grow_canvas: true,
+            ..Self::default()
+        }
+    }
+
     /// How many times each stage has run in this builder (stages that never ran are absent).
     pub fn runs(&self) -> &std::collections::BTreeMap<Stage, usize> {
-        &self.runs
+        &self.stats.runs
     }
 
     /// Wall time of each stage's most recent run, seconds (stages that never ran are absent;
     /// a stage re-used from the cache keeps the time of the run that made its output).
     pub fn last_run_seconds(&self) -> &std::collections::BTreeMap<Stage, f64> {
-        &self.seconds
-    }
-
-    fn ran(&mut self, stage: Stage, started: std::time::Instant) {
-        *self.runs.entry(stage).or_insert(0) += 1;
-        self.seconds.insert(stage, started.elapsed().as_secs_f64());
+        &self.stats.seconds
     }
 
     /// Builds (or re-uses) every stage for `project`.
     pub fn build(&mut self, project: &Project, progress: &Progress) -> Result<Scene> {
+        let grow = self.grow_canvas;
+        self.build_inner(project, progress, grow, false)?
+            .map_err(|_| Error::invalid("internal: a build that is not dry missed a stage"))
+    }
+
+    /// Builds with exactly the canvas `project`'s path needs, whatever the builder's rule (what
+    /// the command line renders for the same project).
+    pub fn build_exact(&mut self, project: &Project, progress: &Progress) -> Result<Scene> {
+        self.build_inner(project, progress, false, false)?
+            .map_err(|_| Error::invalid("internal: a build that is not dry missed a stage"))
+    }
+
+    /// The first stage a [`SceneBuilder::build`] of `project` would run, without running any
+    /// (`None`: every stage is cached). Errors as the build would on a bad project.
+    pub fn first_stale_stage(&mut self, project: &Project) -> Result<Option<Stage>> {
+        let grow = self.grow_canvas;
+        Ok(self
+            .build_inner(project, &Progress::none(), grow, true)?
+            .err())
+    }
+
+    fn build_inner(
+        &mut self,
+        project: &Project,
+        progress: &Progress,
+        grow: bool,
+        dry: bool,
+    ) -> Result<std::result::Result<Scene, Stage>> {
         project.validate()?;
         let mut warnings = Vec::new();
         let mut done = 0.0f32;
@@ -248,24 +395,28 @@ impl SceneBuilder {
             done += stage.weight();
             p
         };
+        let stats = &mut self.stats;
+        macro_rules! stage {
+            ($e:expr) => {
+                match $e? {
+                    Ok(v) => v,
+                    Err(stage) => return Ok(Err(stage)),
+                }
+            };
+        }
 
         // 1. Load.
         let p = step(Stage::Load);
         let key = key_of(0, &project.input);
-        let input = match &self.load {
-            Some(s) if s.key == key => s.value.clone(),
-            _ => {
-                let started = std::time::Instant::now();
-                p.report(0.0, Stage::Load.name());
-                let v = Arc::new(load_image(&project.input)?);
-                self.ran(Stage::Load, started);
-                self.load = Some(Slot {
-                    key,
-                    value: v.clone(),
-                });
-                v
-            }
-        };
+        let input = stage!(cached(
+            &mut self.load,
+            stats,
+            Stage::Load,
+            key,
+            dry,
+            &p,
+            |_| { load_image(&project.input) }
+        ));
         p.check()?;
         let (w, h) = input.rgb.size();
         let intrinsics = Intrinsics::from_hfov(w, h, project.camera.hfov_deg);
@@ -273,72 +424,94 @@ impl SceneBuilder {
         // 2. Depth.
         let p = step(Stage::Depth);
         let key = key_of(key, &(&project.depth, project.camera.hfov_deg));
-        let depth = match &self.depth {
-            Some(s) if s.key == key => s.value.clone(),
-            _ => {
-                let started = std::time::Instant::now();
-                p.report(0.0, Stage::Depth.name());
-                let v = Arc::new(run_depth_stage(
-                    &project.depth,
-                    &input.rgb,
-                    &intrinsics,
-                    &p,
-                )?);
-                self.ran(Stage::Depth, started);
-                self.depth = Some(Slot {
-                    key,
-                    value: v.clone(),
-                });
-                v
-            }
-        };
+        let depth = stage!(cached(
+            &mut self.depth,
+            stats,
+            Stage::Depth,
+            key,
+            dry,
+            &p,
+            |p| { run_depth_stage(&project.depth, &input.rgb, &intrinsics, p) }
+        ));
         warnings.extend(depth.warnings.iter().cloned());
         let scale = scene_scale(&depth.estimate.depth, &depth.estimate.sky)?;
 
         // The inpainter serves the canvas and the layers.
         let (inpainter, inpainter_name) = make_inpainter(&project.inpaint, &mut warnings);
 
-        // 3. Canvas.
+        // 3. Canvas: the layout the path needs, then a cached canvas that covers it, one grown
+        // from a cached canvas, or a new one.
         let p = step(Stage::Canvas);
         let output_size = match (project.output.width, project.output.height) {
             (Some(ow), Some(oh)) => (ow, oh),
             _ => (w, h),
         };
-        let key = key_of(
-            key,
-            &(
-                &project.canvas,
-                &project.camera.path,
-                project.output.frames,
-                output_size,
-                &project.inpaint,
-            ),
-        );
-        let canvas = match &self.canvas {
-            Some(s) if s.key == key => s.value.clone(),
-            _ => {
+        let needed = canvas_layout(
+            project,
+            (w, h),
+            &intrinsics,
+            &depth.estimate.depth,
+            &scale,
+            output_size,
+        )?;
+        let base = key_of(key, &(&project.canvas, &project.inpaint));
+        let exact_key = key_of(base, &(needed, 0u64));
+        let reused = match self.canvas.get(exact_key) {
+            Some(v) => Some((exact_key, v)),
+            None if grow => self
+                .canvas
+                .newest(|s| s.base == base && layout_covers(&s.value.layout, &needed, (w, h))),
+            None => None,
+        };
+        let (canvas_key, canvas) = match reused {
+            Some((k, v)) => {
+                // Mark it as used.
+                self.canvas.get(k);
+                (k, v)
+            }
+            None if dry => return Ok(Err(Stage::Canvas)),
+            None => {
                 let started = std::time::Instant::now();
                 p.report(0.0, Stage::Canvas.name());
-                let v = Arc::new(build_canvas(
-                    project,
-                    &input.rgb,
-                    &intrinsics,
-                    &depth.estimate.depth,
-                    &depth.estimate.sky,
-                    &scale,
-                    output_size,
-                    inpainter.as_ref(),
-                    &p,
-                )?);
-                self.ran(Stage::Canvas, started);
-                self.canvas = Some(Slot {
-                    key,
-                    value: v.clone(),
-                });
-                v
+                let parent = if grow {
+                    self.canvas.newest(|s| s.base == base)
+                } else {
+                    None
+                };
+                let (k, v) = match parent {
+                    Some((parent_key, parent)) => {
+                        let layout = layout_union(&parent.layout, &needed, (w, h));
+                        let v = grow_canvas(
+                            &parent,
+                            layout,
+                            (w, h),
+                            &intrinsics,
+                            inpainter.as_ref(),
+                            project.inpaint.seed,
+                            &p,
+                        )?;
+                        (key_of(base, &(layout, parent_key)), v)
+                    }
+                    None => (
+                        exact_key,
+                        build_canvas(
+                            project,
+                            needed,
+                            &input.rgb,
+                            &intrinsics,
+                            &depth.estimate.depth,
+                            &depth.estimate.sky,
+                            inpainter.as_ref(),
+                            &p,
+                        )?,
+                    ),
+                };
+                let v = Arc::new(v);
+                stats.ran(Stage::Canvas, started);
+                self.canvas.put(k, base, v.clone());
+                (k, v)
             }
         };
-        let canvas_key = key;
 
         // 4. Layers.
         let p = step(Stage::Layers);
@@ -351,160 +524,117 @@ impl SceneBuilder {
             }
         };
         let key = key_of(canvas_key, &(&params, project.layers.enabled));
-        let plan = match &self.layers {
-            Some(s) if s.key == key => s.value.clone(),
-            _ => {
-                let started = std::time::Instant::now();
-                p.report(0.0, Stage::Layers.name());
-                let v = Arc::new(plan_layers_with_sky(
-                    &canvas.depth,
-                    Some(&canvas.sky),
-                    &params,
-                    &p,
-                )?);
-                self.ran(Stage::Layers, started);
-                self.layers = Some(Slot {
-                    key,
-                    value: v.clone(),
-                });
-                v
-            }
-        };
+        let plan = stage!(cached(
+            &mut self.layers,
+            stats,
+            Stage::Layers,
+            key,
+            dry,
+            &p,
+            |p| { plan_layers_with_sky(&canvas.depth, Some(&canvas.sky), &params, p) }
+        ));
 
         // 5. Layer inpainting.
         let p = step(Stage::Inpaint);
         let key = key_of(key, &(project.layers.inpaint, &project.inpaint));
-        let inpainted = match &self.inpaint {
-            Some(s) if s.key == key => s.value.clone(),
-            _ => {
-                let started = std::time::Instant::now();
-                p.report(0.0, Stage::Inpaint.name());
-                let v = if project.layers.inpaint && plan.regions.len() > 1 {
+        let inpainted = stage!(cached(
+            &mut self.inpaint,
+            stats,
+            Stage::Inpaint,
+            key,
+            dry,
+            &p,
+            |p| {
+                if project.layers.inpaint && plan.regions.len() > 1 {
                     inpaint_layers(
                         &canvas.image,
                         &plan,
                         inpainter.as_ref(),
                         project.inpaint.seed,
-                        &p,
-                    )?
+                        p,
+                    )
                 } else {
-                    uninpainted_layers(&canvas.image, &plan)
-                };
-                let v = Arc::new(v);
-                self.ran(Stage::Inpaint, started);
-                self.inpaint = Some(Slot {
-                    key,
-                    value: v.clone(),
-                });
-                v
+                    Ok(uninpainted_layers(&canvas.image, &plan))
+                }
             }
-        };
+        ));
 
         // 6. Layer-based depth.
         let p = step(Stage::LayerDepth);
         let key = key_of(key, &project.layers.layer_depth);
-        let layered = match &self.layer_depth {
-            Some(s) if s.key == key => s.value.clone(),
-            _ => {
-                let started = std::time::Instant::now();
-                let v = if project.layers.layer_depth
-                    && project.layers.inpaint
-                    && inpainted.layers.len() > 1
-                {
-                    p.report(0.0, Stage::LayerDepth.name());
+        let run_layer_depth =
+            project.layers.layer_depth && project.layers.inpaint && inpainted.layers.len() > 1;
+        let layered = if run_layer_depth {
+            stage!(cached(
+                &mut self.layer_depth,
+                stats,
+                Stage::LayerDepth,
+                key,
+                dry,
+                &p,
+                |p| {
                     let estimator = layer_depth_estimator(project);
-                    Arc::new(layer_based_depth(
+                    layer_based_depth(
                         &inpainted,
                         &canvas.image,
                         estimator.as_ref(),
                         &canvas.intrinsics,
                         &LayerDepthParams::default(),
-                        &p,
-                    )?)
-                } else {
-                    inpainted.clone()
-                };
-                self.ran(Stage::LayerDepth, started);
-                self.layer_depth = Some(Slot {
-                    key,
-                    value: v.clone(),
-                });
-                v
-            }
+                        p,
+                    )
+                }
+            ))
+        } else {
+            inpainted.clone()
         };
 
-        // 7. Cloud.
+        // 7. Cloud: keyed by the density strides the path asks for, so a camera edit that keeps
+        // them keeps the cloud.
         let p = step(Stage::Cloud);
-        let key = key_of(key, &project.layers.adaptive_density);
-        let cloud = match &self.cloud {
-            Some(s) if s.key == key => s.value.clone(),
-            _ => {
-                let started = std::time::Instant::now();
-                p.report(0.0, Stage::Cloud.name());
-                let strides = if project.layers.adaptive_density {
-                    let views = path_views(project, &intrinsics, (w, h), output_size, &scale)?;
-                    density_strides(&layered, &canvas.intrinsics, &views)
-                } else {
-                    Vec::new()
-                };
-                let options = CloudOptions {
-                    needed: None,
-                    strides,
-                };
-                let mut c = layered.point_cloud_with(&canvas.intrinsics, &options)?;
-                // Outpainted pixels count as synthesised content too.
-                for (flag, px) in c.inpainted.iter_mut().zip(&c.source_pixel) {
-                    let (x, y) = (px[0].round() as usize, px[1].round() as usize);
-                    if x < canvas.synthesised.width()
-                        && y < canvas.synthesised.height()
-                        && canvas.synthesised.at(x, y)
-                    {
-                        *flag = true;
-                    }
-                }
-                if let Some(alpha) = &input.alpha {
-                    apply_input_alpha(&mut c, alpha, &canvas.layout);
-                }
-                let v = Arc::new(c);
-                self.ran(Stage::Cloud, started);
-                self.cloud = Some(Slot {
-                    key,
-                    value: v.clone(),
-                });
-                v
-            }
+        let strides = if project.layers.adaptive_density {
+            let views = path_views(project, &intrinsics, (w, h), output_size, &scale)?;
+            density_strides(&layered, &canvas.intrinsics, &views)
+        } else {
+            Vec::new()
         };
+        let key = key_of(key, &(project.layers.adaptive_density, &strides));
+        let cloud = stage!(cached(
+            &mut self.cloud,
+            stats,
+            Stage::Cloud,
+            key,
+            dry,
+            &p,
+            |_| { make_cloud(&layered, &canvas, input.alpha.as_ref(), strides) }
+        ));
 
         // 8. Motion.
         let p = step(Stage::Motion);
         let key = key_of(key, &project.motion);
-        let motion = match &self.motion {
-            Some(s) if s.key == key => (*s.value).clone(),
-            _ => {
-                let started = std::time::Instant::now();
-                let v = if project.motion.is_still() {
-                    None
-                } else {
-                    p.report(0.0, Stage::Motion.name());
-                    let (field, motion_loop) = prepare_motion(
-                        &project.motion,
-                        &cloud,
-                        canvas.image.width(),
-                        canvas.image.height(),
-                        &p,
-                    )?;
-                    Some(Arc::new(PreparedMotion { field, motion_loop }))
-                };
-                self.ran(Stage::Motion, started);
-                self.motion = Some(Slot {
-                    key,
-                    value: Arc::new(v.clone()),
-                });
-                v
+        let motion = stage!(cached(
+            &mut self.motion,
+            stats,
+            Stage::Motion,
+            key,
+            dry,
+            &p,
+            |p| {
+                if project.motion.is_still() {
+                    return Ok(None);
+                }
+                let (field, motion_loop) = prepare_motion(
+                    &project.motion,
+                    &cloud,
+                    canvas.image.width(),
+                    canvas.image.height(),
+                    p,
+                )?;
+                Ok(Some(Arc::new(PreparedMotion { field, motion_loop })))
             }
-        };
+        ));
+        let motion = (*motion).clone();
         progress.report(1.0, "scene");
-        Ok(Scene {
+        Ok(Ok(Scene {
             input,
             intrinsics,
             depth_estimator: depth.estimator.clone(),
@@ -516,7 +646,7 @@ impl SceneBuilder {
             motion,
             inpainter: inpainter_name,
             warnings,
-        })
+        }))
     }
 }
 
@@ -572,6 +702,35 @@ fn layer_depth_estimator(project: &Project) -> Box<dyn DepthEstimator> {
         },
         DepthMethod::Classical => Box::new(ClassicalDepth::new(project.depth.classical.clone())),
     }
+}
+
+/// The point cloud of `layered` on `canvas` at `strides` (per layer; empty = full density):
+/// outpainted pixels are flagged synthesised, and the photo's `alpha` scales point opacity.
+fn make_cloud(
+    layered: &LayeredScene,
+    canvas: &Canvas,
+    alpha: Option<&GrayRaster>,
+    strides: Vec<usize>,
+) -> Result<PointCloud> {
+    let options = CloudOptions {
+        needed: None,
+        strides,
+    };
+    let mut c = layered.point_cloud_with(&canvas.intrinsics, &options)?;
+    // Outpainted pixels count as synthesised content too.
+    for (flag, px) in c.inpainted.iter_mut().zip(&c.source_pixel) {
+        let (x, y) = (px[0].round() as usize, px[1].round() as usize);
+        if x < canvas.synthesised.width()
+            && y < canvas.synthesised.height()
+            && canvas.synthesised.at(x, y)
+        {
+            *flag = true;
+        }
+    }
+    if let Some(alpha) = alpha {
+        apply_input_alpha(&mut c, alpha, &canvas.layout);
+    }
+    Ok(c)
 }
 
 /// Layers without hidden-region inpainting (the `--no-layer-inpaint` ablation): each layer holds
@@ -650,50 +809,124 @@ pub fn autocruise(
     )
 }
 
-/// Sizes the canvas from the path and completes colour and depth beyond the photo.
+/// The canvas layout `project` needs for a photo `input_size`: the photo itself when
+/// outpainting is off, the fixed factor, or the footprint of the camera path.
+pub fn canvas_layout(
+    project: &Project,
+    input_size: (usize, usize),
+    intrinsics: &Intrinsics,
+    depth: &GrayRaster,
+    scale: &SceneScale,
+    output_size: (usize, usize),
+) -> Result<CanvasLayout> {
+    if !project.canvas.enabled {
+        return Ok(CanvasLayout::identity(input_size));
+    }
+    match project.canvas.sizing {
+        CanvasSizing::Fixed { factor, placement } => {
+            CanvasLayout::fixed(input_size, factor, placement)
+        }
+        CanvasSizing::FromPath(options) => {
+            let views = path_views(project, intrinsics, input_size, output_size, scale)?;
+            canvas_from_views(
+                input_size,
+                intrinsics,
+                &views,
+                output_size,
+                DepthRange::from_depth(depth)?,
+                &options,
+            )
+        }
+    }
+}
+
+/// `src` (`sw × sh`) copied into a `width × height` raster of `fill` at `(left, top)`.
+fn placed<T: Copy>(
+    src: &Raster<T>,
+    width: usize,
+    height: usize,
+    (left, top): (usize, usize),
+    fill: T,
+) -> Raster<T> {
+    let (sw, sh) = src.size();
+    let mut out = Raster::new(width, height, fill);
+    for y in 0..sh {
+        let dst = (y + top) * width + left;
+        out.data_mut()[dst..dst + sw].copy_from_slice(src.row(y));
+    }
+    out
+}
+
+/// Completes the `hole` of a canvas whose known pixels are `image` and `disparity` (`1/Z`),
+/// colour and disparity together (disparity is bounded and smooth across the horizon, so the
+/// fill copies the sky's far plane and the ground's slope sensibly); hole pixels at the far
+/// plane (`far`) join `sky`.
+#[allow(clippy::too_many_arguments)]
+fn complete_canvas(
+    layout: CanvasLayout,
+    intrinsics: Intrinsics,
+    image: RgbRaster,
+    disparity: GrayRaster,
+    mut sky: GrayRaster,
+    hole: &MaskRaster,
+    synthesised: MaskRaster,
+    far: f32,
+    inpainter: &dyn Inpainter,
+    seed: u64,
+    progress: &Progress,
+) -> Result<Canvas> {
+    let result = inpainter.inpaint(
+        &InpaintRequest {
+            image: &image,
+            hole,
+            allowed_source: None,
+            guide: Some(&disparity),
+            seed,
+        },
+        progress,
+    )?;
+    let filled_disparity = result.guide.unwrap_or(disparity);
+    let depth = filled_disparity.map(|d| {
+        if d.is_finite() && d > 0.0 {
+            (1.0 / d).min(far)
+        } else {
+            far
+        }
+    });
+    for (s, (&z, &fill)) in sky
+        .data_mut()
+        .iter_mut()
+        .zip(depth.data().iter().zip(hole.data()))
+    {
+        if fill && z >= 0.99 * far {
+            *s = 1.0;
+        }
+    }
+    Ok(Canvas {
+        layout,
+        intrinsics,
+        image: result.image,
+        depth,
+        sky,
+        synthesised,
+    })
+}
+
+/// The canvas at `layout`: the photo placed on it, colour and depth completed beyond it.
 #[allow(clippy::too_many_arguments)]
 fn build_canvas(
     project: &Project,
+    layout: CanvasLayout,
     image: &RgbRaster,
     intrinsics: &Intrinsics,
     depth: &GrayRaster,
     sky: &GrayRaster,
-    scale: &SceneScale,
-    output_size: (usize, usize),
     inpainter: &dyn Inpainter,
     progress: &Progress,
 ) -> Result<Canvas> {
     let (w, h) = image.size();
-    let layout = if !project.canvas.enabled {
-        CanvasLayout::identity((w, h))
-    } else {
-        match project.canvas.sizing {
-            CanvasSizing::Fixed { factor, placement } => {
-                CanvasLayout::fixed((w, h), factor, placement)?
-            }
-            CanvasSizing::FromPath(options) => {
-                let views = path_views(project, intrinsics, (w, h), output_size, scale)?;
-                canvas_from_views(
-                    (w, h),
-                    intrinsics,
-                    &views,
-                    output_size,
-                    DepthRange::from_depth(depth)?,
-                    &options,
-                )?
-            }
-        }
-    };
     let canvas_k = layout.intrinsics(intrinsics);
     let synthesised = layout.synthesised_mask((w, h));
-    let place = |src: &GrayRaster, fill: f32| {
-        let mut out = Raster::new(layout.width, layout.height, fill);
-        for y in 0..h {
-            let dst = (y + layout.top_pad) * layout.width + layout.left_pad;
-            out.data_mut()[dst..dst + w].copy_from_slice(src.row(y));
-        }
-        out
-    };
     if layout.is_identity((w, h)) {
         return Ok(Canvas {
             layout,
@@ -720,56 +953,80 @@ fn build_canvas(
             synthesised.at(x, y) || !((x0..x1).contains(&x) && (y0..y1).contains(&y))
         })
     };
-    let mut canvas_image = RgbRaster::new(layout.width, layout.height, [0.0; 3]);
-    for y in 0..h {
-        let dst = (y + layout.top_pad) * layout.width + layout.left_pad;
-        canvas_image.data_mut()[dst..dst + w].copy_from_slice(image.row(y));
-    }
-    // Complete colour and disparity together: disparity is bounded and smooth across the
-    // horizon, so the fill copies the sky's far plane and the ground's slope sensibly.
+    let at = (layout.left_pad, layout.top_pad);
     let far = depth
         .data()
         .iter()
         .copied()
         .fold(0.0f32, f32::max)
         .max(1e-6);
-    let disparity = place(&depth.map(|z| 1.0 / z.max(1e-6)), 0.0);
-    let result = inpainter.inpaint(
-        &InpaintRequest {
-            image: &canvas_image,
-            hole: &synthesised,
-            allowed_source: None,
-            guide: Some(&disparity),
-            seed: project.inpaint.seed,
-        },
-        progress,
-    )?;
-    let filled_disparity = result.guide.unwrap_or(disparity);
-    let canvas_depth = filled_disparity.map(|d| {
-        if d.is_finite() && d > 0.0 {
-            (1.0 / d).min(far)
-        } else {
-            far
-        }
-    });
-    let mut canvas_sky = place(sky, 0.0);
-    for (s, (&z, &synth)) in canvas_sky
-        .data_mut()
-        .iter_mut()
-        .zip(canvas_depth.data().iter().zip(synthesised.data()))
-    {
-        if synth && z >= 0.99 * far {
-            *s = 1.0;
-        }
-    }
-    Ok(Canvas {
+    complete_canvas(
         layout,
-        intrinsics: canvas_k,
-        image: result.image,
-        depth: canvas_depth,
-        sky: canvas_sky,
+        canvas_k,
+        placed(image, layout.width, layout.height, at, [0.0; 3]),
+        placed(
+            &depth.map(|z| 1.0 / z.max(1e-6)),
+            layout.width,
+            layout.height,
+            at,
+            0.0,
+        ),
+        placed(sky, layout.width, layout.height, at, 0.0),
+        &synthesised,
+        synthesised.clone(),
+        far,
+        inpainter,
+        project.inpaint.seed,
+        progress,
+    )
+}
+
+/// `parent` grown to `layout` (which covers it): its pixels are kept as they are and only the
+/// new margin around them is outpainted, from everything the parent holds.
+fn grow_canvas(
+    parent: &Canvas,
+    layout: CanvasLayout,
+    input_size: (usize, usize),
+    intrinsics: &Intrinsics,
+    inpainter: &dyn Inpainter,
+    seed: u64,
+    progress: &Progress,
+) -> Result<Canvas> {
+    let old = parent.layout;
+    let at = (layout.left_pad - old.left_pad, layout.top_pad - old.top_pad);
+    let (x0, y0) = at;
+    let (x1, y1) = (x0 + old.width, y0 + old.height);
+    let hole = MaskRaster::from_fn(layout.width, layout.height, |x, y| {
+        !((x0..x1).contains(&x) && (y0..y1).contains(&y))
+    });
+    let synthesised = placed(&parent.synthesised, layout.width, layout.height, at, true);
+    let far = parent
+        .depth
+        .data()
+        .iter()
+        .copied()
+        .fold(0.0f32, f32::max)
+        .max(1e-6);
+    debug_assert!(layout_covers(&layout, &old, input_size));
+    complete_canvas(
+        layout,
+        layout.intrinsics(intrinsics),
+        placed(&parent.image, layout.width, layout.height, at, [0.0; 3]),
+        placed(
+            &parent.depth.map(|z| 1.0 / z.max(1e-6)),
+            layout.width,
+            layout.height,
+            at,
+            0.0,
+        ),
+        placed(&parent.sky, layout.width, layout.height, at, 0.0),
+        &hole,
         synthesised,
-    })
+        far,
+        inpainter,
+        seed,
+        progress,
+    )
 }
 
 impl Scene {
@@ -821,18 +1078,41 @@ impl Scene {
     /// cloud by `F_{N−m}(−M)`, each only when it contributes, and the blend time `t`; for a
     /// still scene neither (render the cloud's own positions).
     pub fn frame_positions(&self, frame_index: usize) -> Result<FramePositions> {
+        self.frame_positions_of(&self.cloud, frame_index)
+    }
+
+    /// The cloud of this scene's layers at `strides` per layer (one point per `s × s` block,
+    /// as [`crate::stages::layers::density_strides`] picks for a set of views): for renders
+    /// that never need full density, such as the editor's preview at a fraction of the output
+    /// size. Render it with [`Scene::frame_positions_of`].
+    pub fn cloud_with_strides(&self, strides: &[usize]) -> Result<PointCloud> {
+        make_cloud(
+            &self.layers,
+            &self.canvas,
+            self.input.alpha.as_ref(),
+            strides.to_vec(),
+        )
+    }
+
+    /// [`Scene::frame_positions`] for `cloud`, a cloud of this scene's layers (its own or one
+    /// from [`Scene::cloud_with_strides`]).
+    pub fn frame_positions_of(
+        &self,
+        cloud: &PointCloud,
+        frame_index: usize,
+    ) -> Result<FramePositions> {
         let Some(motion) = self.motion.as_ref().filter(|m| !m.motion_loop.is_still()) else {
             return Ok(FramePositions::still());
         };
         let f = motion.motion_loop.frame(frame_index)?;
         let k = self.canvas.intrinsics;
         let forward = if f.needs_forward() {
-            Some(displaced_positions(&self.cloud, &f.forward, &k)?)
+            Some(displaced_positions(cloud, &f.forward, &k)?)
         } else {
             None
         };
         let backward = if f.needs_backward() {
-            Some(displaced_positions(&self.cloud, &f.backward, &k)?)
+            Some(displaced_positions(cloud, &f.backward, &k)?)
         } else {
             None
         };

@@ -40,21 +40,24 @@ fn harness(open: PathBuf) -> Option<Harness<'static, EditorApp>> {
 
 /// The harness with the preview renderer `preview`.
 fn harness_with(open: PathBuf, preview: RendererChoice) -> Option<Harness<'static, EditorApp>> {
+    harness_options(move || EditorOptions {
+        open: Some(open),
+        ephemeral: true,
+        preview_renderer: preview,
+        ..Default::default()
+    })
+}
+
+/// The harness with the editor made from `options()`.
+fn harness_options(
+    options: impl FnOnce() -> EditorOptions + std::panic::UnwindSafe + 'static,
+) -> Option<Harness<'static, EditorApp>> {
     let built = std::panic::catch_unwind(move || {
+        let options = options();
         Harness::builder()
             .with_size(egui::vec2(1280.0, 800.0))
             .wgpu()
-            .build_eframe(move |cc| {
-                EditorApp::new(
-                    cc,
-                    EditorOptions {
-                        open: Some(open),
-                        ephemeral: true,
-                        preview_renderer: preview,
-                        ..Default::default()
-                    },
-                )
-            })
+            .build_eframe(move |cc| EditorApp::new(cc, options))
     });
     match built {
         Ok(h) => Some(h),
@@ -492,4 +495,274 @@ fn every_tab_names_its_widgets() {
             "{shown}: the field is reachable by its label"
         );
     }
+}
+
+/// An edit the bench and these tests make: a different frame rate (rebuilds nothing).
+fn edit_fps(h: &mut Harness<'_, EditorApp>, fps: f32) {
+    let mut p = h.state().project().unwrap().clone();
+    p.output.fps = fps;
+    h.state_mut().apply_edit("Frame rate", p);
+    wait_idle(h, Duration::from_secs(600));
+}
+
+#[test]
+fn unsaved_changes_ask_before_quit_new_and_open() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = fast_project(dir.path());
+    let Some(mut h) = harness(file.clone()) else {
+        return;
+    };
+    let limit = Duration::from_secs(600);
+    wait_idle(&mut h, limit);
+    assert!(!h.state().is_dirty());
+    edit_fps(&mut h, 30.0);
+    assert!(h.state().is_dirty());
+
+    // Quit → the prompt; Cancel keeps everything.
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Q);
+    h.step();
+    h.step();
+    assert!(
+        h.state().is_confirming(),
+        "Ctrl+Q with unsaved edits asks first"
+    );
+    h.get_by_label("Cancel").click();
+    h.step();
+    h.step();
+    assert!(!h.state().is_confirming());
+    assert!(!h.state().close_allowed());
+    assert!(h.state().is_dirty(), "Cancel keeps the edit");
+
+    // New → Discard closes the document without saving.
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::N);
+    h.step();
+    h.step();
+    assert!(h.state().is_confirming());
+    h.get_by_label("Discard").click();
+    h.step();
+    h.step();
+    assert!(h.state().project().is_none(), "Discard closed the document");
+    let on_disk = Project::load(&file).unwrap();
+    assert_eq!(on_disk.output.fps, 25.0, "Discard wrote nothing");
+
+    // Open the file again, edit, and quit with Save: the file has the edit, the window closes.
+    h.state_mut().open(&file);
+    wait_idle(&mut h, limit);
+    edit_fps(&mut h, 12.0);
+    h.state_mut().request_quit();
+    h.step();
+    h.step();
+    assert!(h.state().is_confirming());
+    h.get_by_label("Save").click();
+    h.step();
+    h.step();
+    assert!(h.state().close_allowed(), "Save then quit");
+    assert_eq!(Project::load(&file).unwrap().output.fps, 12.0);
+    assert!(!h.state().is_dirty());
+}
+
+#[test]
+fn the_fallback_path_prompt_saves_a_project_and_autosave_recovers_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let recovery = dir.path().join("recovery");
+    let recovery_dir = recovery.clone();
+    let Some(mut h) = harness_options(move || EditorOptions {
+        open: Some(sample()),
+        ephemeral: true,
+        preview_renderer: RendererChoice::Cpu,
+        recovery_dir: Some(recovery_dir),
+        no_native_dialogs: true,
+        ..Default::default()
+    }) else {
+        return;
+    };
+    let limit = Duration::from_secs(600);
+    wait_idle(&mut h, limit);
+    edit_fps(&mut h, 30.0);
+
+    // The autosave a crash would leave behind (the minute timer calls this).
+    h.state_mut().write_recovery();
+    assert!(recovery.join("recovery.json").is_file());
+
+    // Ctrl+S on a project without a file: the editor's own path prompt.
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::S);
+    h.step();
+    h.step();
+    let target = dir.path().join("saved project");
+    h.query_all_by_role(egui::accesskit::Role::TextInput)
+        .find(|n| n.value().is_some_and(|v| v.starts_with('/')))
+        .expect("the path prompt's field, holding a path")
+        .click();
+    h.step();
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::A);
+    h.step();
+    h.query_all_by_role(egui::accesskit::Role::TextInput)
+        .find(|n| n.is_focused())
+        .expect("the focused field")
+        .type_text(&target.display().to_string());
+    h.step();
+    h.get_by_label("Save").click();
+    h.step();
+    h.step();
+    let written = target.with_extension("json");
+    assert!(
+        written.is_file(),
+        "the prompt saved {}; notices {:?}",
+        written.display(),
+        h.state().notices()
+    );
+    assert_eq!(Project::load(&written).unwrap().output.fps, 30.0);
+    assert!(!h.state().is_dirty());
+    assert!(
+        !recovery.join("recovery.json").exists(),
+        "a clean save removes the recovery copy"
+    );
+
+    // A session that crashed with unsaved work: the next editor offers it back.
+    edit_fps(&mut h, 8.0);
+    h.state_mut().write_recovery();
+    drop(h);
+    let recovery_dir = recovery.clone();
+    let Some(mut h) = harness_options(move || EditorOptions {
+        ephemeral: true,
+        preview_renderer: RendererChoice::Cpu,
+        recovery_dir: Some(recovery_dir),
+        no_native_dialogs: true,
+        ..Default::default()
+    }) else {
+        return;
+    };
+    h.step();
+    h.step();
+    h.get_by_label("Recover").click();
+    h.step();
+    let p = h.state().project().expect("recovered").clone();
+    assert_eq!(p.output.fps, 8.0);
+    assert!(
+        h.state().is_dirty(),
+        "recovered work is unsaved until saved"
+    );
+}
+
+#[test]
+fn strokes_made_during_a_rebuild_are_all_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(mut h) = harness(fast_project(dir.path())) else {
+        return;
+    };
+    let limit = Duration::from_secs(600);
+    wait_idle(&mut h, limit);
+    h.get_by_label("3 Depth").click();
+    h.step();
+    h.step();
+    h.get_by_label("pull (nearer)").click();
+    h.step();
+    let view = h.state().probe().view.expect("the depth view");
+    let mut during_a_build = 0;
+    const STROKES: usize = 6;
+    for i in 0..STROKES {
+        let y = 0.2 + 0.1 * i as f32;
+        let a = view.rect.lerp_inside(egui::vec2(0.2, y));
+        let b = view.rect.lerp_inside(egui::vec2(0.6, y));
+        if h.state().job().kind.is_some() {
+            during_a_build += 1;
+        }
+        drag(&mut h, a, b);
+    }
+    assert!(
+        during_a_build > 0,
+        "the strokes were meant to land while a rebuild ran"
+    );
+    assert_eq!(
+        h.state().project().unwrap().depth.strokes.len(),
+        STROKES,
+        "every stroke is recorded"
+    );
+    wait_idle(&mut h, limit);
+    let built = &h.state().snapshot().unwrap().project.depth.strokes;
+    assert_eq!(built.len(), STROKES, "every stroke is in the built depth");
+}
+
+#[test]
+fn camera_edits_inside_the_canvas_rebuild_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = fast_project(dir.path());
+    let mut p = Project::load(&file).unwrap();
+    p.camera.path = CameraPath::Preset(makeit4d::path::Preset::new(
+        makeit4d::path::PresetKind::Orbit,
+    ));
+    p.save(&file).unwrap();
+    let Some(mut h) = harness(file) else {
+        return;
+    };
+    let limit = Duration::from_secs(600);
+    wait_idle(&mut h, limit);
+    let runs = h.state().stage_runs();
+    // A smaller orbit fits the canvas.
+    let mut smaller = h.state().project().unwrap().clone();
+    smaller.camera.path = CameraPath::Preset(makeit4d::path::Preset {
+        kind: makeit4d::path::PresetKind::Orbit,
+        amplitude: 0.5,
+    });
+    h.state_mut().apply_edit("Smaller orbit", smaller);
+    wait_idle(&mut h, limit);
+    assert_eq!(h.state().stage_runs(), runs, "a preset inside the canvas");
+    // A key (I) and deleting it (Delete).
+    h.get_by_label("7 Preview").click();
+    h.state_mut().seek(1);
+    h.step();
+    h.key_press(egui::Key::I);
+    wait_idle(&mut h, limit);
+    assert!(matches!(
+        h.state().project().unwrap().camera.path,
+        CameraPath::Keyframes(_)
+    ));
+    h.key_press(egui::Key::Delete);
+    wait_idle(&mut h, limit);
+    assert_eq!(h.state().stage_runs(), runs, "add and delete a key");
+    // Undo twice returns to the first orbit: cached.
+    h.state_mut().undo();
+    h.state_mut().undo();
+    h.state_mut().undo();
+    wait_idle(&mut h, limit);
+    assert_eq!(h.state().stage_runs(), runs, "undo to an earlier state");
+}
+
+#[test]
+fn playback_shows_the_frame_the_timeline_says() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = fast_project(dir.path());
+    let mut p = Project::load(&file).unwrap();
+    p.output.frames = 40;
+    p.save(&file).unwrap();
+    let Some(mut h) = harness_with(file, RendererChoice::Cpu) else {
+        return;
+    };
+    let limit = Duration::from_secs(600);
+    wait_idle(&mut h, limit);
+    h.get_by_label("7 Preview").click();
+    h.step();
+    h.key_press(egui::Key::Space);
+    h.step();
+    assert!(h.state().is_playing());
+    let started = Instant::now();
+    let mut pictures = std::collections::BTreeSet::new();
+    while started.elapsed() < Duration::from_secs(4) {
+        h.step();
+        std::thread::sleep(Duration::from_millis(10));
+        if let Some(s) = h.state().shown_preview()
+            && s.at >= started
+        {
+            pictures.insert(s.frame_index);
+            assert_eq!(
+                s.frame_index,
+                h.state().frame(),
+                "the picture shows the timeline's frame"
+            );
+        }
+    }
+    h.key_press(egui::Key::Space);
+    h.step();
+    assert!(!h.state().is_playing());
+    assert!(pictures.len() >= 2, "playback showed frames {pictures:?}");
 }

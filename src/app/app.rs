@@ -48,6 +48,49 @@ pub struct EditorOptions {
     pub preview_renderer: RendererChoice,
     /// Do not read or write the persisted settings (tests).
     pub ephemeral: bool,
+    /// Where the autosaved recovery project lives (default: `$XDG_DATA_HOME/makeit4d`, else
+    /// `~/.local/share/makeit4d`; none for an ephemeral editor unless given).
+    pub recovery_dir: Option<PathBuf>,
+    /// Never call the desktop's file dialog: always the editor's own path prompt (tests, and
+    /// desktops without xdg-desktop-portal or zenity; also `MAKEIT4D_NO_NATIVE_DIALOG=1`).
+    pub no_native_dialogs: bool,
+}
+
+/// Seconds between autosaves of an unsaved project to the recovery file.
+pub const AUTOSAVE_SECS: u64 = 60;
+/// The recovery project's file name in the recovery folder.
+const RECOVERY_FILE: &str = "recovery.json";
+/// Beside it: the project file the recovered project belongs to (one path, when it had one).
+const RECOVERY_ORIGIN: &str = "recovery.origin";
+
+/// The default recovery folder.
+fn default_recovery_dir() -> Option<PathBuf> {
+    if let Some(d) = std::env::var_os("XDG_DATA_HOME").filter(|d| !d.is_empty()) {
+        return Some(PathBuf::from(d).join("makeit4d"));
+    }
+    std::env::var_os("HOME")
+        .filter(|h| !h.is_empty())
+        .map(|h| PathBuf::from(h).join(".local/share/makeit4d"))
+}
+
+/// What waits on an answer to "save the changes?".
+#[derive(Clone, Debug, PartialEq)]
+enum Pending {
+    /// Close the window.
+    Quit,
+    /// Open this file.
+    Open(PathBuf),
+    /// Show the Open dialog.
+    OpenDialog,
+    /// Close the document (File > New).
+    New,
+}
+
+/// The editor's own path prompt: the fallback file dialog.
+struct PathPrompt {
+    kind: DialogKind,
+    text: String,
+    error: Option<String>,
 }
 
 /// Settings kept between sessions (eframe storage, key [`STORAGE_KEY`]).
@@ -167,27 +210,175 @@ pub struct EditorApp {
     open_on_start: Option<PathBuf>,
     last_build_stages: Vec<Stage>,
     last_export: Option<String>,
+    /// The view of each preview request in flight (by id), to know what an arriving frame shows.
+    requested_views: std::collections::BTreeMap<u64, View>,
+    /// The preview picture on screen.
+    shown: Option<ShownFrame>,
+    /// When each recent preview picture arrived (the preview's own frames/s).
+    shown_times: std::collections::VecDeque<Instant>,
+    /// The CPU preview's longest side while playing, adapted to hold [`PLAYBACK_FPS`].
+    playback_side: usize,
+    /// How many times each stage ran in the scene worker, from its reports.
+    stage_runs: std::collections::BTreeMap<Stage, usize>,
+    ctx: egui::Context,
+    /// An action waiting for the answer to "save the changes?".
+    confirm: Option<Pending>,
+    /// An action to finish once the Save as the prompt asked for succeeds.
+    after_save: Option<Pending>,
+    /// The path prompt, when shown.
+    path_prompt: Option<PathPrompt>,
+    no_native_dialogs: bool,
+    /// The window may close (the user answered, or nothing was unsaved).
+    close_allowed: bool,
+    recovery_dir: Option<PathBuf>,
+    last_autosave: Instant,
+    /// A recovery project found at start: `(autosaved project, its project file)`.
+    recover_offer: Option<(Project, Option<PathBuf>, String)>,
 }
+
+/// The preview picture on screen: what it shows.
+#[derive(Clone, Copy, Debug)]
+pub struct ShownFrame {
+    /// The scene generation it was rendered from.
+    pub generation: u64,
+    /// The output frame.
+    pub frame_index: usize,
+    /// The camera (at the output size), the path's view moved by the fly camera.
+    pub view: View,
+    /// Its longest side, pixels.
+    pub side: usize,
+    /// When it arrived.
+    pub at: Instant,
+}
+
+/// `~/…` with the home folder.
+fn expand_home(text: &str) -> PathBuf {
+    match (text.strip_prefix("~/"), std::env::var_os("HOME")) {
+        (Some(rest), Some(home)) => PathBuf::from(home).join(rest),
+        _ => PathBuf::from(text),
+    }
+}
+
+/// Up to `max` completions of a typed path: the entries of its folder that start with its last
+/// part (folders end with `/`), sorted; hidden entries only when the part starts with a dot.
+fn path_completions(text: &str, max: usize) -> Vec<String> {
+    let (dir_text, part) = match text.rfind('/') {
+        Some(i) => (&text[..=i], &text[i + 1..]),
+        None => ("", text),
+    };
+    let dir = if dir_text.is_empty() {
+        PathBuf::from(".")
+    } else {
+        expand_home(dir_text)
+    };
+    let Ok(entries) = std::fs::read_dir(&dir) else {
+        return Vec::new();
+    };
+    let mut out: Vec<String> = entries
+        .filter_map(|e| e.ok())
+        .filter_map(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if !name.starts_with(part) || (name.starts_with('.') && !part.starts_with('.')) {
+                return None;
+            }
+            let slash = if e.path().is_dir() { "/" } else { "" };
+            Some(format!("{dir_text}{name}{slash}"))
+        })
+        .filter(|c| c != text)
+        .collect();
+    out.sort();
+    out.truncate(max);
+    out
+}
+
+/// The recovery project in `dir`, if a session left one: `(project, its file, when)`.
+fn find_recovery(dir: &Path) -> Option<(Project, Option<PathBuf>, String)> {
+    let file = dir.join(RECOVERY_FILE);
+    if !file.is_file() {
+        return None;
+    }
+    let project = Project::load(&file).ok()?;
+    let origin = std::fs::read_to_string(dir.join(RECOVERY_ORIGIN))
+        .ok()
+        .map(|t| PathBuf::from(t.trim_end()))
+        .filter(|p| !p.as_os_str().is_empty());
+    let age = std::fs::metadata(&file)
+        .and_then(|m| m.modified())
+        .ok()
+        .and_then(|t| t.elapsed().ok())
+        .map_or_else(String::new, |d| {
+            let m = d.as_secs() / 60;
+            if m < 1 {
+                " (autosaved under a minute ago)".to_string()
+            } else if m < 120 {
+                format!(" (autosaved {m} min ago)")
+            } else {
+                format!(" (autosaved {} h ago)", m / 60)
+            }
+        });
+    Some((project, origin, age))
+}
+
+/// The quality of the scene on screen, a few words for the status bar.
+fn quality_label(s: &SceneSnapshot) -> String {
+    if s.draft {
+        "draft quality (refining)".to_string()
+    } else {
+        format!("{} quality", s.project.inpaint.preset.name())
+    }
+}
+
+/// The CPU preview's target rate while playing: its size adapts to hold it.
+pub const PLAYBACK_FPS: f64 = 10.0;
+/// Smallest longest side the adaptive playback size goes down to.
+const PLAYBACK_MIN_SIDE: usize = 96;
 
 impl EditorApp {
     /// Creates the editor (eframe's creation hook).
     pub fn new(cc: &eframe::CreationContext<'_>, options: EditorOptions) -> Self {
-        let ctx = cc.egui_ctx.clone();
+        Self::with_context(
+            cc.egui_ctx.clone(),
+            cc.storage,
+            cc.wgpu_render_state.as_ref(),
+            options,
+        )
+    }
+
+    /// The editor on a bare egui context, without a window, storage or GPU preview: the real
+    /// editor state and workers, stepped by [`EditorApp::run_frame`] (`makeit4d bench editor`).
+    pub fn headless(ctx: egui::Context, options: EditorOptions) -> Self {
+        Self::with_context(ctx, None, None, options)
+    }
+
+    /// Runs one UI frame on `ctx` with `input` (eframe's order: logic, then the UI).
+    pub fn run_frame(&mut self, ctx: &egui::Context, input: egui::RawInput) -> egui::FullOutput {
+        ctx.run_ui(input, |ui| {
+            self.logic_step(ui.ctx());
+            self.ui_step(ui);
+        })
+    }
+
+    fn with_context(
+        ctx: egui::Context,
+        storage: Option<&dyn eframe::Storage>,
+        render_state: Option<&eframe::egui_wgpu::RenderState>,
+        options: EditorOptions,
+    ) -> Self {
         let persisted = if options.ephemeral {
             Persisted::default()
         } else {
-            cc.storage
+            storage
                 .and_then(|s| eframe::get_value::<Persisted>(s, STORAGE_KEY))
                 .unwrap_or_default()
         };
-        let adapter = match &cc.wgpu_render_state {
+        let adapter = match render_state {
             Some(rs) => {
                 let info = rs.adapter.get_info();
                 format!("{} ({:?})", info.name, info.backend)
             }
             None => "no GPU adapter".to_string(),
         };
-        let (gpu, gpu_error) = match &cc.wgpu_render_state {
+        let (gpu, gpu_error) = match render_state {
             Some(rs) => match GpuPreview::new(rs) {
                 Ok(g) => (Some(g), None),
                 Err(e) => (None, Some(format!("the GPU splatter cannot run here: {e}"))),
@@ -240,7 +431,14 @@ impl EditorApp {
             |p| p.renderer_name().to_string(),
         );
         let cpu_renderer = renderer_name.clone();
-        Self {
+        let recovery_dir = options.recovery_dir.clone().or_else(|| {
+            if options.ephemeral {
+                None
+            } else {
+                default_recovery_dir()
+            }
+        });
+        let mut app = Self {
             doc: None,
             history: History::default(),
             scene_worker,
@@ -292,7 +490,24 @@ impl EditorApp {
             last_build_stages: Vec::new(),
             typed_path: String::new(),
             last_export: None,
-        }
+            requested_views: Default::default(),
+            shown: None,
+            shown_times: Default::default(),
+            playback_side: usize::MAX,
+            stage_runs: Default::default(),
+            ctx: ctx.clone(),
+            confirm: None,
+            after_save: None,
+            path_prompt: None,
+            no_native_dialogs: options.no_native_dialogs
+                || std::env::var_os("MAKEIT4D_NO_NATIVE_DIALOG").is_some_and(|v| v != "0"),
+            close_allowed: false,
+            recover_offer: None,
+            last_autosave: Instant::now(),
+            recovery_dir: recovery_dir.clone(),
+        };
+        app.recover_offer = recovery_dir.as_deref().and_then(find_recovery);
+        app
     }
 
     // ---- Queries (used by the tests and the status bar) ----
@@ -441,6 +656,62 @@ impl EditorApp {
         }
     }
 
+    /// How many times each stage has run in this session's scene worker.
+    pub fn stage_runs(&self) -> std::collections::BTreeMap<Stage, usize> {
+        self.stage_runs.clone()
+    }
+
+    /// Why the current project's scene could not be built, if it could not.
+    pub fn build_error(&self) -> Option<&str> {
+        self.build_error
+            .as_ref()
+            .filter(|(g, _)| Some(*g) == self.doc.as_ref().map(|d| d.generation))
+            .map(|(_, e)| e.as_str())
+    }
+
+    /// The preview picture on screen, once one arrived.
+    pub fn shown_preview(&self) -> Option<&ShownFrame> {
+        self.shown.as_ref()
+    }
+
+    /// The preview's own rate: pictures that arrived in the last two seconds, per second (the
+    /// GPU preview draws one per UI frame).
+    pub fn preview_fps(&self) -> f64 {
+        let now = Instant::now();
+        let recent: Vec<&Instant> = self
+            .shown_times
+            .iter()
+            .filter(|t| now.duration_since(**t) < Duration::from_secs(2))
+            .collect();
+        match (recent.first(), recent.len()) {
+            (Some(first), n) if n >= 2 => {
+                (n - 1) as f64 / now.duration_since(**first).as_secs_f64().max(1e-3)
+            }
+            _ => 0.0,
+        }
+    }
+
+    /// Starts or stops playback (Space).
+    pub fn set_playing(&mut self, playing: bool) {
+        let frames = self.doc.as_ref().map_or(1, |d| d.project.output.frames);
+        if playing && !self.timeline.looping && self.timeline.frame + 1 >= frames {
+            self.timeline.seek(0);
+        }
+        self.timeline.playing = playing;
+        self.timeline.clock = self.timeline.frame as f64;
+    }
+
+    /// True while playing.
+    pub fn is_playing(&self) -> bool {
+        self.timeline.playing
+    }
+
+    /// The camera the preview asks for now: the path's view at the frame, moved by the fly
+    /// camera (`None` before the path is known).
+    pub fn preview_view(&self) -> Option<View> {
+        self.preview.view
+    }
+
     /// The last export's summary line, once one finished.
     pub fn last_export(&self) -> Option<&str> {
         self.last_export.as_deref()
@@ -561,9 +832,11 @@ impl EditorApp {
         }
     }
 
-    /// Saves the project to `path`.
-    pub fn save_to(&mut self, path: &Path) {
-        let Some(doc) = &mut self.doc else { return };
+    /// Saves the project to `path`; false (and an error message) when it could not.
+    pub fn save_to(&mut self, path: &Path) -> bool {
+        let Some(doc) = &mut self.doc else {
+            return false;
+        };
         match doc.project.save(path) {
             Ok(()) => {
                 doc.file = Some(path.to_path_buf());
@@ -572,14 +845,21 @@ impl EditorApp {
                 self.persisted.recent.insert(0, path.to_path_buf());
                 self.persisted.recent.truncate(MAX_RECENT);
                 self.notify(format!("saved {}", path.display()));
+                self.remove_recovery();
+                true
             }
-            Err(e) => self.error(format!("cannot save {}: {e:#}", path.display())),
+            Err(e) => {
+                self.error(format!("cannot save {}: {e:#}", path.display()));
+                false
+            }
         }
     }
 
     fn save(&mut self) {
         match self.doc.as_ref().and_then(|d| d.file.clone()) {
-            Some(file) => self.save_to(&file),
+            Some(file) => {
+                self.save_to(&file);
+            }
             None if self.doc.is_some() => self.start_dialog(DialogKind::SaveAs),
             None => {}
         }
@@ -588,7 +868,11 @@ impl EditorApp {
     /// Runs a file dialog on its own thread (the portal call blocks) and picks the answer up
     /// in a later frame.
     fn start_dialog(&mut self, kind: DialogKind) {
-        if self.dialog.is_some() {
+        if self.dialog.is_some() || self.path_prompt.is_some() {
+            return;
+        }
+        if self.no_native_dialogs {
+            self.show_path_prompt(kind);
             return;
         }
         let (tx, rx) = sync_channel(1);
@@ -631,36 +915,413 @@ impl EditorApp {
             Err(std::sync::mpsc::TryRecvError::Empty) => return,
             Err(std::sync::mpsc::TryRecvError::Disconnected) => {
                 self.dialog = None;
-                self.error("the file dialog failed (no desktop portal?): type the path instead");
+                self.no_native_dialogs = true;
+                self.show_path_prompt(kind);
                 return;
             }
         };
         self.dialog = None;
         let Some(path) = answer else {
-            // An answer within a moment means no dialog could be shown at all.
+            // An answer within a moment means no dialog could be shown at all: the editor's
+            // own prompt takes over (and from now on, straight away).
             if started.elapsed() < Duration::from_millis(700) {
-                self.error(
-                    "no file dialog could be shown (it needs xdg-desktop-portal or zenity): type the path instead",
-                );
+                self.no_native_dialogs = true;
+                self.show_path_prompt(kind);
+            } else {
+                self.after_save = None;
             }
             return;
         };
+        if let Err(e) = self.finish_dialog(kind, path) {
+            self.error(e);
+        }
+    }
+
+    /// Acts on a path picked for `kind` (from the desktop's dialog or the path prompt); the
+    /// error is one sentence naming the file.
+    fn finish_dialog(&mut self, kind: DialogKind, path: PathBuf) -> Result<(), String> {
         match kind {
-            DialogKind::Open => self.open(&path),
+            DialogKind::Open => {
+                if !path.is_file() {
+                    return Err(format!("cannot open {}: no such file", path.display()));
+                }
+                self.open(&path);
+            }
             DialogKind::SaveAs => {
                 let path = if path.extension().is_none() {
                     path.with_extension("json")
                 } else {
                     path
                 };
-                self.save_to(&path);
+                if path.is_dir() {
+                    return Err(format!(
+                        "cannot save {}: it is a folder; add a file name such as project.json",
+                        path.display()
+                    ));
+                }
+                if !self.save_to(&path) {
+                    return Err(self
+                        .last_error()
+                        .unwrap_or_else(|| format!("cannot save {}", path.display())));
+                }
+                if let Some(action) = self.after_save.take() {
+                    self.perform(action);
+                }
             }
             DialogKind::ExportFolder => {
+                if path.exists() && !path.is_dir() {
+                    return Err(format!(
+                        "{} is a file, not a folder: choose a folder for the frames",
+                        path.display()
+                    ));
+                }
                 let message = PanelMessage::ExportFolder(path);
                 for p in &mut self.panels {
                     p.on_message(&message);
                 }
             }
+        }
+        Ok(())
+    }
+
+    fn show_path_prompt(&mut self, kind: DialogKind) {
+        let start = match kind {
+            DialogKind::SaveAs => self.doc.as_ref().and_then(|d| d.file.clone()).or_else(|| {
+                self.doc
+                    .as_ref()
+                    .map(|d| d.project.input.with_extension("json"))
+            }),
+            _ => self
+                .doc
+                .as_ref()
+                .and_then(|d| d.project.input.parent().map(Path::to_path_buf)),
+        };
+        let text = start
+            .or_else(|| std::env::current_dir().ok())
+            .map(|p| {
+                let mut t = p.display().to_string();
+                if p.is_dir() && !t.ends_with('/') {
+                    t.push('/');
+                }
+                t
+            })
+            .unwrap_or_default();
+        self.path_prompt = Some(PathPrompt {
+            kind,
+            text,
+            error: None,
+        });
+    }
+
+    /// The newest error message, if the last notice is one.
+    fn last_error(&self) -> Option<String> {
+        self.notices
+            .last()
+            .filter(|n| n.level == Level::Error)
+            .map(|n| n.text.clone())
+    }
+
+    // ---- Unsaved changes, quitting, autosave ----
+
+    /// True when the project has edits that are not in its file.
+    pub fn is_dirty(&self) -> bool {
+        self.doc
+            .as_ref()
+            .is_some_and(|d| d.generation != d.saved_generation)
+    }
+
+    /// Does `action` now, or first asks "save the changes?" when there are unsaved edits.
+    fn guard(&mut self, action: Pending) {
+        if self.is_dirty() {
+            self.confirm = Some(action);
+        } else {
+            self.perform(action);
+        }
+    }
+
+    /// Asks to quit, as File > Quit does (a prompt first when there are unsaved edits).
+    pub fn request_quit(&mut self) {
+        self.guard(Pending::Quit);
+    }
+
+    /// True while the "save the changes?" prompt is shown.
+    pub fn is_confirming(&self) -> bool {
+        self.confirm.is_some()
+    }
+
+    /// True once the window was told to close.
+    pub fn close_allowed(&self) -> bool {
+        self.close_allowed
+    }
+
+    fn perform(&mut self, action: Pending) {
+        match action {
+            Pending::Quit => {
+                self.close_allowed = true;
+                self.remove_recovery();
+                self.ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            }
+            Pending::Open(path) => {
+                self.remove_recovery();
+                self.open(&path);
+            }
+            Pending::OpenDialog => self.start_dialog(DialogKind::Open),
+            Pending::New => {
+                self.remove_recovery();
+                self.close_document();
+            }
+        }
+    }
+
+    /// Closes the document: back to the welcome screen.
+    fn close_document(&mut self) {
+        self.doc = None;
+        self.history.clear();
+        self.snapshot = None;
+        self.build_error = None;
+        self.preview.texture = None;
+        self.preview_key = None;
+        self.camera_key = None;
+        self.camera = CameraInfo::default();
+        self.shown = None;
+    }
+
+    /// The "save the changes?" prompt.
+    fn confirm_ui(&mut self, ctx: &egui::Context) {
+        let Some(action) = self.confirm.clone() else {
+            return;
+        };
+        let name = self
+            .doc
+            .as_ref()
+            .map(|d| {
+                d.file
+                    .as_ref()
+                    .unwrap_or(&d.project.input)
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default()
+            })
+            .unwrap_or_default();
+        let what = match &action {
+            Pending::Quit => "before quitting",
+            Pending::Open(_) | Pending::OpenDialog => "before opening another file",
+            Pending::New => "before closing it",
+        };
+        let mut answer = None;
+        let modal = egui::Modal::new(egui::Id::unique("unsaved-changes")).show(ctx, |ui| {
+            ui.set_width(380.0);
+            ui.heading("Unsaved changes");
+            ui.label(format!("Save the changes to {name} {what}?"));
+            ui.add_space(8.0);
+            ui.horizontal(|ui| {
+                if ui.button("Save").clicked() {
+                    answer = Some(1);
+                }
+                if ui.button("Discard").clicked() {
+                    answer = Some(2);
+                }
+                if ui.button("Cancel").clicked() {
+                    answer = Some(0);
+                }
+            });
+        });
+        if modal.should_close() && answer.is_none() {
+            answer = Some(0);
+        }
+        match answer {
+            Some(1) => {
+                self.confirm = None;
+                match self.doc.as_ref().and_then(|d| d.file.clone()) {
+                    Some(file) => {
+                        if self.save_to(&file) {
+                            self.perform(action);
+                        }
+                    }
+                    None => {
+                        self.after_save = Some(action);
+                        self.start_dialog(DialogKind::SaveAs);
+                    }
+                }
+            }
+            Some(2) => {
+                self.confirm = None;
+                self.perform(action);
+            }
+            Some(_) => self.confirm = None,
+            None => {}
+        }
+    }
+
+    /// The editor's own path prompt (the fallback file dialog), with completion from the
+    /// folder being typed.
+    fn path_prompt_ui(&mut self, ctx: &egui::Context) {
+        let Some(prompt) = &mut self.path_prompt else {
+            return;
+        };
+        let (title, hint, action) = match prompt.kind {
+            DialogKind::Open => ("Open", "a photo (.jpg, .png) or a project (.json)", "Open"),
+            DialogKind::SaveAs => (
+                "Save project as",
+                "the project file to write (.json)",
+                "Save",
+            ),
+            DialogKind::ExportFolder => ("Export folder", "the folder for the frames", "Choose"),
+        };
+        let mut done: Option<bool> = None;
+        egui::Modal::new(egui::Id::unique("path-prompt")).show(ctx, |ui| {
+            ui.set_width(560.0);
+            ui.heading(title);
+            ui.label(RichText::new(format!("Type the path of {hint}.")).weak());
+            let field = ui.add(
+                egui::TextEdit::singleline(&mut prompt.text)
+                    .id(egui::Id::unique("path-prompt-field"))
+                    .desired_width(f32::INFINITY),
+            );
+            if field.lost_focus() && ui.input(|i| i.key_pressed(Key::Enter)) {
+                done = Some(true);
+            }
+            let completions = path_completions(&prompt.text, 12);
+            if !completions.is_empty() {
+                egui::ScrollArea::vertical()
+                    .max_height(180.0)
+                    .show(ui, |ui| {
+                        for c in completions {
+                            if ui.selectable_label(false, &c).clicked() {
+                                prompt.text = c;
+                            }
+                        }
+                    });
+            }
+            if let Some(e) = &prompt.error {
+                ui.colored_label(Color32::from_rgb(230, 90, 80), e);
+            }
+            ui.add_space(6.0);
+            ui.horizontal(|ui| {
+                if ui.button(action).clicked() {
+                    done = Some(true);
+                }
+                if ui.button("Cancel").clicked() || ui.input(|i| i.key_pressed(Key::Escape)) {
+                    done = Some(false);
+                }
+            });
+        });
+        match done {
+            Some(true) => {
+                let text = prompt.text.trim().to_string();
+                let kind = prompt.kind;
+                if text.is_empty() {
+                    prompt.error = Some("type a path first".into());
+                    return;
+                }
+                let path = expand_home(&text);
+                match self.finish_dialog(kind, path) {
+                    Ok(()) => self.path_prompt = None,
+                    Err(e) => {
+                        if let Some(p) = &mut self.path_prompt {
+                            p.error = Some(e);
+                        }
+                    }
+                }
+            }
+            Some(false) => {
+                self.path_prompt = None;
+                self.after_save = None;
+            }
+            None => {}
+        }
+    }
+
+    /// Writes the unsaved project to the recovery file every [`AUTOSAVE_SECS`].
+    fn autosave(&mut self) {
+        if self.last_autosave.elapsed() < Duration::from_secs(AUTOSAVE_SECS) {
+            return;
+        }
+        self.last_autosave = Instant::now();
+        if self.is_dirty() {
+            self.write_recovery();
+        }
+    }
+
+    /// Writes the project to the recovery file now (what the minute timer does).
+    pub fn write_recovery(&mut self) {
+        let (Some(dir), Some(doc)) = (&self.recovery_dir, &self.doc) else {
+            return;
+        };
+        let written = std::fs::create_dir_all(dir)
+            .map_err(|e| format!("{}: {e}", dir.display()))
+            .and_then(|()| {
+                doc.project
+                    .save(&dir.join(RECOVERY_FILE))
+                    .map_err(|e| format!("{e:#}"))
+            })
+            .and_then(|()| {
+                let origin = doc
+                    .file
+                    .as_ref()
+                    .map(|f| f.display().to_string())
+                    .unwrap_or_default();
+                std::fs::write(dir.join(RECOVERY_ORIGIN), origin)
+                    .map_err(|e| format!("{}: {e}", dir.display()))
+            });
+        if let Err(e) = written {
+            self.error(format!("cannot autosave the recovery copy: {e}"));
+        }
+    }
+
+    fn remove_recovery(&mut self) {
+        if let Some(dir) = &self.recovery_dir {
+            let _ = std::fs::remove_file(dir.join(RECOVERY_FILE));
+            let _ = std::fs::remove_file(dir.join(RECOVERY_ORIGIN));
+        }
+    }
+
+    /// The "recover?" offer after a session that did not end cleanly.
+    fn recover_ui(&mut self, ctx: &egui::Context) {
+        let Some((project, origin, age)) = &self.recover_offer else {
+            return;
+        };
+        let photo = project
+            .input
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let mut answer = None;
+        egui::Modal::new(egui::Id::unique("recover")).show(ctx, |ui| {
+            ui.set_width(420.0);
+            ui.heading("Recover unsaved work?");
+            ui.label(format!(
+                "makeit4d did not close cleanly. A project on {photo} was not saved{age}."
+            ));
+            if let Some(o) = origin {
+                ui.label(RichText::new(format!("It belongs to {}.", o.display())).weak());
+            }
+            ui.add_space(8.0);
+            ui.horizontal(|ui| {
+                if ui.button("Recover").clicked() {
+                    answer = Some(true);
+                }
+                if ui.button("Discard").clicked() {
+                    answer = Some(false);
+                }
+            });
+        });
+        match answer {
+            Some(true) => {
+                if let Some((project, origin, _)) = self.recover_offer.take() {
+                    self.set_document(project, origin);
+                    if let Some(doc) = &mut self.doc {
+                        // Recovered edits are unsaved until the user saves them.
+                        doc.saved_generation = 0;
+                    }
+                    self.notify("recovered the autosaved project: save it to keep it");
+                }
+            }
+            Some(false) => {
+                self.recover_offer = None;
+                self.remove_recovery();
+            }
+            None => {}
         }
     }
 
@@ -755,6 +1416,7 @@ impl EditorApp {
                     generation,
                     stages_run,
                     seconds,
+                    draft,
                 } => {
                     if let Some(s) = &latest
                         && s.generation == generation
@@ -778,7 +1440,10 @@ impl EditorApp {
                         self.build_error = None;
                     }
                     self.last_build_stages = stages_run.clone();
-                    if !stages_run.is_empty() {
+                    for stage in &stages_run {
+                        *self.stage_runs.entry(*stage).or_insert(0) += 1;
+                    }
+                    if !stages_run.is_empty() && !draft {
                         let names: Vec<&str> = stages_run.iter().map(|s| s.name()).collect();
                         self.notify(format!("rebuilt {} in {seconds:.1} s", names.join(", ")));
                     }
@@ -901,7 +1566,10 @@ impl EditorApp {
         let (Some(worker), Some(snapshot)) = (&self.preview_worker, &self.snapshot) else {
             return;
         };
+        let playing_cpu = self.timeline.playing && !on_gpu;
         if let Some(frame) = worker.take_frame() {
+            let full_view = self.requested_views.get(&frame.id).copied();
+            self.requested_views.retain(|id, _| *id > frame.id);
             match (&frame.error, frame.output) {
                 (Some(e), _) => self.notices.push(Notice {
                     text: format!("preview failed: {e}"),
@@ -928,6 +1596,30 @@ impl EditorApp {
                             .hole_fractions
                             .insert(frame.frame_index, hole_fraction);
                     }
+                    let now = Instant::now();
+                    let side = image.size[0].max(image.size[1]);
+                    self.shown = Some(ShownFrame {
+                        generation: frame.generation,
+                        frame_index: frame.frame_index,
+                        view: full_view.unwrap_or(frame.view),
+                        side,
+                        at: now,
+                    });
+                    self.shown_times.push_back(now);
+                    while self.shown_times.len() > 64 {
+                        self.shown_times.pop_front();
+                    }
+                    if playing_cpu {
+                        // The counter shows what the picture shows; the clock runs on.
+                        self.timeline.frame = frame.frame_index;
+                        // Size the next pictures to hold the playback rate (render time is
+                        // about proportional to the pixel count).
+                        let target = 1.0 / PLAYBACK_FPS;
+                        let ratio = (target / frame.seconds.max(1e-3)).sqrt().clamp(0.5, 1.5);
+                        let next = (side as f64 * ratio).round() as usize;
+                        self.playback_side =
+                            next.clamp(PLAYBACK_MIN_SIDE, self.preview.max_side.max(32));
+                    }
                 }
                 (None, Some(PreviewOutput::Positions { cloud, positions })) => {
                     self.preview.seconds = frame.seconds;
@@ -936,12 +1628,19 @@ impl EditorApp {
                 (None, None) => {}
             }
         }
-        let frame = self.timeline.frame;
+        let frames = self.doc.as_ref().map_or(1, |d| d.project.output.frames);
+        let frame = if playing_cpu {
+            self.timeline.clock_frame(frames)
+        } else {
+            self.timeline.frame
+        };
         let Some(path_view) = self.camera.views.get(frame) else {
             return;
         };
         let view = self.preview.fly.apply(path_view);
-        self.preview.view = Some(view);
+        if !playing_cpu {
+            self.preview.view = Some(view);
+        }
         let wanted = matches!(self.tab, Tab::Preview | Tab::Camera) || self.timeline.playing;
         if on_gpu && let Some(gpu) = &self.gpu {
             // The GPU splats every frame itself; the worker only displaces the cloud for a
@@ -962,6 +1661,18 @@ impl EditorApp {
                 positions: positions.map(|p| p.2.clone()),
                 settings: snapshot.project.render,
             });
+            let now = Instant::now();
+            self.shown = Some(ShownFrame {
+                generation: snapshot.generation,
+                frame_index: self.preview.frame_index,
+                view,
+                side: self.preview.max_side,
+                at: now,
+            });
+            self.shown_times.push_back(now);
+            while self.shown_times.len() > 64 {
+                self.shown_times.pop_front();
+            }
             let key = (snapshot.generation, frame);
             if moving && wanted && self.positions_key != Some(key) {
                 self.positions_key = Some(key);
@@ -981,7 +1692,16 @@ impl EditorApp {
         if !wanted {
             return;
         }
-        let side = self.preview.max_side.max(32);
+        // While playing, a request goes out only when the last picture is done, for the frame
+        // the clock is at then (frames the preview cannot render in time are dropped).
+        if playing_cpu && worker.is_busy() {
+            return;
+        }
+        let side = if playing_cpu {
+            self.playback_side.min(self.preview.max_side).max(32)
+        } else {
+            self.preview.max_side.max(32)
+        };
         let key = (snapshot.generation, frame, format!("{:?}", view), side);
         if self.preview_key.as_ref() == Some(&key) {
             return;
@@ -991,8 +1711,12 @@ impl EditorApp {
         if pw == 0 || ph == 0 {
             return;
         }
+        if playing_cpu {
+            self.preview.view = Some(view);
+        }
         self.preview_key = Some(key);
         self.preview_id += 1;
+        self.requested_views.insert(self.preview_id, view);
         worker.request(PreviewRequest {
             id: self.preview_id,
             snapshot: snapshot.clone(),
@@ -1022,7 +1746,13 @@ impl EditorApp {
             self.undo();
         }
         if shortcut(Modifiers::COMMAND, Key::O) {
-            self.start_dialog(DialogKind::Open);
+            self.guard(Pending::OpenDialog);
+        }
+        if shortcut(Modifiers::COMMAND, Key::N) {
+            self.guard(Pending::New);
+        }
+        if shortcut(Modifiers::COMMAND, Key::Q) {
+            self.guard(Pending::Quit);
         }
         if shortcut(Modifiers::COMMAND | Modifiers::SHIFT, Key::S) {
             self.start_dialog(DialogKind::SaveAs);
@@ -1037,8 +1767,7 @@ impl EditorApp {
             self.add_keyframe();
         }
         if shortcut(Modifiers::NONE, Key::Space) {
-            self.timeline.playing = !self.timeline.playing;
-            self.timeline.clock = self.timeline.frame as f64;
+            self.set_playing(!self.timeline.playing);
         }
         if shortcut(Modifiers::NONE, Key::Delete)
             && let Some(i) = self.timeline.selected_key
@@ -1083,7 +1812,7 @@ impl EditorApp {
                 .collect()
         });
         if let Some(path) = dropped.first() {
-            self.open(path);
+            self.guard(Pending::Open(path.clone()));
         }
     }
 
@@ -1131,8 +1860,11 @@ impl EditorApp {
     fn menu_ui(&mut self, ui: &mut egui::Ui) {
         egui::MenuBar::new().ui(ui, |ui| {
             ui.menu_button("File", |ui| {
+                if ui.button("New  (Ctrl+N)").clicked() {
+                    self.guard(Pending::New);
+                }
                 if ui.button("Open…  (Ctrl+O)").clicked() {
-                    self.start_dialog(DialogKind::Open);
+                    self.guard(Pending::OpenDialog);
                 }
                 let has_doc = self.doc.is_some();
                 if ui
@@ -1155,12 +1887,12 @@ impl EditorApp {
                 }
                 for path in recent {
                     if ui.button(path.display().to_string()).clicked() {
-                        self.open(&path);
+                        self.guard(Pending::Open(path));
                     }
                 }
                 ui.separator();
-                if ui.button("Quit").clicked() {
-                    ui.ctx().send_viewport_cmd(egui::ViewportCommand::Close);
+                if ui.button("Quit  (Ctrl+Q)").clicked() {
+                    self.guard(Pending::Quit);
                 }
             });
             ui.menu_button("Edit", |ui| {
@@ -1227,7 +1959,13 @@ impl EditorApp {
             match self.job.kind {
                 Some(kind) => {
                     ui.spinner();
-                    ui.label(format!("{}: {}", kind.name(), self.job.stage));
+                    let shown = match &self.snapshot {
+                        Some(s) if kind == JobKind::Build => {
+                            format!(" · showing {}", quality_label(s))
+                        }
+                        _ => String::new(),
+                    };
+                    ui.label(format!("{}: {}{shown}", kind.name(), self.job.stage));
                     ui.add(
                         egui::ProgressBar::new(self.job.fraction)
                             .desired_width(180.0)
@@ -1243,7 +1981,8 @@ impl EditorApp {
                     let text = match (&self.snapshot, &self.build_error) {
                         (_, Some((_, e))) => format!("build failed: {e}"),
                         (Some(s), None) => format!(
-                            "ready · {} layer(s) · {} points",
+                            "ready · {} · {} layer(s) · {} points",
+                            quality_label(s),
                             s.scene.layers.layers.len(),
                             s.scene.cloud.len()
                         ),
@@ -1265,9 +2004,16 @@ impl EditorApp {
                 } else {
                     "CPU preview"
                 };
-                ui.label(format!("{} · {short}", self.adapter))
+                let fps = self.preview_fps();
+                let rate = if fps > 0.0 {
+                    format!(" {fps:.1} frames/s")
+                } else {
+                    String::new()
+                };
+                ui.label(format!("{} · {short}{rate}", self.adapter))
                     .on_hover_text(format!(
-                        "The window's GPU adapter; the preview renderer: {}",
+                        "The window's GPU adapter; the preview renderer: {} (its own rate: \
+                         pictures shown per second)",
                         self.preview.renderer
                     ));
             });
@@ -1356,9 +2102,38 @@ impl EditorApp {
 
 impl eframe::App for EditorApp {
     fn logic(&mut self, ctx: &egui::Context, _frame: &mut eframe::Frame) {
+        self.logic_step(ctx);
+    }
+
+    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+        self.ui_step(ui);
+    }
+
+    fn save(&mut self, storage: &mut dyn eframe::Storage) {
+        if self.ephemeral {
+            return;
+        }
+        self.persisted.tab = self.tab;
+        self.persisted.preview_side = self.preview.max_side;
+        eframe::set_value(storage, STORAGE_KEY, &self.persisted);
+    }
+}
+
+impl EditorApp {
+    fn logic_step(&mut self, ctx: &egui::Context) {
         if let Some(path) = self.open_on_start.take() {
             self.open(&path);
         }
+        // Closing the window with unsaved edits asks first.
+        if ctx.input(|i| i.viewport().close_requested()) && !self.close_allowed {
+            if self.is_dirty() {
+                ctx.send_viewport_cmd(egui::ViewportCommand::CancelClose);
+                self.confirm = Some(Pending::Quit);
+            } else {
+                self.remove_recovery();
+            }
+        }
+        self.autosave();
         if let Some(w) = &mut self.scene_worker {
             w.flush();
         }
@@ -1371,6 +2146,7 @@ impl eframe::App for EditorApp {
             .as_ref()
             .map_or(25.0, |d| f64::from(d.project.output.fps));
         let dt = ctx.input(|i| f64::from(i.stable_dt)).min(0.25);
+        self.timeline.follows_preview = !self.preview_uses_gpu();
         self.timeline.advance(dt, fps, frames);
         if self.timeline.playing {
             ctx.request_repaint();
@@ -1380,7 +2156,7 @@ impl eframe::App for EditorApp {
         }
     }
 
-    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+    fn ui_step(&mut self, ui: &mut egui::Ui) {
         let start = Instant::now();
         let ctx = ui.ctx().clone();
         self.handle_shortcuts(&ctx);
@@ -1450,6 +2226,9 @@ impl eframe::App for EditorApp {
         for r in requests {
             self.handle_request(r);
         }
+        self.confirm_ui(&ctx);
+        self.path_prompt_ui(&ctx);
+        self.recover_ui(&ctx);
         // Messages float in the bottom right corner of the view, above the timeline.
         egui::Area::new(egui::Id::unique("notices"))
             .anchor(egui::Align2::RIGHT_BOTTOM, egui::vec2(-360.0, -96.0))
@@ -1469,14 +2248,5 @@ impl eframe::App for EditorApp {
                 self.job.stage
             );
         }
-    }
-
-    fn save(&mut self, storage: &mut dyn eframe::Storage) {
-        if self.ephemeral {
-            return;
-        }
-        self.persisted.tab = self.tab;
-        self.persisted.preview_side = self.preview.max_side;
-        eframe::set_value(storage, STORAGE_KEY, &self.persisted);
     }
 }

@@ -18,6 +18,7 @@
 // The brief's file layout: app/app.rs holds the application itself.
 #[allow(clippy::module_inception)]
 mod app;
+pub mod bench;
 pub mod gpu_preview;
 pub mod history;
 pub mod images;
@@ -26,7 +27,7 @@ pub mod timeline;
 pub mod viewport;
 pub mod worker;
 
-pub use app::{EditorApp, EditorOptions};
+pub use app::{EditorApp, EditorOptions, PLAYBACK_FPS, ShownFrame};
 
 use std::path::PathBuf;
 

@@ -21,6 +21,11 @@ pub struct TimelineState {
     pub selected_key: Option<usize>,
     /// Hole fraction of every rendered preview frame, by frame (reset with each new scene).
     pub hole_fractions: BTreeMap<usize, f32>,
+    /// While playing, [`TimelineState::frame`] is the frame the preview picture shows (set by
+    /// the app when a rendered frame arrives) and only the clock runs on: a preview slower
+    /// than the timeline drops frames instead of lagging behind the counter (the CPU
+    /// preview). Off: the frame follows the clock (the GPU preview draws every frame itself).
+    pub follows_preview: bool,
 }
 
 impl TimelineState {
@@ -43,8 +48,16 @@ impl TimelineState {
                 self.playing = false;
             }
         }
-        self.frame = f;
-        f != before
+        if !self.follows_preview || !self.playing {
+            self.frame = f;
+        }
+        self.frame != before
+    }
+
+    /// The frame the playback clock is at (equal to [`TimelineState::frame`] unless the frame
+    /// follows the preview).
+    pub fn clock_frame(&self, frames: usize) -> usize {
+        (self.clock.floor().max(0.0) as usize).min(frames.saturating_sub(1))
     }
 
     /// Jumps to `frame` (stops the clock there).
@@ -303,5 +316,21 @@ mod tests {
         assert_eq!(t.frame, 7);
         assert!(!t.playing);
         assert!(!t.advance(1.0, 10.0, 8));
+    }
+
+    #[test]
+    fn a_frame_that_follows_the_preview_stays_while_the_clock_runs() {
+        let mut t = TimelineState {
+            playing: true,
+            looping: true,
+            follows_preview: true,
+            ..Default::default()
+        };
+        assert!(!t.advance(0.5, 10.0, 8));
+        assert_eq!((t.frame, t.clock_frame(8)), (0, 5));
+        // The app sets the frame when the picture for it arrives.
+        t.frame = t.clock_frame(8);
+        t.advance(0.25, 10.0, 8);
+        assert_eq!((t.frame, t.clock_frame(8)), (5, 7));
     }
 }

@@ -31,11 +31,53 @@ pub trait PreviewRenderer: Send {
     ) -> crate::Result<Frame>;
 }
 
-/// The CPU reference splatter as a preview renderer.
+/// The CPU reference splatter as a preview renderer. The preview is a fraction of the output
+/// size, so it splats the scene's layers at the density its own view needs
+/// ([`crate::stages::layers::density_strides`] for that view: one point per `s × s` block,
+/// `s` up to 4), which costs up to 16 times fewer points than the output's cloud.
 #[derive(Default)]
 pub struct CpuPreview {
     renderer: CpuRenderer,
+    /// The cloud the renderer holds.
     cloud: Option<Arc<PointCloud>>,
+    /// Thinned clouds by the scene cloud they thin and their strides (most recent last), so
+    /// that a fly-through's few strides and returning to an earlier scene (undo) find theirs.
+    thinned: Vec<(Arc<PointCloud>, Vec<usize>, Arc<PointCloud>)>,
+}
+
+/// Thinned clouds kept.
+const THINNED_CLOUDS: usize = 4;
+
+impl CpuPreview {
+    /// The cloud to render `view` of `scene` with: the scene's own when the view needs every
+    /// point, else a thinned one (made once per scene and strides).
+    fn cloud_for(&mut self, scene: &Scene, view: &View) -> crate::Result<Arc<PointCloud>> {
+        let strides = crate::stages::layers::density_strides(
+            &scene.layers,
+            &scene.canvas.intrinsics,
+            std::slice::from_ref(view),
+        );
+        if strides.iter().all(|&s| s <= 1) {
+            return Ok(scene.cloud.clone());
+        }
+        if let Some(i) = self
+            .thinned
+            .iter()
+            .position(|(of, s, _)| Arc::ptr_eq(of, &scene.cloud) && *s == strides)
+        {
+            let entry = self.thinned.remove(i);
+            let cloud = entry.2.clone();
+            self.thinned.push(entry);
+            return Ok(cloud);
+        }
+        let cloud = Arc::new(scene.cloud_with_strides(&strides)?);
+        self.thinned
+            .push((scene.cloud.clone(), strides, cloud.clone()));
+        if self.thinned.len() > THINNED_CLOUDS {
+            self.thinned.remove(0);
+        }
+        Ok(cloud)
+    }
 }
 
 impl PreviewRenderer for CpuPreview {
@@ -52,16 +94,14 @@ impl PreviewRenderer for CpuPreview {
         width: usize,
         height: usize,
     ) -> crate::Result<Frame> {
-        if !self
-            .cloud
-            .as_ref()
-            .is_some_and(|c| Arc::ptr_eq(c, &scene.cloud))
-        {
-            self.renderer.set_cloud(scene.cloud.clone())?;
-            self.cloud = Some(scene.cloud.clone());
+        let cloud = self.cloud_for(scene, view)?;
+        if !self.cloud.as_ref().is_some_and(|c| Arc::ptr_eq(c, &cloud)) {
+            self.renderer.set_cloud(cloud.clone())?;
+            self.cloud = Some(cloud.clone());
         }
         self.renderer.settings = *settings;
-        scene.render_frame(&mut self.renderer, view, frame_index, width, height)
+        let positions = scene.frame_positions_of(&cloud, frame_index)?;
+        self.renderer.render_frame(view, width, height, &positions)
     }
 }
 

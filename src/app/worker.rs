@@ -24,6 +24,7 @@ use crate::raster::GrayRaster;
 use crate::render::cpu::CpuRenderer;
 use crate::scene::{Scene, SceneBuilder, Stage};
 use crate::stages::depth::preview::depth_preview;
+use crate::stages::inpaint::InpaintPreset;
 use crate::stages::motion::MotionSpec;
 use eframe::egui::{self, Color32, ColorImage};
 use std::path::PathBuf;
@@ -112,8 +113,10 @@ pub enum Event {
         generation: u64,
         /// Stages that ran (the rest came from the cache).
         stages_run: Vec<Stage>,
-        /// Build time.
+        /// Seconds since the build was asked for.
         seconds: f64,
+        /// A draft scene (the project's preset follows).
+        draft: bool,
     },
     /// A build failed; the previous scene stays.
     BuildFailed {
@@ -144,6 +147,7 @@ pub enum Event {
 }
 
 /// Per layer: the layer before and after inpainting.
+#[derive(Clone)]
 pub struct LayerImages {
     /// Own pixels only (what the canvas shows of this layer).
     pub before: ColorImage,
@@ -167,6 +171,7 @@ pub struct FlowArrow {
 }
 
 /// Display data of a scene, made on the scene thread.
+#[derive(Clone)]
 pub struct DisplayImages {
     /// The input photo.
     pub input: ColorImage,
@@ -201,7 +206,9 @@ pub struct SceneSnapshot {
     /// The scene.
     pub scene: Scene,
     /// Display images.
-    pub display: DisplayImages,
+    pub display: Arc<DisplayImages>,
+    /// Built at the draft inpainting preset while the project's preset refines it.
+    pub draft: bool,
 }
 
 struct Shared {
@@ -398,7 +405,8 @@ fn scene_thread(
     shared: Arc<Shared>,
     ctx: egui::Context,
 ) {
-    let mut builder = SceneBuilder::new();
+    // The canvas only grows while editing: camera edits within it rebuild nothing.
+    let mut builder = SceneBuilder::growing();
     let pool = stage_pool("makeit4d-stage");
     let pool = pool.as_ref();
     let mut queue: std::collections::VecDeque<Command> = Default::default();
@@ -500,7 +508,8 @@ fn scene_thread(
                 options,
             } => {
                 let result = job(&shared, &ctx, JobKind::Export, pool, |progress| {
-                    let scene = builder.build(&project, &progress.sub(0.0, 0.1))?;
+                    // Exactly the canvas the path needs: the frames the command line renders.
+                    let scene = builder.build_exact(&project, &progress.sub(0.0, 0.1))?;
                     let mut renderer = CpuRenderer::new(project.render);
                     render_sequence(
                         &project,
@@ -524,7 +533,10 @@ fn scene_thread(
     }
 }
 
-/// Builds the scene, publishes it with its display images, and reports.
+/// Builds the scene, publishes it with its display images, and reports. When the build has to
+/// inpaint (the canvas, the layers) at a slower preset than `draft`, a draft scene comes first
+/// (published with [`SceneSnapshot::draft`] set) and the project's preset refines it in the
+/// same job; a newer edit cancels both.
 fn run_build(
     builder: &mut SceneBuilder,
     shared: &Arc<Shared>,
@@ -532,36 +544,36 @@ fn run_build(
     pool: Option<&rayon::ThreadPool>,
     generation: u64,
     project: Project,
-    send: &impl Fn(Event) -> bool,
+    send: &(impl Fn(Event) -> bool + Sync),
 ) -> bool {
-    let before = builder.runs().clone();
     let start = Instant::now();
+    let refine = project.inpaint.model.is_none()
+        && project.inpaint.preset != InpaintPreset::Draft
+        && builder
+            .first_stale_stage(&project)
+            .ok()
+            .flatten()
+            .is_some_and(|stage| stage <= Stage::Inpaint);
     let result = job(shared, ctx, JobKind::Build, pool, |progress| {
-        let scene = builder.build(&project, progress)?;
-        progress.report(1.0, "display");
-        let display = display_images(&scene);
-        Ok::<_, crate::Error>((scene, display))
+        let mut final_part = progress.sub(0.0, 1.0);
+        if refine {
+            let mut draft = project.clone();
+            draft.inpaint.preset = InpaintPreset::Draft;
+            let before = builder.runs().clone();
+            let scene = builder.build(&draft, &progress.sub(0.0, 0.25))?;
+            publish(
+                shared, builder, &before, generation, &project, scene, true, start, send,
+            );
+            final_part = progress.sub(0.25, 1.0);
+        }
+        let before = builder.runs().clone();
+        let scene = builder.build(&project, &final_part)?;
+        Ok::<_, crate::Error>((before, scene))
     });
     match result {
-        Ok((scene, display)) => {
-            let stages_run = builder
-                .runs()
-                .iter()
-                .filter(|(stage, n)| before.get(stage) != Some(n))
-                .map(|(stage, _)| *stage)
-                .collect();
-            *lock(&shared.scene) = Some(Arc::new(SceneSnapshot {
-                generation,
-                project,
-                scene,
-                display,
-            }));
-            send(Event::SceneReady {
-                generation,
-                stages_run,
-                seconds: start.elapsed().as_secs_f64(),
-            })
-        }
+        Ok((before, scene)) => publish(
+            shared, builder, &before, generation, &project, scene, false, start, send,
+        ),
         Err(crate::Error::Cancelled) => true,
         Err(e) => send(Event::BuildFailed {
             generation,
@@ -570,11 +582,141 @@ fn run_build(
     }
 }
 
+/// Puts `scene` with its display images into the slot and says so.
+#[allow(clippy::too_many_arguments)]
+fn publish(
+    shared: &Arc<Shared>,
+    builder: &SceneBuilder,
+    runs_before: &std::collections::BTreeMap<Stage, usize>,
+    generation: u64,
+    project: &Project,
+    scene: Scene,
+    draft: bool,
+    start: Instant,
+    send: &impl Fn(Event) -> bool,
+) -> bool {
+    let previous = lock(&shared.scene).clone();
+    let display =
+        display_images_reusing(&scene, previous.as_deref().map(|s| (&s.scene, &*s.display)));
+    let stages_run = builder
+        .runs()
+        .iter()
+        .filter(|(stage, n)| runs_before.get(stage) != Some(n))
+        .map(|(stage, _)| *stage)
+        .collect();
+    *lock(&shared.scene) = Some(Arc::new(SceneSnapshot {
+        generation,
+        project: project.clone(),
+        scene,
+        display: Arc::new(display),
+        draft,
+    }));
+    send(Event::SceneReady {
+        generation,
+        stages_run,
+        seconds: start.elapsed().as_secs_f64(),
+        draft,
+    })
+}
+
 /// Makes every display image of `scene`.
 pub fn display_images(scene: &Scene) -> DisplayImages {
+    display_images_reusing(scene, None)
+}
+
+/// [`display_images`], copying the images of `previous` whose stage output `scene` shares (a
+/// camera edit remakes none; a threshold drag only the layers').
+pub fn display_images_reusing(
+    scene: &Scene,
+    previous: Option<(&Scene, &DisplayImages)>,
+) -> DisplayImages {
+    let reuse = |same: &dyn Fn(&Scene) -> bool| previous.filter(|(old, _)| same(old)).map(|p| p.1);
     let canvas = &scene.canvas;
     let depth = &scene.depth.estimate;
-    let layers = scene
+    let input = match reuse(&|old| Arc::ptr_eq(&old.input, &scene.input)) {
+        Some(d) => d.input.clone(),
+        None => rgb_image(&scene.input.rgb, DISPLAY_MAX_SIDE),
+    };
+    let (depth_image, sky, detected_horizon) =
+        match reuse(&|old| Arc::ptr_eq(&old.depth, &scene.depth)) {
+            Some(d) => (d.depth.clone(), d.sky.clone(), d.detected_horizon),
+            None => (
+                rgb_image(
+                    &depth_preview(&depth.depth, Some(&depth.sky)),
+                    DISPLAY_MAX_SIDE,
+                ),
+                mask_overlay(
+                    &depth.sky,
+                    Color32::from_rgb(120, 200, 255),
+                    0.5,
+                    DISPLAY_MAX_SIDE,
+                ),
+                crate::stages::depth::classical::horizon_from_sky(&depth.sky),
+            ),
+        };
+    let (canvas_image, synthesised, histogram) =
+        match reuse(&|old| Arc::ptr_eq(&old.canvas, &scene.canvas)) {
+            Some(d) => (d.canvas.clone(), d.synthesised.clone(), d.histogram.clone()),
+            None => (
+                rgb_image(&canvas.image, DISPLAY_MAX_SIDE),
+                mask_overlay(
+                    &canvas.synthesised.map(|s| if s { 1.0 } else { 0.0 }),
+                    Color32::from_rgb(255, 140, 0),
+                    0.25,
+                    DISPLAY_MAX_SIDE,
+                ),
+                disparity_histogram(&canvas.depth, HISTOGRAM_BINS),
+            ),
+        };
+    let layers = match reuse(&|old| {
+        Arc::ptr_eq(&old.layers, &scene.layers) && Arc::ptr_eq(&old.canvas, &scene.canvas)
+    }) {
+        Some(d) => d.layers.clone(),
+        None => layer_images(scene),
+    };
+    let same_motion = |old: &Scene| match (&scene.motion, &old.motion) {
+        (Some(a), Some(b)) => Arc::ptr_eq(a, b),
+        (None, None) => true,
+        _ => false,
+    };
+    let (motion_mask, flow, max_speed) = match reuse(&same_motion) {
+        Some(d) => (d.motion_mask.clone(), d.flow.clone(), d.max_speed),
+        None => match &scene.motion {
+            Some(m) => {
+                let (flow, max_speed) = flow_arrows(&m.field.flow);
+                (
+                    Some(mask_overlay(
+                        &m.field.mask,
+                        Color32::from_rgb(60, 200, 255),
+                        0.45,
+                        DISPLAY_MAX_SIDE,
+                    )),
+                    flow,
+                    max_speed,
+                )
+            }
+            None => (None, Vec::new(), 0.0),
+        },
+    };
+    DisplayImages {
+        input,
+        canvas: canvas_image,
+        synthesised,
+        depth: depth_image,
+        sky,
+        detected_horizon,
+        histogram,
+        layers,
+        motion_mask,
+        flow,
+        max_speed,
+    }
+}
+
+/// Each layer of `scene` before and after inpainting.
+fn layer_images(scene: &Scene) -> Vec<LayerImages> {
+    let canvas = &scene.canvas;
+    scene
         .layers
         .layers
         .iter()
@@ -591,49 +733,7 @@ pub fn display_images(scene: &Scene) -> DisplayImages {
                 hidden_pixels: l.inpainted.data().iter().filter(|&&m| m).count(),
             }
         })
-        .collect();
-    let (motion_mask, flow, max_speed) = match &scene.motion {
-        Some(m) => {
-            let (flow, max_speed) = flow_arrows(&m.field.flow);
-            (
-                Some(mask_overlay(
-                    &m.field.mask,
-                    Color32::from_rgb(60, 200, 255),
-                    0.45,
-                    DISPLAY_MAX_SIDE,
-                )),
-                flow,
-                max_speed,
-            )
-        }
-        None => (None, Vec::new(), 0.0),
-    };
-    DisplayImages {
-        input: rgb_image(&scene.input.rgb, DISPLAY_MAX_SIDE),
-        canvas: rgb_image(&canvas.image, DISPLAY_MAX_SIDE),
-        synthesised: mask_overlay(
-            &canvas.synthesised.map(|s| if s { 1.0 } else { 0.0 }),
-            Color32::from_rgb(255, 140, 0),
-            0.25,
-            DISPLAY_MAX_SIDE,
-        ),
-        depth: rgb_image(
-            &depth_preview(&depth.depth, Some(&depth.sky)),
-            DISPLAY_MAX_SIDE,
-        ),
-        sky: mask_overlay(
-            &depth.sky,
-            Color32::from_rgb(120, 200, 255),
-            0.5,
-            DISPLAY_MAX_SIDE,
-        ),
-        detected_horizon: crate::stages::depth::classical::horizon_from_sky(&depth.sky),
-        histogram: disparity_histogram(&canvas.depth, HISTOGRAM_BINS),
-        layers,
-        motion_mask,
-        flow,
-        max_speed,
-    }
+        .collect()
 }
 
 /// Histogram of `1/Z` over the finite positive depths: `[bin centre, fraction]`.
@@ -741,6 +841,8 @@ pub struct PreviewFrame {
     pub generation: u64,
     /// Output frame index.
     pub frame_index: usize,
+    /// The camera it was rendered from.
+    pub view: View,
     /// The picture or the positions (`None` when the work failed).
     pub output: Option<PreviewOutput>,
     /// Render time.
@@ -874,6 +976,7 @@ fn preview_thread(
             id: request.id,
             generation: request.snapshot.generation,
             frame_index: request.frame_index,
+            view: request.view,
             output,
             seconds: start.elapsed().as_secs_f64(),
             error,

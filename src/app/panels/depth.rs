@@ -141,6 +141,31 @@ impl StagePanel for DepthPanel {
                 }
             }
         }
+        // Strokes made since the depth on screen was computed: drawn at once, until the depth
+        // stage has them (a stroke never waits for a rebuild to appear).
+        let built = &snapshot.project.depth.strokes;
+        let strokes = &cx.current().depth.strokes;
+        let pending = if strokes.len() >= built.len() && strokes[..built.len()] == built[..] {
+            &strokes[built.len()..]
+        } else {
+            &strokes[..]
+        };
+        if !pending.is_empty() && strokes != built {
+            for stroke in pending {
+                let r = (stroke.radius_px * view.scale()).max(1.0);
+                let colour = match stroke.kind {
+                    DepthStrokeKind::Push => Color32::from_rgba_unmultiplied(80, 120, 255, 70),
+                    DepthStrokeKind::Pull => Color32::from_rgba_unmultiplied(255, 110, 60, 70),
+                    _ => Color32::from_rgba_unmultiplied(255, 255, 255, 60),
+                };
+                let pts: Vec<_> = stroke.points.iter().map(|q| view.to_screen(*q)).collect();
+                if pts.len() == 1 {
+                    painter.circle_filled(pts[0], r, colour);
+                } else {
+                    painter.add(egui::Shape::line(pts, Stroke::new(2.0 * r, colour)));
+                }
+            }
+        }
         // The horizon line and its handle.
         let overridden = self.horizon_drag.is_some() || classical.horizon.is_some();
         let colour = if overridden {
