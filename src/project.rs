@@ -273,8 +273,18 @@ impl Project {
             }
             None => return Err(Error::invalid("project JSON has no \"version\" field")),
         }
-        let project: Project = serde_json::from_value(value)
-            .map_err(|e| Error::invalid(format!("invalid project: {e}")))?;
+        let project: Project = serde_path_to_error::deserialize(value).map_err(|e| {
+            let field = e.path().to_string();
+            let inner = e.into_inner().to_string();
+            if field.is_empty() || field == "." {
+                Error::invalid(format!("invalid project: {inner}"))
+            } else {
+                Error::invalid(format!(
+                    "invalid project field \"{field}\": {inner} (fix or remove the field; \
+                     every field has a default)"
+                ))
+            }
+        })?;
         project.validate()?;
         Ok(project)
     }
@@ -388,6 +398,21 @@ mod tests {
         assert_eq!(absolute(&back.input), absolute(&img));
         assert_eq!(back.output, p.output);
         assert_eq!(back.camera, p.camera);
+    }
+
+    #[test]
+    fn a_bad_field_is_named_in_the_error() {
+        let e = Project::from_json(
+            r#"{"version": 1, "input": "a.jpg", "camera": {"hfov_deg": "wide"}}"#,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("\"camera.hfov_deg\""), "{e}");
+        assert!(e.contains("expected f32"), "{e}");
+        let e = Project::from_json(r#"{"version": 1, "output": {"frames": 5}}"#)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("missing field `input`"), "{e}");
     }
 
     #[test]

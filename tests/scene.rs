@@ -218,3 +218,90 @@ fn psnr(a: &makeit4d::raster::RgbRaster, b: &makeit4d::raster::RgbRaster) -> f64
     let mse = se / (3 * a.len()) as f64;
     10.0 * (1.0 / mse.max(1e-20)).log10()
 }
+
+#[test]
+fn a_growing_canvas_keeps_its_pixels_and_serves_every_path_inside_it() {
+    let mut builder = SceneBuilder::growing();
+    let fly_in = project("evening_glow_320.jpg", PresetKind::FlyIn, 6);
+    let first = builder.build(&fly_in, &Progress::none()).expect("fly-in");
+    let orbit = project("evening_glow_320.jpg", PresetKind::Orbit, 6);
+    let grown = builder.build(&orbit, &Progress::none()).expect("orbit");
+    let (a, b) = (first.canvas.layout, grown.canvas.layout);
+    assert!(
+        b.left_pad >= a.left_pad && b.top_pad >= a.top_pad && b.width >= a.width,
+        "{a:?} → {b:?}"
+    );
+    assert!(
+        b.width * b.height > a.width * a.height,
+        "the orbit needs more canvas"
+    );
+    // The old canvas is inside the new one, unchanged.
+    let (dx, dy) = (b.left_pad - a.left_pad, b.top_pad - a.top_pad);
+    for y in (0..a.height).step_by(7) {
+        for x in (0..a.width).step_by(7) {
+            assert_eq!(
+                first.canvas.image.at(x, y),
+                grown.canvas.image.at(x + dx, y + dy)
+            );
+            assert_eq!(
+                first.canvas.depth.at(x, y),
+                grown.canvas.depth.at(x + dx, y + dy)
+            );
+        }
+    }
+    // The new margin is synthesised and filled (not the black placeholder).
+    assert!(grown.canvas.synthesised.at(0, 0));
+    assert!(
+        grown
+            .canvas
+            .depth
+            .data()
+            .iter()
+            .all(|z| z.is_finite() && *z > 0.0)
+    );
+    let canvas_runs = builder.runs()[&Stage::Canvas];
+    // A smaller orbit and the fly-in again: inside the canvas, nothing runs.
+    let mut small = orbit.clone();
+    small.camera.path = CameraPath::Preset(Preset {
+        kind: PresetKind::Orbit,
+        amplitude: 0.5,
+    });
+    let runs = builder.runs().clone();
+    let inside = builder
+        .build(&small, &Progress::none())
+        .expect("smaller orbit");
+    assert!(std::sync::Arc::ptr_eq(&inside.canvas, &grown.canvas));
+    assert_eq!(builder.runs()[&Stage::Canvas], canvas_runs);
+    let back = builder
+        .build(&orbit, &Progress::none())
+        .expect("orbit again");
+    assert!(std::sync::Arc::ptr_eq(&back.cloud, &grown.cloud));
+    assert_eq!(builder.runs(), &runs, "returning to the orbit runs nothing");
+    assert_eq!(
+        builder.first_stale_stage(&orbit).expect("dry run"),
+        None,
+        "every stage cached"
+    );
+    // The exact canvas (exports) is the path's own.
+    let exact = builder
+        .build_exact(&fly_in, &Progress::none())
+        .expect("exact");
+    assert_eq!(exact.canvas.layout, first.canvas.layout);
+}
+
+#[test]
+fn returning_to_an_earlier_state_finds_every_stage_cached() {
+    let mut builder = SceneBuilder::new();
+    let mut p = project("evening_glow_320.jpg", PresetKind::FlyIn, 6);
+    p.layers.params.mode = LayerCount::Count(2);
+    builder.build(&p, &Progress::none()).expect("two layers");
+    let mut q = p.clone();
+    q.layers.params.mode = LayerCount::Count(3);
+    assert_eq!(builder.first_stale_stage(&q).unwrap(), Some(Stage::Layers));
+    builder.build(&q, &Progress::none()).expect("three layers");
+    let runs = builder.runs().clone();
+    // Back to two layers, then three again: both cached (undo, redo, a count switched back).
+    builder.build(&p, &Progress::none()).expect("two again");
+    builder.build(&q, &Progress::none()).expect("three again");
+    assert_eq!(builder.runs(), &runs);
+}

@@ -322,9 +322,9 @@ fn find_recovery(dir: &Path) -> Option<(Project, Option<PathBuf>, String)> {
 /// The quality of the scene on screen, a few words for the status bar.
 fn quality_label(s: &SceneSnapshot) -> String {
     if s.draft {
-        "draft quality (refining)".to_string()
+        "sketch quality (harmonic fill; refining)".to_string()
     } else {
-        format!("{} quality", s.project.inpaint.preset.name())
+        format!("final quality ({})", s.scene.inpainter)
     }
 }
 

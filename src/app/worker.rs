@@ -24,7 +24,6 @@ use crate::raster::GrayRaster;
 use crate::render::cpu::CpuRenderer;
 use crate::scene::{Scene, SceneBuilder, Stage};
 use crate::stages::depth::preview::depth_preview;
-use crate::stages::inpaint::InpaintPreset;
 use crate::stages::motion::MotionSpec;
 use eframe::egui::{self, Color32, ColorImage};
 use std::path::PathBuf;
@@ -207,7 +206,8 @@ pub struct SceneSnapshot {
     pub scene: Scene,
     /// Display images.
     pub display: Arc<DisplayImages>,
-    /// Built at the draft inpainting preset while the project's preset refines it.
+    /// A sketch (the harmonic fill, [`SceneBuilder::build_sketch`]) while the project's
+    /// inpainter refines it.
     pub draft: bool,
 }
 
@@ -534,9 +534,9 @@ fn scene_thread(
 }
 
 /// Builds the scene, publishes it with its display images, and reports. When the build has to
-/// inpaint (the canvas, the layers) at a slower preset than `draft`, a draft scene comes first
-/// (published with [`SceneSnapshot::draft`] set) and the project's preset refines it in the
-/// same job; a newer edit cancels both.
+/// inpaint (the canvas, the layers), a sketch comes first ([`SceneBuilder::build_sketch`]: the
+/// harmonic fill, published with [`SceneSnapshot::draft`] set) and the project's inpainter
+/// refines it in the same job; a newer edit cancels both.
 fn run_build(
     builder: &mut SceneBuilder,
     shared: &Arc<Shared>,
@@ -547,24 +547,20 @@ fn run_build(
     send: &(impl Fn(Event) -> bool + Sync),
 ) -> bool {
     let start = Instant::now();
-    let refine = project.inpaint.model.is_none()
-        && project.inpaint.preset != InpaintPreset::Draft
-        && builder
-            .first_stale_stage(&project)
-            .ok()
-            .flatten()
-            .is_some_and(|stage| stage <= Stage::Inpaint);
+    let refine = builder
+        .first_stale_stage(&project)
+        .ok()
+        .flatten()
+        .is_some_and(|stage| stage <= Stage::Inpaint);
     let result = job(shared, ctx, JobKind::Build, pool, |progress| {
         let mut final_part = progress.sub(0.0, 1.0);
         if refine {
-            let mut draft = project.clone();
-            draft.inpaint.preset = InpaintPreset::Draft;
             let before = builder.runs().clone();
-            let scene = builder.build(&draft, &progress.sub(0.0, 0.25))?;
+            let scene = builder.build_sketch(&project, &progress.sub(0.0, 0.2))?;
             publish(
                 shared, builder, &before, generation, &project, scene, true, start, send,
             );
-            final_part = progress.sub(0.25, 1.0);
+            final_part = progress.sub(0.2, 1.0);
         }
         let before = builder.runs().clone();
         let scene = builder.build(&project, &final_part)?;

@@ -350,7 +350,16 @@ impl StagePanel for MotionPanel {
                 cx.requests.push(Request::SuggestMotion);
             }
         });
-        if let Some(sug) = self.suggestion.clone() {
+        if self
+            .suggestion
+            .as_ref()
+            .is_some_and(|s| s.regions.is_empty())
+        {
+            ui.label("Nothing to suggest: no sky or water was found. Paint a region below.");
+            if ui.small_button("OK").clicked() {
+                self.suggestion = None;
+            }
+        } else if let Some(sug) = self.suggestion.clone() {
             let n: usize = sug.regions.iter().map(|r| r.arrows.len()).sum();
             ui.label(format!(
                 "suggested: {} region(s) ({}), {n} arrow(s)",

@@ -44,6 +44,38 @@ impl Inpainter for HarmonicInpainter {
     }
 }
 
+/// SOR sweeps of [`SketchInpainter`] at full resolution (the half-resolution solution,
+/// prolonged, is already within a few percent of the harmonic one; a few sweeps smooth the
+/// prolongation's seams).
+const SKETCH_FINEST_SWEEPS: usize = 4;
+
+/// The membrane fill solved at half resolution and prolonged to full resolution with only
+/// [`SKETCH_FINEST_SWEEPS`] sweeps there: the editor's first answer to an edit
+/// ([`crate::scene::SceneBuilder::build_sketch`]), about twice as fast as
+/// [`HarmonicInpainter`] and as smooth.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SketchInpainter;
+
+impl Inpainter for SketchInpainter {
+    fn name(&self) -> &str {
+        "harmonic sketch"
+    }
+
+    fn inpaint(&self, request: &InpaintRequest<'_>, progress: &Progress) -> Result<InpaintResult> {
+        let source = match common::plan(request)? {
+            Plan::Unchanged(result) => return Ok(result),
+            Plan::Fill { source } => source,
+        };
+        let (w, h) = request.image.size();
+        let (mut pixels, scale) = common::work_pixels(request.image, request.guide, &source, 1.0);
+        let unknown: Vec<bool> = source.iter().map(|&s| !s).collect();
+        progress.report(0.0, "harmonic sketch");
+        membrane_fill_with(&mut pixels, w, h, &unknown, SKETCH_FINEST_SWEEPS, progress)?;
+        progress.report(1.0, "harmonic sketch");
+        Ok(common::finish(request, &pixels, scale))
+    }
+}
+
 /// Replaces every `unknown` pixel of `pixels` (`w × h`, row-major) by the harmonic interpolant
 /// of the known ones. Needs at least one known pixel (otherwise leaves the values as they are).
 pub(crate) fn membrane_fill<const N: usize>(
@@ -53,10 +85,22 @@ pub(crate) fn membrane_fill<const N: usize>(
     unknown: &[bool],
     progress: &Progress,
 ) -> Result<()> {
+    membrane_fill_with(pixels, w, h, unknown, SWEEPS_PER_LEVEL, progress)
+}
+
+/// [`membrane_fill`] with `finest_sweeps` SOR sweeps at full resolution.
+fn membrane_fill_with<const N: usize>(
+    pixels: &mut [[f32; N]],
+    w: usize,
+    h: usize,
+    unknown: &[bool],
+    finest_sweeps: usize,
+    progress: &Progress,
+) -> Result<()> {
     if unknown.iter().all(|&u| u) || !unknown.iter().any(|&u| u) {
         return Ok(());
     }
-    solve_level(pixels, w, h, unknown, progress)
+    solve_level(pixels, w, h, unknown, finest_sweeps, progress)
 }
 
 fn solve_level<const N: usize>(
@@ -64,6 +108,7 @@ fn solve_level<const N: usize>(
     w: usize,
     h: usize,
     unknown: &[bool],
+    level_sweeps: usize,
     progress: &Progress,
 ) -> Result<()> {
     progress.check()?;
@@ -118,7 +163,14 @@ fn solve_level<const N: usize>(
                 }
             }
         }
-        solve_level(&mut coarse, cw, ch, &coarse_unknown, progress)?;
+        solve_level(
+            &mut coarse,
+            cw,
+            ch,
+            &coarse_unknown,
+            SWEEPS_PER_LEVEL,
+            progress,
+        )?;
         // Prolong: bilinear from the coarse solution, pixel-centre aligned.
         for y in 0..h {
             let fy = ((y as f32 + 0.5) * 0.5 - 0.5).clamp(0.0, (ch - 1) as f32);
@@ -149,7 +201,7 @@ fn solve_level<const N: usize>(
     let sweeps = if coarsest {
         SWEEPS_COARSEST
     } else {
-        SWEEPS_PER_LEVEL
+        level_sweeps
     };
     sor(pixels, w, h, unknown, sweeps, progress)
 }
@@ -248,6 +300,47 @@ mod tests {
         for (y, x) in [(15, 19), (5, 8), (24, 29)] {
             let want = 2.0 + 0.1 * x as f32 + 0.05 * y as f32;
             assert!((g.at(x, y) - want).abs() < 1e-2, "{} vs {want}", g.at(x, y));
+        }
+    }
+
+    #[test]
+    fn the_sketch_is_close_to_the_full_solve() {
+        // A smooth, non-linear boundary: the half-resolution solve prolonged with a few sweeps
+        // lands within 2 % of the full solve, and a linear ramp within 2 %.
+        let (w, h) = (64, 48);
+        let truth = RgbRaster::from_fn(w, h, |x, y| {
+            let (u, v) = (x as f32 / w as f32, y as f32 / h as f32);
+            [u, v, 0.5 + 0.4 * (3.0 * u).sin() * v]
+        });
+        let hole = MaskRaster::from_fn(w, h, |x, y| (10..50).contains(&x) && (8..40).contains(&y));
+        let request = InpaintRequest {
+            image: &truth,
+            hole: &hole,
+            allowed_source: None,
+            guide: None,
+            seed: 0,
+        };
+        let full = HarmonicInpainter
+            .inpaint(&request, &Progress::none())
+            .unwrap();
+        let sketch = SketchInpainter
+            .inpaint(&request, &Progress::none())
+            .unwrap();
+        let mut worst = 0.0f32;
+        for (a, b) in sketch.image.data().iter().zip(full.image.data()) {
+            for c in 0..3 {
+                worst = worst.max((a[c] - b[c]).abs());
+            }
+        }
+        assert!(
+            worst < 0.02,
+            "sketch differs from the full solve by {worst}"
+        );
+        for (i, (a, b)) in sketch.image.data().iter().zip(truth.data()).enumerate() {
+            if !hole.data()[i] {
+                assert_eq!(a, b, "known pixels stay");
+            }
+            assert!((a[0] - b[0]).abs() < 0.02 && (a[1] - b[1]).abs() < 0.02);
         }
     }
 

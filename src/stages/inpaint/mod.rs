@@ -15,7 +15,7 @@ pub mod patchmatch;
 
 pub use bench::{BenchOptions, BenchRow, bench_inpaint, format_bench_table};
 pub use command::{inpaint_command, read_hole_mask};
-pub use harmonic::HarmonicInpainter;
+pub use harmonic::{HarmonicInpainter, SketchInpainter};
 pub use patchmatch::{InpaintPreset, PatchMatchInpainter, PatchMatchParams};
 
 use crate::error::Result;
