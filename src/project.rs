@@ -54,6 +54,18 @@ pub struct Project {
     /// Splatting quality.
     #[serde(default)]
     pub render: SplatSettings,
+    /// Where the editor exports (remembered with the project; the command line takes its
+    /// folder as an argument).
+    #[serde(default)]
+    pub export: ExportSettings,
+}
+
+/// Export settings kept with the project.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ExportSettings {
+    /// The folder the editor's Export tab writes to; relative to the project file.
+    pub folder: Option<PathBuf>,
 }
 
 /// Outpainting settings.
@@ -170,6 +182,7 @@ impl Project {
             layers: LayerSettings::default(),
             motion: MotionSpec::default(),
             render: SplatSettings::default(),
+            export: ExportSettings::default(),
         }
     }
 
@@ -234,6 +247,9 @@ impl Project {
         }
         if let Some(m) = &self.inpaint.model {
             self.inpaint.model = Some(f(m));
+        }
+        if let Some(d) = &self.export.folder {
+            self.export.folder = Some(f(d));
         }
     }
 

@@ -481,7 +481,7 @@ fn every_tab_names_its_widgets() {
     assert_eq!(eases, keys + 1);
     h.get_by_label("8 Export").click();
     h.step();
-    h.get_by_label("Size of the photo").click();
+    h.get_by_label_contains("A size for this export").click();
     h.step();
     h.step();
     h.get_by_label("Only a range of frames").click();

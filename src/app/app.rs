@@ -1339,13 +1339,16 @@ impl EditorApp {
         let (w, _) = self.camera.output_size;
         let mut keys = match &doc.project.camera.path {
             CameraPath::Keyframes(k) => k.clone(),
-            preset => match preset.to_keyframes(
+            path @ CameraPath::Preset(preset) => match path.to_keyframes(
                 &self.camera.views[0].intrinsics,
                 w,
                 &snapshot.scene.scale,
                 doc.project.output.frames,
             ) {
-                Ok(k) => k,
+                Ok(k) => KeyframePath {
+                    from_preset: Some(*preset),
+                    ..k
+                },
                 Err(e) => {
                     self.error(format!("cannot turn the preset into keyframes: {e:#}"));
                     return;
@@ -1368,8 +1371,10 @@ impl EditorApp {
                 i
             }
             None => {
-                keys.keys.push(key);
-                keys.keys.len() - 1
+                // Keys stay in frame order, so their numbers are their order on the timeline.
+                let at = keys.keys.partition_point(|k| k.frame < frame as f64);
+                keys.keys.insert(at, key);
+                at
             }
         };
         let mut project = doc.project.clone();
@@ -1392,7 +1397,14 @@ impl EditorApp {
             return;
         }
         let mut project = doc.project.clone();
-        project.camera.path = CameraPath::Keyframes(keyframes);
+        let from_preset = match &doc.project.camera.path {
+            CameraPath::Preset(p) => Some(*p),
+            CameraPath::Keyframes(k) => k.from_preset,
+        };
+        project.camera.path = CameraPath::Keyframes(KeyframePath {
+            from_preset,
+            ..keyframes
+        });
         self.apply_edit("Autocruise", project);
         self.timeline.selected_key = None;
         self.notify(report.trim_end().to_string());
@@ -1763,6 +1775,14 @@ impl EditorApp {
         if ctx.egui_wants_keyboard_input() {
             return;
         }
+        if self.job.kind.is_some()
+            && self.path_prompt.is_none()
+            && self.confirm.is_none()
+            && shortcut(Modifiers::NONE, Key::Escape)
+            && let Some(w) = &self.scene_worker
+        {
+            w.cancel();
+        }
         if shortcut(Modifiers::NONE, Key::I) {
             self.add_keyframe();
         }
@@ -1779,7 +1799,9 @@ impl EditorApp {
             if let CameraPath::Keyframes(k) = &mut project.camera.path {
                 k.keys.remove(i);
                 if k.keys.is_empty() {
-                    project.camera.path = CameraPath::default();
+                    project.camera.path = k
+                        .from_preset
+                        .map_or_else(CameraPath::default, CameraPath::Preset);
                 }
             }
             self.timeline.selected_key = None;
@@ -1971,7 +1993,10 @@ impl EditorApp {
                             .desired_width(180.0)
                             .show_percentage(),
                     );
-                    if ui.small_button("Cancel").clicked()
+                    if ui
+                        .small_button("Cancel")
+                        .on_hover_text("Stop this job (Esc)")
+                        .clicked()
                         && let Some(w) = &self.scene_worker
                     {
                         w.cancel();

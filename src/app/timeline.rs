@@ -170,7 +170,7 @@ fn keyframe_controls_ui(ui: &mut Ui, cx: &mut PanelContext<'_>) {
 }
 
 /// Deletes key `i` (a path needs one key at least: deleting the last one goes back to the
-/// default preset).
+/// preset the keys were made from, or the default one).
 pub fn delete_key(cx: &mut PanelContext<'_>, i: usize) {
     cx.edit("Delete keyframe", |p| {
         if let CameraPath::Keyframes(path) = &mut p.camera.path
@@ -178,7 +178,9 @@ pub fn delete_key(cx: &mut PanelContext<'_>, i: usize) {
         {
             path.keys.remove(i);
             if path.keys.is_empty() {
-                p.camera.path = CameraPath::default();
+                p.camera.path = path
+                    .from_preset
+                    .map_or_else(CameraPath::default, CameraPath::Preset);
             }
         }
     });

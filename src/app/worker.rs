@@ -182,6 +182,9 @@ pub struct DisplayImages {
     pub depth: ColorImage,
     /// The photo's sky mask as a translucent overlay.
     pub sky: ColorImage,
+    /// The disparities at the depth colour map's two ends (`lo`: far, `hi`: near), for its
+    /// legend.
+    pub depth_range: Option<(f32, f32)>,
     /// Horizon detected from the sky, fraction of the photo height from the top.
     pub detected_horizon: Option<f32>,
     /// Histogram of the canvas disparity `1/Z`: `[bin centre, fraction of pixels]`.
@@ -552,6 +555,8 @@ fn run_build(
         .ok()
         .flatten()
         .is_some_and(|stage| stage <= Stage::Inpaint);
+    // Both scenes are published inside the job, so the status says "building" until the
+    // final one is on screen.
     let result = job(shared, ctx, JobKind::Build, pool, |progress| {
         let mut final_part = progress.sub(0.0, 1.0);
         if refine {
@@ -564,12 +569,12 @@ fn run_build(
         }
         let before = builder.runs().clone();
         let scene = builder.build(&project, &final_part)?;
-        Ok::<_, crate::Error>((before, scene))
+        Ok::<_, crate::Error>(publish(
+            shared, builder, &before, generation, &project, scene, false, start, send,
+        ))
     });
     match result {
-        Ok((before, scene)) => publish(
-            shared, builder, &before, generation, &project, scene, false, start, send,
-        ),
+        Ok(alive) => alive,
         Err(crate::Error::Cancelled) => true,
         Err(e) => send(Event::BuildFailed {
             generation,
@@ -633,9 +638,14 @@ pub fn display_images_reusing(
         Some(d) => d.input.clone(),
         None => rgb_image(&scene.input.rgb, DISPLAY_MAX_SIDE),
     };
-    let (depth_image, sky, detected_horizon) =
+    let (depth_image, sky, detected_horizon, depth_range) =
         match reuse(&|old| Arc::ptr_eq(&old.depth, &scene.depth)) {
-            Some(d) => (d.depth.clone(), d.sky.clone(), d.detected_horizon),
+            Some(d) => (
+                d.depth.clone(),
+                d.sky.clone(),
+                d.detected_horizon,
+                d.depth_range,
+            ),
             None => (
                 rgb_image(
                     &depth_preview(&depth.depth, Some(&depth.sky)),
@@ -648,6 +658,7 @@ pub fn display_images_reusing(
                     DISPLAY_MAX_SIDE,
                 ),
                 crate::stages::depth::classical::horizon_from_sky(&depth.sky),
+                crate::stages::depth::preview::disparity_range(&depth.depth, Some(&depth.sky)),
             ),
         };
     let (canvas_image, synthesised, histogram) =
@@ -700,6 +711,7 @@ pub fn display_images_reusing(
         synthesised,
         depth: depth_image,
         sky,
+        depth_range,
         detected_horizon,
         histogram,
         layers,

@@ -166,6 +166,10 @@ pub struct KeyframePath {
     /// (see the module documentation).
     #[serde(default)]
     pub constant_speed: bool,
+    /// The preset these keys were made from, when they were (the editor's "Back to the …
+    /// preset" returns to it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub from_preset: Option<super::Preset>,
 }
 
 impl KeyframePath {
@@ -174,6 +178,7 @@ impl KeyframePath {
         Self {
             keys,
             constant_speed: false,
+            from_preset: None,
         }
     }
 
@@ -246,6 +251,7 @@ impl KeyframePath {
         Ok(KeyframePath {
             keys,
             constant_speed: self.constant_speed,
+            from_preset: self.from_preset,
         })
     }
 

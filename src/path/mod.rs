@@ -341,6 +341,7 @@ mod tests {
             let path = CameraPath::Keyframes(KeyframePath {
                 keys: keys.clone(),
                 constant_speed,
+                from_preset: None,
             });
             let evaluator = path.evaluator(&base(), WIDTH, &scene(), 10_000).unwrap();
             let views = evaluator.views();

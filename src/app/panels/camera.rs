@@ -153,6 +153,8 @@ fn path_plot_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, proj: &Projection, width
     // Set in the last frame: the pointer is over a key, so a press grabs it instead of
     // panning the plot.
     let near_key: bool = ui.data(|d| d.get_temp(near_id)).unwrap_or(false);
+    let hold_id = egui::Id::unique(("camera axes held", proj.name));
+    let held: bool = ui.data(|d| d.get_temp(hold_id)).unwrap_or(false);
     let (project, camera, snapshot) = (cx.project, cx.camera, cx.snapshot);
     let key_path = match &project.camera.path {
         CameraPath::Keyframes(k) => Some(k),
@@ -210,10 +212,13 @@ fn path_plot_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, proj: &Projection, width
             .allow_drag(!(near_key || drag.is_some()))
             .show(ui, |pui| {
                 // Hold the axes still while a key is dragged (the path changes under the
-                // pointer), and fit them again when it is dropped.
-                if drag.is_some() {
-                    let held = pui.response().dragged();
-                    pui.set_auto_bounds(!held);
+                // pointer) and after it is dropped, so the key stays where it was let go;
+                // a double click fits them to the path again.
+                if pui.response().double_clicked() {
+                    pui.ctx().data_mut(|d| d.insert_temp(hold_id, false));
+                } else if drag.is_some() || held {
+                    pui.ctx().data_mut(|d| d.insert_temp(hold_id, true));
+                    pui.set_auto_bounds(false);
                 }
                 pui.line(
                     Line::new("path", PlotPoints::from(pts.clone()))
@@ -466,8 +471,17 @@ impl StagePanel for CameraPanel {
                         ui.end_row();
                     }
                 });
-                if ui.button("Back to the fly-in preset").clicked() {
-                    cx.edit("Camera preset", |p| p.camera.path = CameraPath::default());
+                let back = match &cx.project.camera.path {
+                    CameraPath::Keyframes(k) => k.from_preset,
+                    CameraPath::Preset(p) => Some(*p),
+                };
+                let back_path = back.map_or_else(CameraPath::default, CameraPath::Preset);
+                let name = match &back_path {
+                    CameraPath::Preset(p) => p.kind.to_string(),
+                    CameraPath::Keyframes(_) => "default".to_string(),
+                };
+                if ui.button(format!("Back to the {name} preset")).clicked() {
+                    cx.edit("Camera preset", move |p| p.camera.path = back_path);
                 }
             }
         }

@@ -166,6 +166,49 @@ impl StagePanel for DepthPanel {
                 }
             }
         }
+        // The colour legend: near (red) to far (dark blue), with the depths at both ends.
+        if let Some((lo, hi)) = snapshot.display.depth_range {
+            let bar = Rect::from_min_size(
+                pos2(view.rect.left() + 8.0, response.rect.bottom() - 30.0),
+                egui::vec2(180.0, 10.0),
+            );
+            if bar.top() > response.rect.top() + 40.0 {
+                painter.rect_filled(bar.expand(4.0), 3.0, Color32::from_black_alpha(150));
+                const STEPS: usize = 36;
+                for k in 0..STEPS {
+                    // Left: near (t = 1), right: far (t = 0).
+                    let t = 1.0 - (k as f32 + 0.5) / STEPS as f32;
+                    let c = crate::stages::depth::preview::turbo(t);
+                    let x0 = bar.left() + bar.width() * k as f32 / STEPS as f32;
+                    let x1 = bar.left() + bar.width() * (k + 1) as f32 / STEPS as f32;
+                    painter.rect_filled(
+                        Rect::from_min_max(pos2(x0, bar.top()), pos2(x1 + 0.5, bar.bottom())),
+                        0.0,
+                        Color32::from_rgb(
+                            (c[0] * 255.0) as u8,
+                            (c[1] * 255.0) as u8,
+                            (c[2] * 255.0) as u8,
+                        ),
+                    );
+                }
+                let font = egui::FontId::proportional(11.0);
+                let text = Color32::from_gray(230);
+                painter.text(
+                    pos2(bar.left(), bar.top() - 3.0),
+                    egui::Align2::LEFT_BOTTOM,
+                    format!("near Z ≈ {:.3}", 1.0 / hi.max(1e-9)),
+                    font.clone(),
+                    text,
+                );
+                painter.text(
+                    pos2(bar.right(), bar.top() - 3.0),
+                    egui::Align2::RIGHT_BOTTOM,
+                    format!("far {:.3} · sky", 1.0 / lo.max(1e-9)),
+                    font,
+                    text,
+                );
+            }
+        }
         // The horizon line and its handle.
         let overridden = self.horizon_drag.is_some() || classical.horizon.is_some();
         let colour = if overridden {

@@ -1,10 +1,7 @@
 //! Export: folder, PNG bit depth, size, fps, frame range, passes, video; progress and cancel.
 //! Runs the command line's `render_sequence` on the scene thread.
 
-use super::{
-    PanelContext, PanelMessage, Request, StagePanel, Tab, committed, frames_and_fps_ui,
-    placeholder_ui,
-};
+use super::{PanelContext, PanelMessage, Request, StagePanel, Tab, placeholder_ui};
 use crate::app::worker::JobKind;
 use crate::export::{ExportOptions, Passes, VideoFormat, VideoOptions};
 use eframe::egui::{self, Ui};
@@ -13,6 +10,11 @@ use std::path::PathBuf;
 /// The Export tab.
 pub struct ExportPanel {
     out_dir: String,
+    /// The project folder `out_dir` was last filled from (a new folder in the project, e.g.
+    /// another project opened, refills it).
+    from_project: Option<PathBuf>,
+    /// A size for this export only (`None`: the project's output size).
+    size: Option<(usize, usize)>,
     sixteen_bit: bool,
     range_on: bool,
     range: (usize, usize),
@@ -25,6 +27,8 @@ impl Default for ExportPanel {
     fn default() -> Self {
         Self {
             out_dir: String::new(),
+            from_project: None,
+            size: None,
             sixteen_bit: false,
             range_on: false,
             range: (0, 10),
@@ -81,9 +85,7 @@ impl StagePanel for ExportPanel {
                         .desired_width(ui.available_width() * 0.6),
                 );
                 ui.label(&cx.job.stage);
-                if ui.button("Cancel export").clicked() {
-                    cx.requests.push(Request::CancelJob);
-                }
+                ui.label(egui::RichText::new("Cancel it in the status bar (Esc).").weak());
             });
         } else if let Some(r) = &self.last_result {
             ui.vertical_centered(|ui| {
@@ -96,6 +98,13 @@ impl StagePanel for ExportPanel {
     }
 
     fn inspector_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>) {
+        // The folder saved with the project fills the field (once per project folder).
+        if let Some(folder) = &cx.project.export.folder
+            && self.from_project.as_ref() != Some(folder)
+        {
+            self.out_dir = folder.display().to_string();
+            self.from_project = Some(folder.clone());
+        }
         ui.heading("Folder");
         ui.horizontal(|ui| {
             ui.add(
@@ -115,41 +124,32 @@ impl StagePanel for ExportPanel {
             ui.radio_value(&mut self.sixteen_bit, true, "16-bit");
         });
         let out = cx.project.output;
-        let mut input_size = out.width.is_none();
-        if ui.checkbox(&mut input_size, "Size of the photo").changed() {
-            let (w, h) = cx.camera.output_size;
-            cx.edit("Output size", |p| {
-                if input_size {
-                    p.output.width = None;
-                    p.output.height = None;
-                } else {
-                    p.output.width = Some(w.max(1));
-                    p.output.height = Some(h.max(1));
-                }
-            });
-        }
-        if let (Some(w), Some(h)) = (out.width, out.height)
-            && let Some(v) = committed(ui, "out-size", (w, h), |ui, v| {
-                ui.horizontal(|ui| {
-                    let width = ui.label("width");
-                    let a = ui
-                        .add(egui::DragValue::new(&mut v.0).range(16..=8192))
-                        .labelled_by(width.id);
-                    let height = ui.label("height");
-                    let b = ui
-                        .add(egui::DragValue::new(&mut v.1).range(16..=8192))
-                        .labelled_by(height.id);
-                    a.union(b)
-                })
-                .inner
-            })
+        let (pw, ph) = cx.camera.output_size;
+        let mut custom = self.size.is_some();
+        if ui
+            .checkbox(
+                &mut custom,
+                format!("A size for this export (the project's: {pw}×{ph})"),
+            )
+            .on_hover_text("Renders this export at another size; the project keeps its own")
+            .changed()
         {
-            cx.edit("Output size", |p| {
-                p.output.width = Some(v.0);
-                p.output.height = Some(v.1);
+            self.size = custom.then_some((pw.max(16), ph.max(16)));
+        }
+        if let Some((w, h)) = &mut self.size {
+            ui.horizontal(|ui| {
+                let width = ui.label("width");
+                ui.add(egui::DragValue::new(w).range(16..=8192))
+                    .labelled_by(width.id);
+                let height = ui.label("height");
+                ui.add(egui::DragValue::new(h).range(16..=8192))
+                    .labelled_by(height.id);
             });
         }
-        frames_and_fps_ui(ui, cx);
+        ui.label(format!(
+            "{} frames at {} fps: the project's path (its length is set on the Input tab)",
+            out.frames, out.fps
+        ));
         ui.checkbox(&mut self.range_on, "Only a range of frames");
         if self.range_on {
             ui.horizontal(|ui| {
@@ -161,6 +161,8 @@ impl StagePanel for ExportPanel {
                     .labelled_by(to.id);
                 ui.label("(end exclusive)");
             });
+            self.range.0 = self.range.0.min(out.frames.saturating_sub(1));
+            self.range.1 = self.range.1.clamp(self.range.0 + 1, out.frames.max(1));
         }
         ui.separator();
         ui.heading("Passes");
@@ -199,15 +201,24 @@ impl StagePanel for ExportPanel {
                 .add_enabled(!busy && !dir.is_empty(), egui::Button::new("Export"))
                 .clicked()
             {
+                let folder = PathBuf::from(&dir);
+                if cx.project.export.folder.as_ref() != Some(&folder) {
+                    // Remember the folder with the project.
+                    self.from_project = Some(folder.clone());
+                    let f = folder.clone();
+                    cx.edit("Export folder", move |p| p.export.folder = Some(f));
+                }
+                let mut project = cx.current().clone();
+                if let Some((w, h)) = self.size {
+                    project.output.width = Some(w);
+                    project.output.height = Some(h);
+                }
                 cx.requests.push(Request::Export {
-                    out_dir: PathBuf::from(&dir),
+                    out_dir: folder,
                     options: self.options(out.frames),
-                    project: Box::new(cx.current().clone()),
+                    project: Box::new(project),
                 });
                 self.last_result = None;
-            }
-            if busy && ui.button("Cancel").clicked() {
-                cx.requests.push(Request::CancelJob);
             }
         });
         if busy {

@@ -71,7 +71,14 @@ impl LayersPanel {
                 );
                 for &(i, x) in &lines {
                     let interior = i > 0 && i < last;
-                    let line = VLine::new(format!("d{}", i + 1), x)
+                    // Interior thresholds d1 … d(L−1) as the inspector numbers them; the
+                    // outer bounds are the scene's nearest and farthest depth.
+                    let name = match i {
+                        0 => "nearest".to_string(),
+                        i if i == last => "farthest".to_string(),
+                        i => format!("d{i}"),
+                    };
+                    let line = VLine::new(name, x)
                         .color(if interior {
                             Color32::from_rgb(255, 200, 60)
                         } else {
@@ -290,7 +297,14 @@ impl StagePanel for LayersPanel {
             }
         }
         ui.separator();
-        ui.heading("Thresholds (depth)");
+        ui.heading("Thresholds");
+        ui.label(
+            egui::RichText::new(
+                "Depth Z between layers, nearest first; the histogram's axis is 1/Z, so d1 is \
+                 its rightmost line.",
+            )
+            .weak(),
+        );
         if let Some(s) = cx.snapshot {
             let t = s.scene.layers.thresholds.clone();
             let overrides = &cx.project.layers.params.overrides;
@@ -298,15 +312,24 @@ impl StagePanel for LayersPanel {
             for (i, &threshold) in t.iter().enumerate().take(interior).skip(1) {
                 let overridden = overrides.get(i).copied().flatten().is_some();
                 ui.horizontal(|ui| {
-                    let label = ui.label(format!("d{}", i + 1));
+                    let label = ui.label(format!("d{i}"));
                     if let Some(v) = committed(ui, &format!("thr{i}"), threshold, |ui, v| {
-                        ui.add(egui::DragValue::new(v).speed(0.01).range(1e-3..=1e6))
-                            .labelled_by(label.id)
+                        ui.add(
+                            egui::DragValue::new(v)
+                                .speed(0.01)
+                                .range(1e-3..=1e6)
+                                .prefix("Z = "),
+                        )
+                        .labelled_by(label.id)
                     }) {
                         cx.edit("Set layer threshold", |p| {
                             set_override(&mut p.layers.params.overrides, i, v)
                         });
                     }
+                    ui.label(
+                        egui::RichText::new(format!("1/Z = {:.4}", 1.0 / threshold.max(1e-9)))
+                            .weak(),
+                    );
                     if overridden && ui.small_button("auto").clicked() {
                         cx.edit("Reset layer threshold", |p| {
                             if let Some(slot) = p.layers.params.overrides.get_mut(i) {

@@ -8,6 +8,11 @@ use crate::render::SplatKernel;
 use crate::render::gpu::RendererChoice;
 use eframe::egui::{self, Key, Sense, Ui};
 
+/// Fly speed of the preview camera (WASD/QE), in the scene's near depths per second.
+pub const FLY_SPEED_PER_NEAR_DEPTH: f32 = 0.5;
+/// Points of drag or scroll that move the preview camera as far as one second of WASD.
+pub const FLY_POINTS_PER_SECOND: f32 = 200.0;
+
 /// The Preview tab.
 #[derive(Default)]
 pub struct PreviewPanel {
@@ -74,9 +79,12 @@ impl StagePanel for PreviewPanel {
             _ => {}
         }
         cx.probe.view = Some(view);
-        let step = cx
+        // One fly speed for every input: WASD/QE move `speed` world units per second, and
+        // dragging or scrolling 200 points moves as far as one second of WASD.
+        let speed = cx
             .snapshot
-            .map_or(0.05, |s| s.scene.scale.near_depth * 0.02);
+            .map_or(0.1, |s| s.scene.scale.near_depth * FLY_SPEED_PER_NEAR_DEPTH);
+        let per_point = speed / FLY_POINTS_PER_SECOND;
         let fly = &mut cx.preview.fly;
         let before = *fly;
         if response.dragged_by(egui::PointerButton::Primary) {
@@ -86,22 +94,25 @@ impl StagePanel for PreviewPanel {
         }
         if response.dragged_by(egui::PointerButton::Secondary) {
             let d = response.drag_delta();
-            fly.offset.x -= d.x * step * 0.2;
-            fly.offset.y -= d.y * step * 0.2;
+            fly.offset.x -= d.x * per_point;
+            fly.offset.y -= d.y * per_point;
         }
         if response.hovered() {
             let scroll = ui.input(|i| i.smooth_scroll_delta.y);
-            fly.offset.z += scroll * step * 0.05;
-            let keys = ui.input(|i| {
+            fly.offset.z += scroll * per_point;
+            let (keys, dt) = ui.input(|i| {
                 let k = |key| if i.key_down(key) { 1.0 } else { 0.0 };
-                glam::Vec3::new(
-                    k(Key::D) - k(Key::A),
-                    k(Key::Q) - k(Key::E),
-                    k(Key::W) - k(Key::S),
+                (
+                    glam::Vec3::new(
+                        k(Key::D) - k(Key::A),
+                        k(Key::Q) - k(Key::E),
+                        k(Key::W) - k(Key::S),
+                    ),
+                    i.stable_dt.min(0.1),
                 )
             });
             if keys != glam::Vec3::ZERO && !ui.ctx().egui_wants_keyboard_input() {
-                fly.offset += keys * step * 0.5;
+                fly.offset += keys * speed * dt;
                 ui.ctx().request_repaint();
             }
         }

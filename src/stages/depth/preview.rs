@@ -48,15 +48,10 @@ pub fn normalised_disparity(depth: &GrayRaster, sky: Option<&GrayRaster>) -> Gra
         }
     });
     let is_sky = |i: usize| sky.is_some_and(|s| s.same_size(depth) && s.data()[i] >= 0.5);
-    let kept: Vec<f32> = disparity
-        .data()
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| !is_sky(*i))
-        .map(|(_, d)| *d)
-        .collect();
-    let lo = quantile(&kept, 0.01);
-    let hi = quantile(&kept, 0.99);
+    let (lo, hi) = match disparity_range(depth, sky) {
+        Some((lo, hi)) => (Some(lo), Some(hi)),
+        None => (None, None),
+    };
     let data = disparity
         .data()
         .iter()
@@ -73,6 +68,21 @@ pub fn normalised_disparity(depth: &GrayRaster, sky: Option<&GrayRaster>) -> Gra
         .collect();
     Raster::from_vec(depth.width(), depth.height(), data)
         .unwrap_or_else(|| Raster::new(depth.width(), depth.height(), 0.0))
+}
+
+/// The disparity range [`normalised_disparity`] maps to `[0, 1]`: the 1st and 99th
+/// percentiles of `1/Z` over the finite, positive, non-sky pixels (`None` when there are none).
+/// `1/lo` and `1/hi` are the depths at the colour map's far and near ends.
+pub fn disparity_range(depth: &GrayRaster, sky: Option<&GrayRaster>) -> Option<(f32, f32)> {
+    let is_sky = |i: usize| sky.is_some_and(|s| s.same_size(depth) && s.data()[i] >= 0.5);
+    let kept: Vec<f32> = depth
+        .data()
+        .iter()
+        .enumerate()
+        .filter(|&(i, &z)| !is_sky(i) && z.is_finite() && z > 0.0)
+        .map(|(_, &z)| 1.0 / z)
+        .collect();
+    Some((quantile(&kept, 0.01)?, quantile(&kept, 0.99)?))
 }
 
 /// Colourised preview of a depth map: [`normalised_disparity`] through [`turbo`].
