@@ -251,6 +251,35 @@ pub struct ShownFrame {
     pub at: Instant,
 }
 
+/// A GPU error as one short sentence for the window: wgpu's validation reports run over many
+/// lines with internal labels, so the known causes get a plain reason and anything else its
+/// first line.
+fn gpu_reason(e: &str) -> String {
+    let lower = e.to_lowercase();
+    if ["storage buffer", "storage_buffers", "storagebuffers"]
+        .iter()
+        .any(|k| lower.contains(k))
+    {
+        return "the adapter offers too few storage buffers per shader stage (a GL or older \
+                driver); the preview runs on the CPU"
+            .into();
+    }
+    if lower.contains("compute") && (lower.contains("not supported") || lower.contains("downlevel"))
+    {
+        return "the adapter has no compute shaders; the preview runs on the CPU".into();
+    }
+    let first = e
+        .lines()
+        .map(str::trim)
+        .find(|l| !l.is_empty())
+        .unwrap_or("unknown error");
+    let mut short: String = first.chars().take(160).collect();
+    if first.chars().count() > 160 {
+        short.push('…');
+    }
+    short
+}
+
 /// `~/…` with the home folder.
 fn expand_home(text: &str) -> PathBuf {
     match (text.strip_prefix("~/"), std::env::var_os("HOME")) {
@@ -381,7 +410,14 @@ impl EditorApp {
         let (gpu, gpu_error) = match render_state {
             Some(rs) => match GpuPreview::new(rs) {
                 Ok(g) => (Some(g), None),
-                Err(e) => (None, Some(format!("the GPU splatter cannot run here: {e}"))),
+                Err(e) => (
+                    None,
+                    Some(format!(
+                        "the GPU splatter cannot run on {}: {}",
+                        rs.adapter.get_info().name,
+                        gpu_reason(&format!("{e:#}"))
+                    )),
+                ),
             },
             None => (None, Some("eframe has no wgpu render state".to_string())),
         };
@@ -1565,10 +1601,11 @@ impl EditorApp {
     /// preview, hands the panel what its paint callback draws.
     fn update_preview(&mut self, ctx: &egui::Context) {
         if let Some(e) = self.gpu.as_ref().and_then(GpuPreview::take_error) {
+            let reason = gpu_reason(&e);
             self.error(format!(
-                "the GPU preview failed, using the CPU preview: {e}"
+                "the GPU preview failed, using the CPU preview: {reason}"
             ));
-            self.gpu_error = Some(format!("the GPU preview failed: {e}"));
+            self.gpu_error = Some(format!("the GPU preview failed: {reason}"));
             self.preview_key = None;
         }
         let on_gpu = self.preview_uses_gpu();
@@ -2273,5 +2310,52 @@ impl EditorApp {
                 self.job.stage
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gpu_errors_become_one_sentence() {
+        let raw = "Validation Error\n\nCaused by:\n  In Device::create_bind_group_layout, label = 'splat'\n    Too many bindings of type StorageBuffers in Stage ShaderStages(COMPUTE), limit is 8, count was 9.";
+        let r = gpu_reason(raw);
+        assert!(r.contains("too few storage buffers"), "{r}");
+        assert!(!r.contains('\n'));
+        let r = gpu_reason("\n  device lost\nmore");
+        assert_eq!(r, "device lost");
+        let long = "x".repeat(400);
+        assert_eq!(gpu_reason(&long).chars().count(), 161);
+    }
+
+    #[test]
+    fn completions_list_the_folder_entries_that_match() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("alpha.json"), "{}").unwrap();
+        std::fs::write(dir.path().join("alps.jpg"), "").unwrap();
+        std::fs::write(dir.path().join(".hidden"), "").unwrap();
+        std::fs::create_dir(dir.path().join("album")).unwrap();
+        let base = format!("{}/", dir.path().display());
+        let got = path_completions(&format!("{base}al"), 10);
+        assert_eq!(
+            got,
+            vec![
+                format!("{base}album/"),
+                format!("{base}alpha.json"),
+                format!("{base}alps.jpg"),
+            ]
+        );
+        assert_eq!(
+            path_completions(&format!("{base}alps.jpg"), 10),
+            Vec::<String>::new()
+        );
+        assert_eq!(
+            path_completions(&base, 10).len(),
+            3,
+            "hidden entries only on a dot"
+        );
+        assert_eq!(path_completions(&format!("{base}.h"), 10).len(), 1);
+        assert!(path_completions("/no/such/folder/x", 10).is_empty());
     }
 }
