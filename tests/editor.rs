@@ -766,3 +766,46 @@ fn playback_shows_the_frame_the_timeline_says() {
     assert!(!h.state().is_playing());
     assert!(pictures.len() >= 2, "playback showed frames {pictures:?}");
 }
+
+/// An output much smaller than the viewport (a thinned cloud drawn large): the GPU preview
+/// still draws surfaces, with no dot grid or gaps between the points.
+#[test]
+fn the_gpu_preview_has_no_gaps_when_the_output_is_small() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = fast_project(dir.path());
+    let mut p = Project::load(&file).unwrap();
+    p.output.width = Some(80);
+    p.output.height = Some(50);
+    p.save(&file).unwrap();
+    let Some(mut h) = harness_with(file, RendererChoice::Gpu) else {
+        return;
+    };
+    wait_idle(&mut h, Duration::from_secs(600));
+    h.get_by_label("7 Preview").click();
+    h.step();
+    h.step();
+    let mut image = h.render().expect("render the window");
+    // The tile lists grow over the first frames (their size check does not stall a frame).
+    for _ in 0..10 {
+        std::thread::sleep(Duration::from_millis(50));
+        h.step();
+        image = h.render().unwrap_or(image);
+    }
+    let view = h.state().probe().view.expect("the preview view");
+    let ppp = image.width() as f32 / 1280.0;
+    let inner = view.rect.shrink(4.0);
+    let (mut dark, mut total) = (0usize, 0usize);
+    for y in inner.min.y as u32..inner.max.y as u32 {
+        for x in inner.min.x as u32..inner.max.x as u32 {
+            let p = image
+                .get_pixel((x as f32 * ppp) as u32, (y as f32 * ppp) as u32)
+                .0;
+            dark += usize::from(u32::from(p[0]) + u32::from(p[1]) + u32::from(p[2]) < 24);
+            total += 1;
+        }
+    }
+    assert!(
+        dark * 50 < total,
+        "{dark} of {total} preview pixels are black (gaps between points)"
+    );
+}

@@ -394,9 +394,16 @@ impl StagePanel for CameraPanel {
                                 &s.scene.scale,
                                 cx.project.output.frames,
                             ) {
-                                Ok(k) => cx.edit("Preset to keyframes", |p| {
-                                    p.camera.path = CameraPath::Keyframes(k)
-                                }),
+                                Ok(k) => {
+                                    let from = Some(*preset);
+                                    cx.edit("Preset to keyframes", |p| {
+                                        p.camera.path =
+                                            CameraPath::Keyframes(crate::path::KeyframePath {
+                                                from_preset: from,
+                                                ..k
+                                            })
+                                    })
+                                }
                                 Err(e) => cx.requests.push(Request::Notify(format!(
                                     "cannot turn the preset into keys: {e:#}"
                                 ))),
