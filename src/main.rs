@@ -136,15 +136,19 @@ struct EvalZoomArgs {
 
 #[derive(Args, Debug)]
 struct BenchEditorArgs {
-    /// The photo or project to open (default: ../shared/data/photos/forest_path.jpg when
-    /// present, else tests/data/evening_glow_320.jpg).
-    photo: Option<PathBuf>,
+    /// Photos (or projects): the first drives the editor; every one gets the sketch-vs-final
+    /// table (default: ../shared/data/photos/forest_path.jpg when present, else
+    /// tests/data/evening_glow_320.jpg).
+    photos: Vec<PathBuf>,
     /// Seconds of playback to measure.
     #[arg(long, default_value_t = 6.0)]
     playback_seconds: f64,
     /// Give up on one edit after this many seconds.
     #[arg(long, default_value_t = 300.0)]
     limit: f64,
+    /// Only the sketch-vs-final table (no editor).
+    #[arg(long)]
+    trade_only: bool,
     /// Print JSON instead of markdown.
     #[arg(long)]
     json: bool,
@@ -1196,19 +1200,20 @@ fn bench_motion(args: BenchMotionArgs) -> anyhow::Result<()> {
 }
 
 fn bench_editor(args: BenchEditorArgs) -> anyhow::Result<()> {
-    let photo = match args.photo {
-        Some(p) => p,
-        None => {
-            let shared = PathBuf::from("../shared/data/photos/forest_path.jpg");
-            if shared.is_file() {
-                shared
-            } else {
-                PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/evening_glow_320.jpg")
-            }
-        }
+    let photos = if args.photos.is_empty() {
+        let shared = PathBuf::from("../shared/data/photos/forest_path.jpg");
+        vec![if shared.is_file() {
+            shared
+        } else {
+            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/evening_glow_320.jpg")
+        }]
+    } else {
+        args.photos.clone()
     };
-    if !photo.is_file() {
-        anyhow::bail!("{}: no such file", photo.display());
+    for p in &photos {
+        if !p.is_file() {
+            anyhow::bail!("{}: no such file", p.display());
+        }
     }
     if !(args.limit.is_finite()
         && args.limit > 0.0
@@ -1217,16 +1222,65 @@ fn bench_editor(args: BenchEditorArgs) -> anyhow::Result<()> {
     {
         anyhow::bail!("--limit must be > 0 and --playback-seconds ≥ 0");
     }
-    let options = makeit4d::app::bench::EditorBenchOptions {
-        open: photo.clone(),
-        limit: std::time::Duration::from_secs_f64(args.limit),
-        playback_seconds: args.playback_seconds,
-    };
-    let rows = makeit4d::app::bench::run(&options, |row| eprintln!("{row:?}"))?;
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&rows)?);
+    let rows = if args.trade_only {
+        Vec::new()
     } else {
-        print!("{}", makeit4d::app::bench::to_markdown(&rows, &photo));
+        let options = makeit4d::app::bench::EditorBenchOptions {
+            open: photos[0].clone(),
+            limit: std::time::Duration::from_secs_f64(args.limit),
+            playback_seconds: args.playback_seconds,
+        };
+        makeit4d::app::bench::run(&options, |row| eprintln!("{row:?}"))?
+    };
+    let mut trades = Vec::new();
+    for photo in &photos {
+        for kind in [
+            makeit4d::path::PresetKind::FlyIn,
+            makeit4d::path::PresetKind::Orbit,
+        ] {
+            let mut project = if photo
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+            {
+                Project::load(photo)?
+            } else {
+                Project::new(photo)
+            };
+            project.camera.path =
+                makeit4d::path::CameraPath::Preset(makeit4d::path::Preset::new(kind));
+            let t = makeit4d::app::bench::sketch_trade(&project)
+                .map_err(|e| anyhow::anyhow!("{}: {e:#}", photo.display()))?;
+            eprintln!("{} {kind}: {t:?}", photo.display());
+            trades.push((photo.clone(), kind, t));
+        }
+    }
+    if args.json {
+        let trades: Vec<_> = trades
+            .iter()
+            .map(|(p, k, t)| serde_json::json!({"photo": p, "preset": k.name(), "trade": t}))
+            .collect();
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({"edits": rows, "sketch": trades}))?
+        );
+        return Ok(());
+    }
+    if !rows.is_empty() {
+        print!("{}", makeit4d::app::bench::to_markdown(&rows, &photos[0]));
+        println!();
+    }
+    println!(
+        "| photo | path | sketch s | final s | PSNR sketch vs final, frame 0 / middle / last (dB) |\n|---|---|---:|---:|---|"
+    );
+    for (photo, kind, t) in &trades {
+        let name = photo.file_name().map_or_else(
+            || photo.display().to_string(),
+            |n| n.to_string_lossy().into(),
+        );
+        println!(
+            "| {name} | {kind} | {:.2} | {:.2} | {:.2} / {:.2} / {:.2} |",
+            t.sketch_s, t.final_s, t.psnr_db[0], t.psnr_db[1], t.psnr_db[2]
+        );
     }
     Ok(())
 }

@@ -56,6 +56,7 @@ fn regenerate_screenshots() {
                 EditorOptions {
                     open: Some(file),
                     ephemeral: true,
+                    no_native_dialogs: true,
                     ..Default::default()
                 },
             )
@@ -101,20 +102,45 @@ fn regenerate_screenshots() {
                 h.step();
             }
         }
-        let image = h.render().expect("render the window");
-        // Three quarters of the window size keeps the files small and the text readable.
-        let image = image::imageops::resize(
-            &image::DynamicImage::ImageRgba8(image).to_rgb8(),
-            960,
-            570,
-            image::imageops::FilterType::Triangle,
-        );
         let name = label
             .split_once(' ')
             .map_or(label.as_str(), |(_, n)| n)
             .to_lowercase();
-        let path = out.join(format!("{:02}-{name}.png", i + 1));
-        image.save(&path).unwrap();
-        eprintln!("wrote {}", path.display());
+        shot(&mut h, &out.join(format!("{:02}-{name}.png", i + 1)));
     }
+
+    // The prompts that keep work from being lost: unsaved changes on quit, and the editor's
+    // own path prompt (the file dialog when the desktop has none).
+    let mut p = h.state().project().unwrap().clone();
+    p.output.fps = 30.0;
+    h.state_mut().apply_edit("Frame rate", p);
+    wait(&mut h, "the edit", EditorApp::is_idle);
+    h.state_mut().request_quit();
+    for _ in 0..4 {
+        h.step();
+    }
+    shot(&mut h, &out.join("09-unsaved-changes.png"));
+    h.get_by_label("Cancel").click();
+    h.step();
+    h.key_press_modifiers(
+        egui::Modifiers::COMMAND | egui::Modifiers::SHIFT,
+        egui::Key::S,
+    );
+    for _ in 0..4 {
+        h.step();
+    }
+    shot(&mut h, &out.join("10-save-as-prompt.png"));
+}
+
+/// Writes the window at three quarters of its size (small files, readable text).
+fn shot(h: &mut Harness<'_, EditorApp>, path: &Path) {
+    let image = h.render().expect("render the window");
+    let image = image::imageops::resize(
+        &image::DynamicImage::ImageRgba8(image).to_rgb8(),
+        960,
+        570,
+        image::imageops::FilterType::Triangle,
+    );
+    image.save(path).unwrap();
+    eprintln!("wrote {}", path.display());
 }

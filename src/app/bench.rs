@@ -343,3 +343,49 @@ pub fn to_markdown(rows: &[EditRow], photo: &Path) -> String {
     }
     out
 }
+
+/// The sketch's trade on one project: what the editor shows first against what it refines to.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SketchTrade {
+    /// Seconds to build the sketch (one stage thread, as in the editor).
+    pub sketch_s: f64,
+    /// Seconds to build the final scene from scratch (one stage thread).
+    pub final_s: f64,
+    /// PSNR of the sketch's frame against the final scene's, dB, at frames 0, ½ and the last.
+    pub psnr_db: [f64; 3],
+}
+
+/// Builds `project` as a sketch and at its own quality, each from scratch on one thread, and
+/// compares the first, middle and last frames.
+pub fn sketch_trade(project: &Project) -> anyhow::Result<SketchTrade> {
+    use crate::progress::Progress;
+    use crate::render::cpu::CpuRenderer;
+    use crate::scene::SceneBuilder;
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    pool.install(|| {
+        let started = Instant::now();
+        let sketch = SceneBuilder::new().build_sketch(project, &Progress::none())?;
+        let sketch_s = started.elapsed().as_secs_f64();
+        let started = Instant::now();
+        let full = SceneBuilder::new().build(project, &Progress::none())?;
+        let final_s = started.elapsed().as_secs_f64();
+        let views = crate::export::output_views(project, &full)?;
+        let (w, h) = crate::export::output_size(project, &full);
+        let last = views.len().saturating_sub(1);
+        let mut psnr_db = [0.0; 3];
+        for (slot, frame) in psnr_db.iter_mut().zip([0, last / 2, last]) {
+            let mut a = CpuRenderer::new(project.render);
+            let mut b = CpuRenderer::new(project.render);
+            crate::render::FrameRenderer::set_cloud(&mut a, sketch.cloud.clone())?;
+            crate::render::FrameRenderer::set_cloud(&mut b, full.cloud.clone())?;
+            let fa = sketch.render_frame(&mut a, &views[frame], frame, w, h)?;
+            let fb = full.render_frame(&mut b, &views[frame], frame, w, h)?;
+            *slot = crate::metrics::psnr(&fa.colour, &fb.colour)?;
+        }
+        Ok::<_, anyhow::Error>(SketchTrade {
+            sketch_s,
+            final_s,
+            psnr_db,
+        })
+    })
+}

@@ -45,8 +45,8 @@ pub struct CpuPreview {
     thinned: Vec<(Arc<PointCloud>, Vec<usize>, Arc<PointCloud>)>,
 }
 
-/// Thinned clouds kept.
-const THINNED_CLOUDS: usize = 4;
+/// Thinned clouds kept (each at most a quarter of its scene's cloud).
+const THINNED_CLOUDS: usize = 6;
 
 impl CpuPreview {
     /// The cloud to render `view` of `scene` with: the scene's own when the view needs every

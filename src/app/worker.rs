@@ -218,6 +218,27 @@ struct Shared {
     status: Mutex<JobStatus>,
     cancel: Mutex<Option<(JobKind, Arc<AtomicBool>)>>,
     scene: Mutex<Option<Arc<SceneSnapshot>>>,
+    /// The last few published snapshots, newest last: a scene the builder found cached (undo,
+    /// redo, a count switched back) takes its display images from here.
+    recent: Mutex<Vec<Arc<SceneSnapshot>>>,
+}
+
+/// Snapshots kept in [`Shared::recent`].
+const RECENT_SNAPSHOTS: usize = 4;
+
+/// True when `a` and `b` are made of the same stage outputs.
+fn same_outputs(a: &Scene, b: &Scene) -> bool {
+    let same_motion = match (&a.motion, &b.motion) {
+        (Some(x), Some(y)) => Arc::ptr_eq(x, y),
+        (None, None) => true,
+        _ => false,
+    };
+    Arc::ptr_eq(&a.input, &b.input)
+        && Arc::ptr_eq(&a.depth, &b.depth)
+        && Arc::ptr_eq(&a.canvas, &b.canvas)
+        && Arc::ptr_eq(&a.layers, &b.layers)
+        && Arc::ptr_eq(&a.cloud, &b.cloud)
+        && same_motion
 }
 
 /// Locks a mutex, recovering the data of a poisoned one (a panicked worker must not take the
@@ -244,6 +265,7 @@ impl SceneWorker {
             status: Mutex::new(JobStatus::default()),
             cancel: Mutex::new(None),
             scene: Mutex::new(None),
+            recent: Mutex::new(Vec::new()),
         });
         let thread = {
             let shared = shared.clone();
@@ -597,21 +619,38 @@ fn publish(
     send: &impl Fn(Event) -> bool,
 ) -> bool {
     let previous = lock(&shared.scene).clone();
-    let display =
-        display_images_reusing(&scene, previous.as_deref().map(|s| (&s.scene, &*s.display)));
+    let known = lock(&shared.recent)
+        .iter()
+        .rev()
+        .find(|s| same_outputs(&s.scene, &scene))
+        .map(|s| s.display.clone());
+    let display = known.unwrap_or_else(|| {
+        Arc::new(display_images_reusing(
+            &scene,
+            previous.as_deref().map(|s| (&s.scene, &*s.display)),
+        ))
+    });
     let stages_run = builder
         .runs()
         .iter()
         .filter(|(stage, n)| runs_before.get(stage) != Some(n))
         .map(|(stage, _)| *stage)
         .collect();
-    *lock(&shared.scene) = Some(Arc::new(SceneSnapshot {
+    let snapshot = Arc::new(SceneSnapshot {
         generation,
         project: project.clone(),
         scene,
-        display: Arc::new(display),
+        display,
         draft,
-    }));
+    });
+    {
+        let mut recent = lock(&shared.recent);
+        recent.push(snapshot.clone());
+        if recent.len() > RECENT_SNAPSHOTS {
+            recent.remove(0);
+        }
+    }
+    *lock(&shared.scene) = Some(snapshot);
     send(Event::SceneReady {
         generation,
         stages_run,

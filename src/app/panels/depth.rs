@@ -40,6 +40,15 @@ impl Default for DepthPanel {
     }
 }
 
+/// `v` with three significant figures (3.24, 124, 0.0512).
+fn three_figures(v: f32) -> String {
+    if !v.is_finite() || v == 0.0 {
+        return format!("{v}");
+    }
+    let digits = (2 - v.abs().log10().floor() as i32).max(0) as usize;
+    format!("{v:.digits$}")
+}
+
 /// Screen y of the horizon at `fraction` of the photo height.
 fn horizon_y(view: &ImageView, fraction: f32) -> f32 {
     view.to_screen([0.0, fraction * (view.size[1] - 1.0)]).y
@@ -196,14 +205,14 @@ impl StagePanel for DepthPanel {
                 painter.text(
                     pos2(bar.left(), bar.top() - 3.0),
                     egui::Align2::LEFT_BOTTOM,
-                    format!("near Z ≈ {:.3}", 1.0 / hi.max(1e-9)),
+                    format!("near Z ≈ {}", three_figures(1.0 / hi.max(1e-9))),
                     font.clone(),
                     text,
                 );
                 painter.text(
                     pos2(bar.right(), bar.top() - 3.0),
                     egui::Align2::RIGHT_BOTTOM,
-                    format!("far {:.3} · sky", 1.0 / lo.max(1e-9)),
+                    format!("far {} · sky", three_figures(1.0 / lo.max(1e-9))),
                     font,
                     text,
                 );
@@ -319,5 +328,16 @@ impl StagePanel for DepthPanel {
         }) {
             cx.edit("Object weight", |p| p.depth.classical.object_weight = v);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn three_significant_figures() {
+        assert_eq!(super::three_figures(3.2351), "3.24");
+        assert_eq!(super::three_figures(124.469), "124");
+        assert_eq!(super::three_figures(0.051234), "0.0512");
+        assert_eq!(super::three_figures(12345.0), "12345");
     }
 }
