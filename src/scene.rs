@@ -161,6 +161,9 @@ pub struct Scene {
     pub warnings: Vec<String>,
 }
 
+/// The smallest density stride of a sketch's cloud ([`SceneBuilder::build_sketch`]).
+pub const SKETCH_STRIDE: usize = 2;
+
 /// How many outputs each stage keeps, keyed by the stage's inputs: returning to an earlier state
 /// (undo, redo, deleting the key just added, switching a count back) finds every stage cached.
 /// Four entries of a 1280×800 scene's heaviest stages take about 1.5 GiB together.
@@ -384,8 +387,9 @@ impl SceneBuilder {
     /// that the canvas margin and the layers' hidden regions are filled by the harmonic
     /// (membrane) fill solved at half resolution ([`crate::stages::inpaint::SketchInpainter`])
     /// instead of the project's inpainter: blurred where the inpainter would synthesise
-    /// texture, but several times faster. The editor shows it first while the
-    /// project's inpainter refines the scene. Sketch outputs are cached apart from the others.
+    /// texture, but several times faster; its cloud keeps at most one point per 2 × 2 block
+    /// ([`SKETCH_STRIDE`]). The editor shows it first while the project's inpainter refines
+    /// the scene. Sketch outputs are cached apart from the others.
     pub fn build_sketch(&mut self, project: &Project, progress: &Progress) -> Result<Scene> {
         let grow = self.grow_canvas;
         self.build_inner(project, progress, grow, false, true)?
@@ -609,12 +613,20 @@ impl SceneBuilder {
         // 7. Cloud: keyed by the density strides the path asks for, so a camera edit that keeps
         // them keeps the cloud.
         let p = step(Stage::Cloud);
-        let strides = if project.layers.adaptive_density {
+        let mut strides = if project.layers.adaptive_density {
             let views = path_views(project, &intrinsics, (w, h), output_size, &scale)?;
             density_strides(&layered, &canvas.intrinsics, &views)
         } else {
             Vec::new()
         };
+        if sketch {
+            // A sketch is seen in the preview, a fraction of the output size: a quarter of
+            // the points is plenty (and the cloud is four times quicker to make).
+            strides.resize(layered.layers.len(), 1);
+            for s in &mut strides {
+                *s = (*s).max(SKETCH_STRIDE);
+            }
+        }
         let key = key_of(key, &(project.layers.adaptive_density, &strides));
         let cloud = stage!(cached(
             &mut self.cloud,
