@@ -396,6 +396,66 @@ impl SceneBuilder {
             .map_err(|_| Error::invalid("internal: a build that is not dry missed a stage"))
     }
 
+    /// The depth stage's output for `project` (load and depth only, cached like a build's):
+    /// the editor shows a depth edit with it before the stages after it have run.
+    pub fn depth_output(
+        &mut self,
+        project: &Project,
+        progress: &Progress,
+    ) -> Result<Arc<DepthStageOutput>> {
+        project.validate()?;
+        match self.load_and_depth(
+            project,
+            &progress.sub(0.0, 0.2),
+            &progress.sub(0.2, 1.0),
+            false,
+        )? {
+            Ok((_, _, _, depth)) => Ok(depth),
+            Err(_) => Err(Error::invalid(
+                "internal: a build that is not dry missed a stage",
+            )),
+        }
+    }
+
+    /// Stages 1 and 2: `(depth key, photo, input camera, depth)`, or the stage a dry run would
+    /// have to run.
+    #[allow(clippy::type_complexity)]
+    fn load_and_depth(
+        &mut self,
+        project: &Project,
+        p_load: &Progress,
+        p_depth: &Progress,
+        dry: bool,
+    ) -> Result<
+        std::result::Result<(u64, Arc<LoadedImage>, Intrinsics, Arc<DepthStageOutput>), Stage>,
+    > {
+        let stats = &mut self.stats;
+        let key = key_of(0, &project.input);
+        let input = match cached(&mut self.load, stats, Stage::Load, key, dry, p_load, |_| {
+            load_image(&project.input)
+        })? {
+            Ok(v) => v,
+            Err(stage) => return Ok(Err(stage)),
+        };
+        p_load.check()?;
+        let (w, h) = input.rgb.size();
+        let intrinsics = Intrinsics::from_hfov(w, h, project.camera.hfov_deg);
+        let key = key_of(key, &(&project.depth, project.camera.hfov_deg));
+        let depth = match cached(
+            &mut self.depth,
+            stats,
+            Stage::Depth,
+            key,
+            dry,
+            p_depth,
+            |p| run_depth_stage(&project.depth, &input.rgb, &intrinsics, p),
+        )? {
+            Ok(v) => v,
+            Err(stage) => return Ok(Err(stage)),
+        };
+        Ok(Ok((key, input, intrinsics, depth)))
+    }
+
     fn build_inner(
         &mut self,
         project: &Project,
@@ -412,7 +472,6 @@ impl SceneBuilder {
             done += stage.weight();
             p
         };
-        let stats = &mut self.stats;
         macro_rules! stage {
             ($e:expr) => {
                 match $e? {
@@ -422,34 +481,15 @@ impl SceneBuilder {
             };
         }
 
-        // 1. Load.
-        let p = step(Stage::Load);
-        let key = key_of(0, &project.input);
-        let input = stage!(cached(
-            &mut self.load,
-            stats,
-            Stage::Load,
-            key,
-            dry,
-            &p,
-            |_| { load_image(&project.input) }
-        ));
-        p.check()?;
+        // 1–2. Load and depth.
+        let (p_load, p_depth) = (step(Stage::Load), step(Stage::Depth));
+        let (key, input, intrinsics, depth) =
+            match self.load_and_depth(project, &p_load, &p_depth, dry)? {
+                Ok(v) => v,
+                Err(stage) => return Ok(Err(stage)),
+            };
         let (w, h) = input.rgb.size();
-        let intrinsics = Intrinsics::from_hfov(w, h, project.camera.hfov_deg);
-
-        // 2. Depth.
-        let p = step(Stage::Depth);
-        let key = key_of(key, &(&project.depth, project.camera.hfov_deg));
-        let depth = stage!(cached(
-            &mut self.depth,
-            stats,
-            Stage::Depth,
-            key,
-            dry,
-            &p,
-            |p| { run_depth_stage(&project.depth, &input.rgb, &intrinsics, p) }
-        ));
+        let stats = &mut self.stats;
         warnings.extend(depth.warnings.iter().cloned());
         let scale = scene_scale(&depth.estimate.depth, &depth.estimate.sky)?;
 

@@ -220,6 +220,8 @@ pub struct EditorApp {
     playback_side: usize,
     /// How many times each stage ran in the scene worker, from its reports.
     stage_runs: std::collections::BTreeMap<Stage, usize>,
+    /// The depth of the build in flight, once its depth stage is done.
+    early_depth: Option<super::worker::EarlyDepth>,
     ctx: egui::Context,
     /// An action waiting for the answer to "save the changes?".
     confirm: Option<Pending>,
@@ -531,6 +533,7 @@ impl EditorApp {
             shown_times: Default::default(),
             playback_side: usize::MAX,
             stage_runs: Default::default(),
+            early_depth: None,
             ctx: ctx.clone(),
             confirm: None,
             after_save: None,
@@ -690,6 +693,15 @@ impl EditorApp {
         for p in &mut self.panels {
             p.on_message(&m);
         }
+    }
+
+    /// The newest generation whose depth the depth view can show (the scene on screen's, or a
+    /// build's in flight once its depth stage is done).
+    pub fn depth_generation(&self) -> u64 {
+        let scene = self.snapshot.as_ref().map_or(0, |s| s.generation);
+        self.early_depth
+            .as_ref()
+            .map_or(scene, |e| e.generation.max(scene))
     }
 
     /// How many times each stage has run in this session's scene worker.
@@ -1496,6 +1508,7 @@ impl EditorApp {
                         self.notify(format!("rebuilt {} in {seconds:.1} s", names.join(", ")));
                     }
                 }
+                Event::DepthReady(early) => self.early_depth = Some(*early),
                 Event::BuildFailed {
                     generation,
                     message,
@@ -2253,6 +2266,11 @@ impl EditorApp {
                 job: &self.job,
                 ffmpeg: self.ffmpeg,
                 probe: &mut self.probe,
+                early_depth: self.early_depth.as_ref().filter(|e| {
+                    self.snapshot
+                        .as_ref()
+                        .is_none_or(|s| e.generation > s.generation)
+                }),
             };
             let panel = &mut self.panels[index];
             egui::Panel::bottom("timeline")

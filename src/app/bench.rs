@@ -34,6 +34,8 @@ pub struct EditRow {
     pub first_picture_s: Option<f64>,
     /// Seconds to the edit's scene on screen (any quality).
     pub first_scene_s: Option<f64>,
+    /// For a depth edit: seconds until the depth view shows the new depth.
+    pub depth_view_s: Option<f64>,
     /// Seconds to the final quality on screen.
     pub final_s: Option<f64>,
     /// Stages the edit's builds ran (the rest came from the cache).
@@ -93,12 +95,14 @@ impl Driver {
 }
 
 /// What an edit's first picture must show.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, PartialEq)]
 enum Answer {
     /// A picture from the camera the preview asks for now (any scene).
     Camera,
     /// A picture of the current generation's scene.
     Scene,
+    /// As `Scene`; and the depth view's answer is timed too.
+    Depth,
 }
 
 fn first_picture(app: &EditorApp, answer: Answer, since: Instant) -> bool {
@@ -110,7 +114,7 @@ fn first_picture(app: &EditorApp, answer: Answer, since: Instant) -> bool {
     }
     match answer {
         Answer::Camera => app.preview_view().is_some_and(|v| v == shown.view),
-        Answer::Scene => shown.generation == app.generation(),
+        Answer::Scene | Answer::Depth => shown.generation == app.generation(),
     }
 }
 
@@ -160,6 +164,11 @@ pub fn run(
         let runs_before = d.app.stage_runs();
         let since = Instant::now();
         edit(&mut d.app);
+        let depth_view = if answer == Answer::Depth {
+            d.until(since, limit, |a| a.depth_generation() == a.generation())
+        } else {
+            None
+        };
         let picture = d.until(since, limit, |a| first_picture(a, answer, since));
         let scene = d.until(since, limit, first_scene);
         let last = d.until(since, limit, |a| is_final(a, since));
@@ -176,6 +185,7 @@ pub fn run(
             edit: name.to_string(),
             first_picture_s: picture,
             first_scene_s: scene,
+            depth_view_s: depth_view,
             final_s: last,
             stages_run,
             playback: None,
@@ -268,7 +278,7 @@ pub fn run(
         radius_px: w as f32 * 0.05,
         strength: 0.3,
     });
-    measure(&mut d, "depth stroke", Answer::Scene, &mut |a| {
+    measure(&mut d, "depth stroke", Answer::Depth, &mut |a| {
         a.apply_edit("Depth stroke", stroked.clone())
     })?;
     measure(&mut d, "undo", Answer::Scene, &mut |a| a.undo())?;
@@ -300,6 +310,7 @@ pub fn run(
         edit: "playback".into(),
         first_picture_s: None,
         first_scene_s: None,
+        depth_view_s: None,
         final_s: None,
         stages_run: Vec::new(),
         playback: Some((fps, agree)),
@@ -328,7 +339,7 @@ pub fn to_markdown(rows: &[EditRow], photo: &Path) -> String {
                 }
             )),
             None => out.push_str(&format!(
-                "| {} | {} | {} | {} | {} |\n",
+                "| {} | {} | {} | {} | {}{} |\n",
                 r.edit,
                 secs(r.first_picture_s),
                 secs(r.first_scene_s),
@@ -337,7 +348,10 @@ pub fn to_markdown(rows: &[EditRow], photo: &Path) -> String {
                     "none".to_string()
                 } else {
                     r.stages_run.join(", ")
-                }
+                },
+                r.depth_view_s.map_or(String::new(), |s| format!(
+                    " (new depth on screen in {s:.2} s)"
+                ))
             )),
         }
     }

@@ -117,6 +117,9 @@ pub enum Event {
         /// A draft scene (the project's preset follows).
         draft: bool,
     },
+    /// The depth stage of a build finished before the stages after it: its display images,
+    /// so the depth view shows a depth edit at once.
+    DepthReady(Box<EarlyDepth>),
     /// A build failed; the previous scene stays.
     BuildFailed {
         /// The generation that failed.
@@ -143,6 +146,55 @@ pub enum Event {
     Cancelled(JobKind),
     /// Something failed outside a job.
     Error(String),
+}
+
+/// The depth of a build still running, for the depth view.
+#[derive(Clone)]
+pub struct EarlyDepth {
+    /// The generation it belongs to.
+    pub generation: u64,
+    /// Depth through the turbo colour map.
+    pub depth: ColorImage,
+    /// The sky mask overlay.
+    pub sky: ColorImage,
+    /// The colour map's disparity range.
+    pub depth_range: Option<(f32, f32)>,
+    /// The detected horizon.
+    pub detected_horizon: Option<f32>,
+    /// The depth strokes it includes.
+    pub strokes: Vec<crate::stages::depth::paint::DepthStroke>,
+}
+
+impl std::fmt::Debug for EarlyDepth {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EarlyDepth")
+            .field("generation", &self.generation)
+            .field("strokes", &self.strokes.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl EarlyDepth {
+    fn new(
+        generation: u64,
+        project: &Project,
+        depth: &crate::stages::depth::DepthStageOutput,
+    ) -> Self {
+        let e = &depth.estimate;
+        Self {
+            generation,
+            depth: rgb_image(&depth_preview(&e.depth, Some(&e.sky)), DISPLAY_MAX_SIDE),
+            sky: mask_overlay(
+                &e.sky,
+                Color32::from_rgb(120, 200, 255),
+                0.5,
+                DISPLAY_MAX_SIDE,
+            ),
+            depth_range: crate::stages::depth::preview::disparity_range(&e.depth, Some(&e.sky)),
+            detected_horizon: crate::stages::depth::classical::horizon_from_sky(&e.sky),
+            strokes: project.depth.strokes.clone(),
+        }
+    }
 }
 
 /// Per layer: the layer before and after inpainting.
@@ -572,24 +624,28 @@ fn run_build(
     send: &(impl Fn(Event) -> bool + Sync),
 ) -> bool {
     let start = Instant::now();
-    let refine = builder
-        .first_stale_stage(&project)
-        .ok()
-        .flatten()
-        .is_some_and(|stage| stage <= Stage::Inpaint);
+    let stale = builder.first_stale_stage(&project).ok().flatten();
+    let refine = stale.is_some_and(|stage| stage <= Stage::Inpaint);
     // Both scenes are published inside the job, so the status says "building" until the
     // final one is on screen.
     let result = job(shared, ctx, JobKind::Build, pool, |progress| {
         let mut final_part = progress.sub(0.0, 1.0);
+        let mut before = builder.runs().clone();
+        if stale.is_some_and(|stage| stage <= Stage::Depth) {
+            // A depth edit: show the new depth as soon as it exists.
+            let depth = builder.depth_output(&project, &progress.sub(0.0, 0.05))?;
+            send(Event::DepthReady(Box::new(EarlyDepth::new(
+                generation, &project, &depth,
+            ))));
+        }
         if refine {
-            let before = builder.runs().clone();
             let scene = builder.build_sketch(&project, &progress.sub(0.0, 0.2))?;
             publish(
                 shared, builder, &before, generation, &project, scene, true, start, send,
             );
+            before = builder.runs().clone();
             final_part = progress.sub(0.2, 1.0);
         }
-        let before = builder.runs().clone();
         let scene = builder.build(&project, &final_part)?;
         Ok::<_, crate::Error>(publish(
             shared, builder, &before, generation, &project, scene, false, start, send,
@@ -1046,6 +1102,90 @@ mod tests {
         assert!((total - 1.0).abs() < 1e-12);
         assert!(h[0][0] > 0.25 && h[2][0] < 1.0);
         assert!(disparity_histogram(&GrayRaster::new(2, 2, f32::NAN), 8).is_empty());
+    }
+
+    /// Waits for events until `done` says stop; panics after two minutes.
+    fn events_until(worker: &SceneWorker, mut done: impl FnMut(&Event) -> bool) -> Vec<String> {
+        let start = Instant::now();
+        let mut seen = Vec::new();
+        loop {
+            while let Some(e) = worker.try_event() {
+                let stop = done(&e);
+                seen.push(match &e {
+                    Event::SceneReady {
+                        generation, draft, ..
+                    } => format!("scene {generation} draft={draft}"),
+                    Event::DepthReady(d) => format!("depth {}", d.generation),
+                    Event::BuildFailed { message, .. } => panic!("build failed: {message}"),
+                    other => format!("{other:?}"),
+                });
+                if stop {
+                    return seen;
+                }
+            }
+            assert!(start.elapsed().as_secs() < 120, "events so far: {seen:?}");
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+    }
+
+    #[test]
+    fn a_depth_edit_shows_its_depth_then_a_sketch_then_the_final_scene() {
+        let photo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data/evening_glow_320.jpg");
+        let mut project = Project::new(photo);
+        project.output.frames = 3;
+        let ctx = egui::Context::default();
+        let mut worker = SceneWorker::start(ctx).unwrap();
+        worker.build(1, &project);
+        let first = events_until(&worker, |e| {
+            matches!(
+                e,
+                Event::SceneReady {
+                    generation: 1,
+                    draft: false,
+                    ..
+                }
+            )
+        });
+        assert_eq!(
+            first,
+            ["depth 1", "scene 1 draft=true", "scene 1 draft=false"],
+            "a new photo: depth, sketch, final"
+        );
+        project
+            .depth
+            .strokes
+            .push(crate::stages::depth::paint::DepthStroke {
+                kind: crate::stages::depth::paint::DepthStrokeKind::Pull,
+                points: vec![[100.0, 150.0], [200.0, 150.0]],
+                radius_px: 20.0,
+                strength: 0.5,
+            });
+        worker.build(2, &project);
+        let second = events_until(&worker, |e| {
+            matches!(
+                e,
+                Event::SceneReady {
+                    generation: 2,
+                    draft: false,
+                    ..
+                }
+            )
+        });
+        assert_eq!(
+            second,
+            ["depth 2", "scene 2 draft=true", "scene 2 draft=false"]
+        );
+        let s = worker.scene().unwrap();
+        assert_eq!(s.project.depth.strokes.len(), 1);
+        assert!(!s.draft);
+        // Back to no stroke: every stage cached, so only the final scene, at once.
+        project.depth.strokes.clear();
+        worker.build(3, &project);
+        let third = events_until(&worker, |e| {
+            matches!(e, Event::SceneReady { generation: 3, .. })
+        });
+        assert_eq!(third, ["scene 3 draft=false"]);
     }
 
     #[test]

@@ -64,24 +64,56 @@ impl StagePanel for DepthPanel {
     }
 
     fn view_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>) {
-        let Some((response, view)) = scene_image_ui(
-            ui,
-            cx,
-            "depth",
-            &mut self.transform,
-            Sense::click_and_drag(),
-            |s| {
-                let (w, h) = s.scene.input.rgb.size();
-                [w, h]
-            },
-            |s| &s.display.depth,
-        ) else {
+        // The depth of a build in flight, when it is newer than the scene on screen.
+        let early = cx.early_depth;
+        let shown = match early {
+            Some(e) => {
+                let Some(snapshot) = cx.snapshot else { return };
+                let (w, h) = snapshot.scene.input.rgb.size();
+                let texture = cx
+                    .textures
+                    .get(ui.ctx(), "depth-early", e.generation, || e.depth.clone())
+                    .id();
+                let (response, view) = crate::app::viewport::image_view_ui(
+                    ui,
+                    texture,
+                    [w, h],
+                    &mut self.transform,
+                    Sense::click_and_drag(),
+                );
+                cx.probe.view = Some(view);
+                Some((response, view))
+            }
+            None => scene_image_ui(
+                ui,
+                cx,
+                "depth",
+                &mut self.transform,
+                Sense::click_and_drag(),
+                |s| {
+                    let (w, h) = s.scene.input.rgb.size();
+                    [w, h]
+                },
+                |s| &s.display.depth,
+            ),
+        };
+        let Some((response, view)) = shown else {
             return;
         };
         let Some(snapshot) = cx.snapshot else { return };
         let painter = ui.painter_at(response.rect);
+        let sky_texture = match early {
+            Some(e) => Some(
+                cx.textures
+                    .get(ui.ctx(), "sky-early", e.generation, || e.sky.clone())
+                    .id(),
+            ),
+            None => cx
+                .scene_texture(ui.ctx(), "sky", |s| &s.display.sky)
+                .map(|t| t.0),
+        };
         if self.show_sky
-            && let Some((sky, _)) = cx.scene_texture(ui.ctx(), "sky", |s| &s.display.sky)
+            && let Some(sky) = sky_texture
         {
             painter.image(
                 sky,
@@ -91,9 +123,8 @@ impl StagePanel for DepthPanel {
             );
         }
         let classical = &cx.project.depth.classical;
-        let auto = snapshot
-            .display
-            .detected_horizon
+        let auto = early
+            .map_or(snapshot.display.detected_horizon, |e| e.detected_horizon)
             .unwrap_or(classical.default_horizon);
         let horizon = self.horizon_drag.or(classical.horizon).unwrap_or(auto);
         let y = horizon_y(&view, horizon);
@@ -152,7 +183,7 @@ impl StagePanel for DepthPanel {
         }
         // Strokes made since the depth on screen was computed: drawn at once, until the depth
         // stage has them (a stroke never waits for a rebuild to appear).
-        let built = &snapshot.project.depth.strokes;
+        let built = early.map_or(&snapshot.project.depth.strokes, |e| &e.strokes);
         let strokes = &cx.current().depth.strokes;
         let pending = if strokes.len() >= built.len() && strokes[..built.len()] == built[..] {
             &strokes[built.len()..]
@@ -176,7 +207,7 @@ impl StagePanel for DepthPanel {
             }
         }
         // The colour legend: near (red) to far (dark blue), with the depths at both ends.
-        if let Some((lo, hi)) = snapshot.display.depth_range {
+        if let Some((lo, hi)) = early.map_or(snapshot.display.depth_range, |e| e.depth_range) {
             let bar = Rect::from_min_size(
                 pos2(view.rect.left() + 8.0, response.rect.bottom() - 30.0),
                 egui::vec2(180.0, 10.0),

@@ -214,6 +214,9 @@ pub struct PanelContext<'a> {
     pub ffmpeg: bool,
     /// Where things were drawn this frame (for tests and tools).
     pub probe: &'a mut Probe,
+    /// The depth of the build in flight when it is newer than the scene on screen (a depth
+    /// edit shows before the later stages finish).
+    pub early_depth: Option<&'a crate::app::worker::EarlyDepth>,
 }
 
 impl PanelContext<'_> {
