@@ -1270,7 +1270,7 @@ fn bench_editor(args: BenchEditorArgs) -> anyhow::Result<()> {
         println!();
     }
     println!(
-        "| photo | path | sketch s | final s | PSNR sketch vs final, frame 0 / middle / last (dB) |\n|---|---|---:|---:|---|"
+        "| photo | path | sketch s | final s | PSNR sketch vs final at the output size, frame 0 / middle / last (dB) | the same in the 360-px CPU preview (dB) |\n|---|---|---:|---:|---|---|"
     );
     for (photo, kind, t) in &trades {
         let name = photo.file_name().map_or_else(
@@ -1278,8 +1278,15 @@ fn bench_editor(args: BenchEditorArgs) -> anyhow::Result<()> {
             |n| n.to_string_lossy().into(),
         );
         println!(
-            "| {name} | {kind} | {:.2} | {:.2} | {:.2} / {:.2} / {:.2} |",
-            t.sketch_s, t.final_s, t.psnr_db[0], t.psnr_db[1], t.psnr_db[2]
+            "| {name} | {kind} | {:.2} | {:.2} | {:.1} / {:.1} / {:.1} | {:.1} / {:.1} / {:.1} |",
+            t.sketch_s,
+            t.final_s,
+            t.psnr_db[0],
+            t.psnr_db[1],
+            t.psnr_db[2],
+            t.preview_psnr_db[0],
+            t.preview_psnr_db[1],
+            t.preview_psnr_db[2]
         );
     }
     Ok(())

@@ -365,15 +365,18 @@ pub struct SketchTrade {
     pub sketch_s: f64,
     /// Seconds to build the final scene from scratch (one stage thread).
     pub final_s: f64,
-    /// PSNR of the sketch's frame against the final scene's, dB, at frames 0, ½ and the last.
+    /// PSNR of the sketch's frame against the final scene's, dB, at frames 0, ½ and the last,
+    /// at the output size.
     pub psnr_db: [f64; 3],
+    /// The same at the editor's default preview size (360 pixels on the long side), where the
+    /// sketch is seen.
+    pub preview_psnr_db: [f64; 3],
 }
 
 /// Builds `project` as a sketch and at its own quality, each from scratch on one thread, and
 /// compares the first, middle and last frames.
 pub fn sketch_trade(project: &Project) -> anyhow::Result<SketchTrade> {
     use crate::progress::Progress;
-    use crate::render::cpu::CpuRenderer;
     use crate::scene::SceneBuilder;
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
     pool.install(|| {
@@ -386,20 +389,58 @@ pub fn sketch_trade(project: &Project) -> anyhow::Result<SketchTrade> {
         let views = crate::export::output_views(project, &full)?;
         let (w, h) = crate::export::output_size(project, &full);
         let last = views.len().saturating_sub(1);
+        let (pw, ph) = super::images::fit_size(w, h, 360);
         let mut psnr_db = [0.0; 3];
-        for (slot, frame) in psnr_db.iter_mut().zip([0, last / 2, last]) {
-            let mut a = CpuRenderer::new(project.render);
-            let mut b = CpuRenderer::new(project.render);
-            crate::render::FrameRenderer::set_cloud(&mut a, sketch.cloud.clone())?;
-            crate::render::FrameRenderer::set_cloud(&mut b, full.cloud.clone())?;
-            let fa = sketch.render_frame(&mut a, &views[frame], frame, w, h)?;
-            let fb = full.render_frame(&mut b, &views[frame], frame, w, h)?;
-            *slot = crate::metrics::psnr(&fa.colour, &fb.colour)?;
+        let mut preview_psnr_db = [0.0; 3];
+        for (i, frame) in [0, last / 2, last].into_iter().enumerate() {
+            let v = &views[frame];
+            // At the output size, each scene's own cloud; at the preview size, what the CPU
+            // preview draws (the layers at the density that view needs).
+            psnr_db[i] = compare(&sketch, &full, project, v, frame, (w, h), false)?;
+            let small = crate::geometry::View {
+                intrinsics: v
+                    .intrinsics
+                    .scaled(pw as f32 / w as f32, ph as f32 / h as f32),
+                world_from_camera: v.world_from_camera,
+            };
+            preview_psnr_db[i] = compare(&sketch, &full, project, &small, frame, (pw, ph), true)?;
         }
         Ok::<_, anyhow::Error>(SketchTrade {
             sketch_s,
             final_s,
             psnr_db,
+            preview_psnr_db,
         })
     })
+}
+
+/// PSNR between `a`'s and `b`'s frame `frame` from `view` at `size`; `thinned`: each cloud
+/// made at the density the view needs, as the CPU preview does.
+fn compare(
+    a: &crate::scene::Scene,
+    b: &crate::scene::Scene,
+    project: &Project,
+    view: &crate::geometry::View,
+    frame: usize,
+    (w, h): (usize, usize),
+    thinned: bool,
+) -> anyhow::Result<f64> {
+    use crate::render::FrameRenderer;
+    let render = |s: &crate::scene::Scene| -> anyhow::Result<crate::raster::RgbRaster> {
+        let cloud = if thinned {
+            let strides = crate::stages::layers::density_strides(
+                &s.layers,
+                &s.canvas.intrinsics,
+                std::slice::from_ref(view),
+            );
+            std::sync::Arc::new(s.cloud_with_strides(&strides)?)
+        } else {
+            s.cloud.clone()
+        };
+        let mut r = crate::render::cpu::CpuRenderer::new(project.render);
+        r.set_cloud(cloud.clone())?;
+        let positions = s.frame_positions_of(&cloud, frame)?;
+        Ok(r.render_frame(view, w, h, &positions)?.colour)
+    };
+    Ok(crate::metrics::psnr(&render(a)?, &render(b)?)?)
 }
