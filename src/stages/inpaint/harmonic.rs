@@ -30,18 +30,28 @@ impl Inpainter for HarmonicInpainter {
     }
 
     fn inpaint(&self, request: &InpaintRequest<'_>, progress: &Progress) -> Result<InpaintResult> {
-        let source = match common::plan(request)? {
-            Plan::Unchanged(result) => return Ok(result),
-            Plan::Fill { source } => source,
-        };
-        let (w, h) = request.image.size();
-        let (mut pixels, scale) = common::work_pixels(request.image, request.guide, &source, 1.0);
-        let unknown: Vec<bool> = source.iter().map(|&s| !s).collect();
-        progress.report(0.0, "harmonic fill");
-        membrane_fill(&mut pixels, w, h, &unknown, progress)?;
-        progress.report(1.0, "harmonic fill");
-        Ok(common::finish(request, &pixels, scale))
+        fill_request(request, SWEEPS_PER_LEVEL, "harmonic fill", progress)
     }
+}
+
+/// Fills `request` with the membrane, `finest_sweeps` SOR sweeps at full resolution.
+fn fill_request(
+    request: &InpaintRequest<'_>,
+    finest_sweeps: usize,
+    label: &str,
+    progress: &Progress,
+) -> Result<InpaintResult> {
+    let source = match common::plan(request)? {
+        Plan::Unchanged(result) => return Ok(result),
+        Plan::Fill { source } => source,
+    };
+    let (w, h) = request.image.size();
+    let (mut pixels, scale) = common::work_pixels(request.image, request.guide, &source, 1.0);
+    let unknown: Vec<bool> = source.iter().map(|&s| !s).collect();
+    progress.report(0.0, label);
+    membrane_fill_with(&mut pixels, w, h, &unknown, finest_sweeps, progress)?;
+    progress.report(1.0, label);
+    Ok(common::finish(request, &pixels, scale))
 }
 
 /// SOR sweeps of [`SketchInpainter`] at full resolution (the half-resolution solution,
@@ -62,17 +72,7 @@ impl Inpainter for SketchInpainter {
     }
 
     fn inpaint(&self, request: &InpaintRequest<'_>, progress: &Progress) -> Result<InpaintResult> {
-        let source = match common::plan(request)? {
-            Plan::Unchanged(result) => return Ok(result),
-            Plan::Fill { source } => source,
-        };
-        let (w, h) = request.image.size();
-        let (mut pixels, scale) = common::work_pixels(request.image, request.guide, &source, 1.0);
-        let unknown: Vec<bool> = source.iter().map(|&s| !s).collect();
-        progress.report(0.0, "harmonic sketch");
-        membrane_fill_with(&mut pixels, w, h, &unknown, SKETCH_FINEST_SWEEPS, progress)?;
-        progress.report(1.0, "harmonic sketch");
-        Ok(common::finish(request, &pixels, scale))
+        fill_request(request, SKETCH_FINEST_SWEEPS, "harmonic sketch", progress)
     }
 }
 
