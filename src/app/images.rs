@@ -4,7 +4,7 @@
 //! finished [`ColorImage`]s.
 
 use crate::image_io::unit_to_u8;
-use crate::raster::{GrayRaster, MaskRaster, Raster, RgbRaster};
+use crate::raster::{GrayRaster, RgbRaster};
 use eframe::egui::{self, Color32, ColorImage, TextureHandle, TextureOptions};
 use std::collections::HashMap;
 
@@ -44,18 +44,61 @@ pub fn rgb_image(raster: &RgbRaster, max_side: usize) -> ColorImage {
     ColorImage::new([w, h], pixels)
 }
 
-/// `raster` where `keep` is true, a checkerboard elsewhere (transparent regions of a layer).
-pub fn masked_rgb(raster: &RgbRaster, keep: &MaskRaster, max_side: usize) -> ColorImage {
-    let (w, h) = raster.size();
-    let masked = Raster::from_fn(w, h, |x, y| {
-        if keep.at(x, y) {
-            raster.at(x, y)
-        } else {
-            let check = ((x / 8) + (y / 8)) % 2 == 0;
-            if check { [0.16; 3] } else { [0.22; 3] }
-        }
-    });
-    rgb_image(&masked, max_side)
+/// `raster` where `keep(x, y)` is true, a checkerboard elsewhere (transparent regions of a
+/// layer), downscaled to fit `max_side`. Each display pixel averages 2 × 2 samples of its
+/// footprint (one when the size is kept), so no full-size copy is made: a layer's thumbnails
+/// cost a fraction of the canvas.
+pub fn masked_rgb(
+    raster: &RgbRaster,
+    keep: impl Fn(usize, usize) -> bool + Sync,
+    max_side: usize,
+) -> ColorImage {
+    use rayon::prelude::*;
+    let (sw, sh) = raster.size();
+    let (w, h) = fit_size(sw, sh, max_side);
+    if w == 0 || h == 0 {
+        return ColorImage::new([w, h], Vec::new());
+    }
+    let samples: &[f32] = if (w, h) == (sw, sh) {
+        &[0.5]
+    } else {
+        &[0.25, 0.75]
+    };
+    let (kx, ky) = (sw as f32 / w as f32, sh as f32 / h as f32);
+    let pixels: Vec<Color32> = (0..w * h)
+        .into_par_iter()
+        .map(|i| {
+            let (x, y) = (i % w, i / w);
+            let check = if ((x / 8) + (y / 8)) % 2 == 0 {
+                [0.16; 3]
+            } else {
+                [0.22; 3]
+            };
+            let mut sum = [0.0f32; 3];
+            let mut n = 0.0f32;
+            for &fy in samples {
+                let sy = (((y as f32 + fy) * ky) as usize).min(sh - 1);
+                for &fx in samples {
+                    let sx = (((x as f32 + fx) * kx) as usize).min(sw - 1);
+                    let c = if keep(sx, sy) {
+                        raster.at(sx, sy)
+                    } else {
+                        check
+                    };
+                    for k in 0..3 {
+                        sum[k] += c[k];
+                    }
+                    n += 1.0;
+                }
+            }
+            Color32::from_rgb(
+                unit_to_u8(sum[0] / n),
+                unit_to_u8(sum[1] / n),
+                unit_to_u8(sum[2] / n),
+            )
+        })
+        .collect();
+    ColorImage::new([w, h], pixels)
 }
 
 /// A soft mask in `[0, 1]` as a translucent overlay of `colour` (alpha = mask × `opacity`).
@@ -145,9 +188,15 @@ mod tests {
         let m = GrayRaster::new(4, 4, 1.0);
         let o = mask_overlay(&m, Color32::RED, 0.5, 100);
         assert_eq!(o.pixels[0].a(), 128);
-        let keep = Raster::from_fn(40, 20, |x, _| x < 20);
-        let l = masked_rgb(&r, &keep, 100);
+        let keep = crate::raster::Raster::from_fn(40, 20, |x, _| x < 20);
+        let l = masked_rgb(&r, |x, y| keep.at(x, y), 100);
         assert_eq!(l.pixels[0], Color32::from_rgb(255, 0, 128));
         assert_ne!(l.pixels[39], Color32::from_rgb(255, 0, 128));
+        // Downscaled by 4: the left half kept, the right half the checkerboard's grey.
+        let small = masked_rgb(&r, |x, _| x < 20, 10);
+        assert_eq!(small.size, [10, 5]);
+        assert_eq!(small.pixels[0], Color32::from_rgb(255, 0, 128));
+        let grey = small.pixels[9];
+        assert_eq!(grey.r(), grey.g());
     }
 }

@@ -823,18 +823,12 @@ fn layer_images(scene: &Scene) -> Vec<LayerImages> {
         .layers
         .layers
         .iter()
-        .map(|l| {
-            let covered =
-                crate::raster::Raster::from_fn(l.mask.width(), l.mask.height(), |x, y| {
-                    l.covers(x, y)
-                });
-            LayerImages {
-                before: masked_rgb(&canvas.image, &l.mask, DISPLAY_MAX_SIDE / 2),
-                after: masked_rgb(&l.image, &covered, DISPLAY_MAX_SIDE / 2),
-                interval: l.interval,
-                pixels: l.mask.data().iter().filter(|&&m| m).count(),
-                hidden_pixels: l.inpainted.data().iter().filter(|&&m| m).count(),
-            }
+        .map(|l| LayerImages {
+            before: masked_rgb(&canvas.image, |x, y| l.mask.at(x, y), DISPLAY_MAX_SIDE / 2),
+            after: masked_rgb(&l.image, |x, y| l.covers(x, y), DISPLAY_MAX_SIDE / 2),
+            interval: l.interval,
+            pixels: l.mask.data().iter().filter(|&&m| m).count(),
+            hidden_pixels: l.inpainted.data().iter().filter(|&&m| m).count(),
         })
         .collect()
 }
