@@ -302,6 +302,11 @@ impl Project {
             }
         })?;
         project.validate()?;
+        let mut project = project;
+        // Keys in frame order, so the editor numbers them as the timeline shows them.
+        if let CameraPath::Keyframes(k) = &mut project.camera.path {
+            k.keys.sort_by(|a, b| a.frame.total_cmp(&b.frame));
+        }
         Ok(project)
     }
 
@@ -414,6 +419,24 @@ mod tests {
         assert_eq!(absolute(&back.input), absolute(&img));
         assert_eq!(back.output, p.output);
         assert_eq!(back.camera, p.camera);
+    }
+
+    #[test]
+    fn keys_load_in_frame_order() {
+        use crate::path::{Keyframe, KeyframePath};
+        let pose = crate::geometry::Pose::new(glam::Quat::IDENTITY, glam::Vec3::ZERO);
+        let mut p = Project::new("a.jpg");
+        p.camera.path = CameraPath::Keyframes(KeyframePath::new(vec![
+            Keyframe::new(40.0, &pose),
+            Keyframe::new(0.0, &pose),
+            Keyframe::new(20.0, &pose),
+        ]));
+        let back = Project::from_json(&serde_json::to_string(&p).unwrap()).unwrap();
+        let CameraPath::Keyframes(k) = back.camera.path else {
+            panic!("keys")
+        };
+        let frames: Vec<f64> = k.keys.iter().map(|k| k.frame).collect();
+        assert_eq!(frames, [0.0, 20.0, 40.0]);
     }
 
     #[test]
