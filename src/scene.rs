@@ -166,7 +166,8 @@ pub const SKETCH_STRIDE: usize = 2;
 
 /// How many outputs each stage keeps, keyed by the stage's inputs: returning to an earlier state
 /// (undo, redo, deleting the key just added, switching a count back) finds every stage cached.
-/// Four entries of a 1280×800 scene's heaviest stages take about 1.5 GiB together.
+/// The editor's whole session on a 1280×800 photo (`makeit4d bench editor`, which fills these
+/// caches) peaks at 2.3 GiB resident; a one-shot build of the same photo at about 350 MiB.
 pub const CACHE_ENTRIES: usize = 4;
 
 struct Slot<T> {
@@ -270,6 +271,23 @@ pub struct SceneBuilder {
     motion: StageCache<Option<Arc<PreparedMotion>>>,
     stats: Stats,
     grow_canvas: bool,
+    /// The inpainter of the last build with its name, by the settings it was made for (an
+    /// ONNX model's session loads once, not on every build and dry run).
+    inpainter: Option<(
+        crate::stages::inpaint::InpaintSettings,
+        Arc<dyn Inpainter>,
+        String,
+    )>,
+}
+
+/// A non-dry build's answer (a dry one alone can miss a stage).
+fn built<T>(answer: std::result::Result<T, Stage>) -> Result<T> {
+    answer.map_err(|stage| {
+        Error::invalid(format!(
+            "internal: a build that is not dry missed the {} stage",
+            stage.name()
+        ))
+    })
 }
 
 /// Hashes `parts` (serialised as JSON) together with the upstream key.
@@ -363,15 +381,13 @@ impl SceneBuilder {
     /// Builds (or re-uses) every stage for `project`.
     pub fn build(&mut self, project: &Project, progress: &Progress) -> Result<Scene> {
         let grow = self.grow_canvas;
-        self.build_inner(project, progress, grow, false, false)?
-            .map_err(|_| Error::invalid("internal: a build that is not dry missed a stage"))
+        built(self.build_inner(project, progress, grow, false, false)?)
     }
 
     /// Builds with exactly the canvas `project`'s path needs, whatever the builder's rule (what
     /// the command line renders for the same project).
     pub fn build_exact(&mut self, project: &Project, progress: &Progress) -> Result<Scene> {
-        self.build_inner(project, progress, false, false, false)?
-            .map_err(|_| Error::invalid("internal: a build that is not dry missed a stage"))
+        built(self.build_inner(project, progress, false, false, false)?)
     }
 
     /// The first stage a [`SceneBuilder::build`] of `project` would run, without running any
@@ -392,8 +408,27 @@ impl SceneBuilder {
     /// the scene. Sketch outputs are cached apart from the others.
     pub fn build_sketch(&mut self, project: &Project, progress: &Progress) -> Result<Scene> {
         let grow = self.grow_canvas;
-        self.build_inner(project, progress, grow, false, true)?
-            .map_err(|_| Error::invalid("internal: a build that is not dry missed a stage"))
+        built(self.build_inner(project, progress, grow, false, true)?)
+    }
+
+    /// The inpainter `settings` ask for, made once per settings; a model that falls back to
+    /// PatchMatch adds its warning to `warnings` and is tried again on the next build.
+    fn inpainter_for(
+        &mut self,
+        settings: &crate::stages::inpaint::InpaintSettings,
+        warnings: &mut Vec<String>,
+    ) -> (Arc<dyn Inpainter>, String) {
+        if let Some((_, inpainter, name)) = self.inpainter.as_ref().filter(|c| &c.0 == settings) {
+            return (inpainter.clone(), name.clone());
+        }
+        let mut notes = Vec::new();
+        let (inpainter, name) = make_inpainter(settings, &mut notes);
+        let inpainter: Arc<dyn Inpainter> = Arc::from(inpainter);
+        warnings.extend(notes.iter().cloned());
+        // A model that could not load is tried again next time (it may have been fixed).
+        let fell_back = settings.model.is_some() && !name.starts_with("onnx ");
+        self.inpainter = (!fell_back).then(|| (settings.clone(), inpainter.clone(), name.clone()));
+        (inpainter, name)
     }
 
     /// The depth stage's output for `project` (load and depth only, cached like a build's):
@@ -404,17 +439,13 @@ impl SceneBuilder {
         progress: &Progress,
     ) -> Result<Arc<DepthStageOutput>> {
         project.validate()?;
-        match self.load_and_depth(
+        let (_, _, _, depth) = built(self.load_and_depth(
             project,
             &progress.sub(0.0, 0.2),
             &progress.sub(0.2, 1.0),
             false,
-        )? {
-            Ok((_, _, _, depth)) => Ok(depth),
-            Err(_) => Err(Error::invalid(
-                "internal: a build that is not dry missed a stage",
-            )),
-        }
+        )?)?;
+        Ok(depth)
     }
 
     /// Stages 1 and 2: `(depth key, photo, input camera, depth)`, or the stage a dry run would
@@ -489,17 +520,17 @@ impl SceneBuilder {
                 Err(stage) => return Ok(Err(stage)),
             };
         let (w, h) = input.rgb.size();
-        let stats = &mut self.stats;
         warnings.extend(depth.warnings.iter().cloned());
         let scale = scene_scale(&depth.estimate.depth, &depth.estimate.sky)?;
 
         // The inpainter serves the canvas and the layers.
         let (inpainter, inpainter_name) = if sketch {
-            let fill: Box<dyn Inpainter> = Box::new(crate::stages::inpaint::SketchInpainter);
+            let fill: Arc<dyn Inpainter> = Arc::new(crate::stages::inpaint::SketchInpainter);
             (fill, "harmonic sketch".to_string())
         } else {
-            make_inpainter(&project.inpaint, &mut warnings)
+            self.inpainter_for(&project.inpaint, &mut warnings)
         };
+        let stats = &mut self.stats;
 
         // 3. Canvas: the layout the path needs, then a cached canvas that covers it, one grown
         // from a cached canvas, or a new one.

@@ -218,6 +218,8 @@ pub struct EditorApp {
     shown_times: std::collections::VecDeque<Instant>,
     /// The CPU preview's longest side while playing, adapted to hold [`PLAYBACK_FPS`].
     playback_side: usize,
+    /// The GPU preview's render count when last looked at.
+    gpu_renders_seen: u64,
     /// How many times each stage ran in the scene worker, from its reports.
     stage_runs: std::collections::BTreeMap<Stage, usize>,
     /// The depth of the build in flight, once its depth stage is done.
@@ -234,6 +236,8 @@ pub struct EditorApp {
     close_allowed: bool,
     recovery_dir: Option<PathBuf>,
     last_autosave: Instant,
+    /// The last autosave failed (and the user was told).
+    autosave_failed: bool,
     /// A recovery project found at start: `(autosaved project, its project file)`.
     recover_offer: Option<(Project, Option<PathBuf>, String)>,
 }
@@ -348,6 +352,42 @@ fn find_recovery(dir: &Path) -> Option<(Project, Option<PathBuf>, String)> {
             }
         });
     Some((project, origin, age))
+}
+
+/// Records in `shown` what the preview picture shows; `new_picture`: a picture was drawn (it
+/// counts in `times`, the preview's frames/s). A picture that shows the same as the last keeps
+/// its arrival time.
+fn record_shown(
+    shown: &mut Option<ShownFrame>,
+    times: &mut std::collections::VecDeque<Instant>,
+    (generation, frame_index, view, side): (u64, usize, View, usize),
+    new_picture: bool,
+) {
+    let now = Instant::now();
+    let at = match shown {
+        Some(s)
+            if !new_picture
+                && s.generation == generation
+                && s.frame_index == frame_index
+                && s.view == view =>
+        {
+            s.at
+        }
+        _ => now,
+    };
+    *shown = Some(ShownFrame {
+        generation,
+        frame_index,
+        view,
+        side,
+        at,
+    });
+    if new_picture {
+        times.push_back(now);
+        while times.len() > 64 {
+            times.pop_front();
+        }
+    }
 }
 
 /// The quality of the scene on screen, a few words for the status bar.
@@ -532,6 +572,7 @@ impl EditorApp {
             shown: None,
             shown_times: Default::default(),
             playback_side: usize::MAX,
+            gpu_renders_seen: 0,
             stage_runs: Default::default(),
             early_depth: None,
             ctx: ctx.clone(),
@@ -543,6 +584,7 @@ impl EditorApp {
             close_allowed: false,
             recover_offer: None,
             last_autosave: Instant::now(),
+            autosave_failed: false,
             recovery_dir: recovery_dir.clone(),
         };
         app.recover_offer = recovery_dir.as_deref().and_then(find_recovery);
@@ -1312,8 +1354,16 @@ impl EditorApp {
                 std::fs::write(dir.join(RECOVERY_ORIGIN), origin)
                     .map_err(|e| format!("{}: {e}", dir.display()))
             });
-        if let Err(e) = written {
-            self.error(format!("cannot autosave the recovery copy: {e}"));
+        match written {
+            // Said once, not every minute, until an autosave works again.
+            Err(e) if !self.autosave_failed => {
+                self.autosave_failed = true;
+                self.error(format!(
+                    "cannot autosave the recovery copy ({e}); save the project to keep your edits"
+                ));
+            }
+            Err(_) => {}
+            Ok(()) => self.autosave_failed = false,
         }
     }
 
@@ -1658,19 +1708,18 @@ impl EditorApp {
                             .hole_fractions
                             .insert(frame.frame_index, hole_fraction);
                     }
-                    let now = Instant::now();
                     let side = image.size[0].max(image.size[1]);
-                    self.shown = Some(ShownFrame {
-                        generation: frame.generation,
-                        frame_index: frame.frame_index,
-                        view: full_view.unwrap_or(frame.view),
-                        side,
-                        at: now,
-                    });
-                    self.shown_times.push_back(now);
-                    while self.shown_times.len() > 64 {
-                        self.shown_times.pop_front();
-                    }
+                    record_shown(
+                        &mut self.shown,
+                        &mut self.shown_times,
+                        (
+                            frame.generation,
+                            frame.frame_index,
+                            full_view.unwrap_or(frame.view),
+                            side,
+                        ),
+                        true,
+                    );
                     if playing_cpu {
                         // The counter shows what the picture shows; the clock runs on.
                         self.timeline.frame = frame.frame_index;
@@ -1723,18 +1772,22 @@ impl EditorApp {
                 positions: positions.map(|p| p.2.clone()),
                 settings: snapshot.project.render,
             });
-            let now = Instant::now();
-            self.shown = Some(ShownFrame {
-                generation: snapshot.generation,
-                frame_index: self.preview.frame_index,
-                view,
-                side: self.preview.max_side,
-                at: now,
-            });
-            self.shown_times.push_back(now);
-            while self.shown_times.len() > 64 {
-                self.shown_times.pop_front();
-            }
+            // The paint callback draws this view; the rate counts the renders it really made
+            // (it renders nothing while nothing changes).
+            let renders = gpu.rendered().0;
+            let rendered = renders != self.gpu_renders_seen;
+            self.gpu_renders_seen = renders;
+            let (generation, frame_index, side) = (
+                snapshot.generation,
+                self.preview.frame_index,
+                self.preview.max_side,
+            );
+            record_shown(
+                &mut self.shown,
+                &mut self.shown_times,
+                (generation, frame_index, view, side),
+                rendered,
+            );
             let key = (snapshot.generation, frame);
             if moving && wanted && self.positions_key != Some(key) {
                 self.positions_key = Some(key);

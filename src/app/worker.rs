@@ -1,12 +1,15 @@
 //! Work off the UI thread.
 //!
-//! - The **scene thread** (`makeit4d-scene`) owns the one [`SceneBuilder`] of the session, so
-//!   an edit re-runs only the stages it invalidates (a threshold: layers onward; a depth
-//!   stroke: depth onward). It takes [`Command`]s from a bounded channel; of several queued
-//!   builds only the newest runs, and a new build cancels the one in flight. Each finished
-//!   scene goes into a latest-value slot as a [`SceneSnapshot`] with its display images
-//!   already made, so the UI only uploads textures. Exports run here too, through exactly the
-//!   command line's [`render_sequence`].
+//! - The **scene thread** (`makeit4d-scene`) owns the one [`SceneBuilder`] of the session
+//!   ([`SceneBuilder::growing`]: the canvas only grows, every stage keeps its recent outputs),
+//!   so an edit re-runs only the stages it invalidates (a threshold: layers onward; a depth
+//!   stroke: depth onward; a camera edit inside the canvas: nothing). It takes [`Command`]s
+//!   from a bounded channel; of several queued builds only the newest runs, and a new build
+//!   cancels the one in flight. A build that has to inpaint answers in steps: a depth edit's
+//!   new depth ([`Event::DepthReady`]), a sketch ([`SceneBuilder::build_sketch`]), then the
+//!   project's quality. Each scene goes into a latest-value slot as a [`SceneSnapshot`] with
+//!   its display images already made, so the UI only uploads textures. Exports run here too,
+//!   through exactly the command line's [`render_sequence`], on the exact canvas.
 //! - The **preview thread** (`makeit4d-preview`) renders the newest [`PreviewRequest`] (a
 //!   request replaces any pending one) with the last good scene, so the preview stays live
 //!   while a stage recomputes.
@@ -280,17 +283,21 @@ const RECENT_SNAPSHOTS: usize = 4;
 
 /// True when `a` and `b` are made of the same stage outputs.
 fn same_outputs(a: &Scene, b: &Scene) -> bool {
-    let same_motion = match (&a.motion, &b.motion) {
-        (Some(x), Some(y)) => Arc::ptr_eq(x, y),
-        (None, None) => true,
-        _ => false,
-    };
     Arc::ptr_eq(&a.input, &b.input)
         && Arc::ptr_eq(&a.depth, &b.depth)
         && Arc::ptr_eq(&a.canvas, &b.canvas)
         && Arc::ptr_eq(&a.layers, &b.layers)
         && Arc::ptr_eq(&a.cloud, &b.cloud)
-        && same_motion
+        && same_motion(a, b)
+}
+
+/// True when `a` and `b` share their motion stage's output (or are both still).
+fn same_motion(a: &Scene, b: &Scene) -> bool {
+    match (&a.motion, &b.motion) {
+        (Some(x), Some(y)) => Arc::ptr_eq(x, y),
+        (None, None) => true,
+        _ => false,
+    }
 }
 
 /// Locks a mutex, recovering the data of a poisoned one (a panicked worker must not take the
@@ -776,12 +783,7 @@ pub fn display_images_reusing(
         Some(d) => d.layers.clone(),
         None => layer_images(scene),
     };
-    let same_motion = |old: &Scene| match (&scene.motion, &old.motion) {
-        (Some(a), Some(b)) => Arc::ptr_eq(a, b),
-        (None, None) => true,
-        _ => false,
-    };
-    let (motion_mask, flow, max_speed) = match reuse(&same_motion) {
+    let (motion_mask, flow, max_speed) = match reuse(&|old| same_motion(old, scene)) {
         Some(d) => (d.motion_mask.clone(), d.flow.clone(), d.max_speed),
         None => match &scene.motion {
             Some(m) => {
