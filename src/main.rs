@@ -12,7 +12,7 @@ use makeit4d::progress::Progress;
 use makeit4d::project::Project;
 use makeit4d::render::gpu::{RendererChoice, select_renderer};
 use makeit4d::scene::SceneBuilder;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
@@ -110,6 +110,27 @@ enum EvalCommand {
     /// Magnification: a still camera zooming into (and out of) real high-resolution photos, the
     /// renderer against bicubic, bilinear, nearest and area resampling of the same input.
     Zoom(EvalZoomArgs),
+    /// Ordinal depth: the share of hand-annotated "a is nearer than b" pairs a depth map orders
+    /// wrongly (WHDR), per photo and group, with the vertical-ramp and constant baselines.
+    Ordinal(EvalOrdinalArgs),
+}
+
+#[derive(Args, Debug)]
+struct EvalOrdinalArgs {
+    /// The annotation file (JSON: {"photos": {"PATH": [[[xa, ya], [xb, yb]], ...]}}).
+    annotations: PathBuf,
+    /// Folder the photo paths are relative to (default: the annotation file's folder).
+    #[arg(long)]
+    root: Option<PathBuf>,
+    /// Also score this ONNX depth model manifest.
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Write each photo's classical depth preview into this folder.
+    #[arg(long)]
+    save: Option<PathBuf>,
+    /// Print JSON instead of a markdown table.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Args, Debug)]
@@ -561,6 +582,7 @@ fn main() -> ExitCode {
         Command::Eval(EvalCommand::Depth(args)) => eval_depth(args, cancel),
         Command::Eval(EvalCommand::Nvs(args)) => eval_nvs(args, cancel),
         Command::Eval(EvalCommand::Zoom(args)) => eval_zoom(args, cancel),
+        Command::Eval(EvalCommand::Ordinal(args)) => eval_ordinal(args, cancel),
         Command::Bench(BenchCommand::Depth(args)) => bench_depth(args),
         Command::Bench(BenchCommand::Inpaint(args)) => bench_inpaint(args, cancel),
         Command::Bench(BenchCommand::Motion(args)) => bench_motion(args),
@@ -872,6 +894,37 @@ fn eval_depth(args: EvalDepthArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()
         print!("{}", table.to_markdown());
     }
     Ok(())
+}
+
+fn eval_ordinal(args: EvalOrdinalArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::stages::depth::ordinal::{OrdinalAnnotations, OrdinalOptions, eval_ordinal};
+    use makeit4d::stages::depth::{DepthEstimator, onnx::OnnxDepth};
+    let annotations = OrdinalAnnotations::load(&args.annotations)?;
+    if annotations.pair_count() == 0 {
+        bail!("{}: no annotated pairs", args.annotations.display());
+    }
+    let model = match &args.model {
+        Some(m) => Some(OnnxDepth::from_manifest(m)?),
+        None => None,
+    };
+    let root = match &args.root {
+        Some(r) => r.clone(),
+        None => args
+            .annotations
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_default(),
+    };
+    let options = OrdinalOptions {
+        root,
+        extra: model.iter().map(|m| m as &dyn DepthEstimator).collect(),
+        save_dir: args.save.clone(),
+    };
+    let (bar, progress) = progress_bar(cancel);
+    let table = eval_ordinal(&annotations, &options, &progress);
+    bar.finish_and_clear();
+    let table = table?;
+    print_table(args.json, || table.to_json(), || table.to_markdown())
 }
 
 fn bench_depth(args: BenchDepthArgs) -> anyhow::Result<()> {

@@ -19,6 +19,7 @@
 //! Sky is clamped to a finite far plane (`far_plane_factor` × median scene depth).
 
 use super::filter::{box_mean, gaussian_blur, guided_upsample, min_filter};
+use super::mirror::{MirrorLine, find_mirror_line};
 use super::{DepthEstimate, DepthEstimator};
 use crate::error::{Error, Result};
 use crate::geometry::Intrinsics;
@@ -93,6 +94,24 @@ pub struct ClassicalDepthParams {
     pub object_structure_onset: f32,
     /// Object-cue structure at which the cue has its full weight. Default 0.25.
     pub object_structure_full: f32,
+    /// Weight of the local detail (focus / figure-ground) cue in photos where the landscape
+    /// cues do not apply (no sky, no reflection): sharper, more detailed than its
+    /// surroundings is nearer. Added to the fused nearness as `weight · clamp(local / scale,
+    /// −½, ½)`. Default 0.3.
+    pub detail_weight: f32,
+    /// Local detail difference (natural log of the gradient energy against its
+    /// neighbourhood) that counts as a full step of the detail cue. Default 3.0.
+    pub detail_scale: f32,
+    /// Weight of the aerial-perspective cue above the horizon of a landscape with a sky:
+    /// what is farther looks more like the sky (paler, bluer, less contrast), so a colour far
+    /// from the sky's is nearer (a red tree before a pale mountain range). Added as
+    /// `weight · min(‖c − c_sky‖ / aerial_scale, 1) · (1 − position)`, fading out just below
+    /// the horizon (a structure the pop-up already carries forward gains nothing).
+    /// Default 0.15.
+    pub aerial_weight: f32,
+    /// RGB distance (`[0, 1]` units, Euclidean) from the sky's median colour that counts as
+    /// fully unlike the sky. Default 0.6.
+    pub aerial_scale: f32,
     /// Weight of the haze cue when the image is fully hazy. Default 0.5.
     pub haze_weight: f32,
     /// Median normalised dark channel at which the haze cue starts to count. Default 0.5.
@@ -135,6 +154,10 @@ impl Default for ClassicalDepthParams {
             object_structure_sigma: 0.06,
             object_structure_onset: 0.15,
             object_structure_full: 0.25,
+            detail_weight: 0.5,
+            detail_scale: 3.0,
+            aerial_weight: 0.15,
+            aerial_scale: 0.6,
             haze_weight: 0.5,
             haze_onset: 0.5,
             haze_full: 0.75,
@@ -162,6 +185,8 @@ impl ClassicalDepthParams {
             ("popup_carry", self.popup_carry),
             ("object_colour_scale", self.object_colour_scale),
             ("object_texture_scale", self.object_texture_scale),
+            ("detail_scale", self.detail_scale),
+            ("aerial_scale", self.aerial_scale),
             ("refine_epsilon", self.refine_epsilon),
         ];
         for (name, v) in positive {
@@ -173,6 +198,8 @@ impl ClassicalDepthParams {
             ("ground_weight", self.ground_weight),
             ("object_weight", self.object_weight),
             ("haze_weight", self.haze_weight),
+            ("detail_weight", self.detail_weight),
+            ("aerial_weight", self.aerial_weight),
             ("background_ramp", self.background_ramp),
             ("border_band", self.border_band),
             ("object_structure_sigma", self.object_structure_sigma),
@@ -259,6 +286,74 @@ pub struct ClassicalAnalysis {
     pub object_work: GrayRaster,
     /// Haze cue, nearness `[0, 1]`.
     pub haze_work: GrayRaster,
+    /// Detail cue, a nearness offset in `[−½, ½]` (zero in landscapes).
+    pub detail_work: GrayRaster,
+    /// The reflection found, in working-resolution rows.
+    pub mirror: Option<MirrorLine>,
+    /// Whether the landscape cues (horizon, ground plane) applied.
+    pub landscape: bool,
+    /// Which cue decided each working pixel.
+    pub cues: Raster<DepthCue>,
+}
+
+/// The cue that decided a region's depth, for the editor's Depth tab.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DepthCue {
+    /// Sky: at the far plane.
+    Sky,
+    /// Water below a reflection's axis: a level plane.
+    Water,
+    /// The ground plane below the horizon.
+    #[default]
+    Ground,
+    /// A standing structure carrying the depth where it meets the ground.
+    PopUp,
+    /// An object unlike the border (figure against ground).
+    Object,
+    /// Haze (the dark channel).
+    Haze,
+    /// No landscape cue applies: a ramp with local detail and focus on top.
+    Fallback,
+}
+
+impl DepthCue {
+    /// Every cue, in legend order.
+    pub const ALL: [DepthCue; 7] = [
+        DepthCue::Sky,
+        DepthCue::Water,
+        DepthCue::Ground,
+        DepthCue::PopUp,
+        DepthCue::Object,
+        DepthCue::Haze,
+        DepthCue::Fallback,
+    ];
+
+    /// A short name for legends.
+    pub fn label(self) -> &'static str {
+        match self {
+            DepthCue::Sky => "sky",
+            DepthCue::Water => "water",
+            DepthCue::Ground => "ground",
+            DepthCue::PopUp => "pop-up",
+            DepthCue::Object => "object",
+            DepthCue::Haze => "haze",
+            DepthCue::Fallback => "fallback",
+        }
+    }
+
+    /// Its colour in the cue overlay (sRGB).
+    pub fn colour(self) -> [u8; 3] {
+        match self {
+            DepthCue::Sky => [90, 160, 255],
+            DepthCue::Water => [0, 200, 200],
+            DepthCue::Ground => [150, 110, 60],
+            DepthCue::PopUp => [240, 200, 40],
+            DepthCue::Object => [230, 60, 160],
+            DepthCue::Haze => [200, 200, 200],
+            DepthCue::Fallback => [140, 90, 220],
+        }
+    }
 }
 
 impl ClassicalDepth {
@@ -300,11 +395,18 @@ impl ClassicalDepth {
         let work_luma = work.map(luma);
         let texture = texture_energy(&work_luma);
 
-        // Sky and horizon.
+        // Reflection, sky and horizon.
+        let mirror = find_mirror_line(&gaussian_blur(&work_luma, 1.0));
+        let water_rows = mirror.map(|m| {
+            let from = (m.axis.floor() as usize + 1).min(wh);
+            from..(from + m.extent).min(wh)
+        });
         let mut sky_work = sky_mask(&work, &work_luma, &texture, p);
-        let (horizon, horizon_detected) = match p.horizon {
-            Some(h) => (h, false),
-            None => match horizon_from_sky(&sky_work) {
+        let (horizon, horizon_detected) = match (p.horizon, mirror) {
+            (Some(h), _) => (h, false),
+            // The far shore of a mirroring lake is at the horizon.
+            (None, Some(m)) => (m.axis / (wh as f32 - 1.0).max(1.0), true),
+            (None, None) => match horizon_from_sky(&sky_work) {
                 Some(h) => (h, true),
                 None => (p.default_horizon, false),
             },
@@ -317,13 +419,36 @@ impl ClassicalDepth {
                 }
             }
         }
+        if let Some(rows) = &water_rows {
+            // A reflected sky is water.
+            for y in rows.start..wh {
+                sky_work.row_mut(y).fill(0.0);
+            }
+        }
+        if !horizon_detected {
+            // No one sky over a horizon: what is left is sky seen through gaps (a canopy),
+            // the brightest thing in the picture, or bright patches that are not sky (the
+            // insides of cups from above).
+            let median_luma = quantile(work_luma.data(), 0.5).unwrap_or(0.0);
+            let bright = (p.sky_bright_factor * median_luma).max(p.sky_min_luma);
+            for (s, l) in sky_work.data_mut().iter_mut().zip(work_luma.data()) {
+                if *l < bright {
+                    *s = 0.0;
+                }
+            }
+        }
+        fill_sky_holes(&mut sky_work, &work, horizon * (wh as f32 - 1.0));
+        // The landscape cues (ground plane below a horizon) hold when the photo shows a sky
+        // above its ground, a reflection, or the user placed the horizon.
+        let landscape = horizon_detected || p.horizon.is_some();
         progress.report(0.2, "depth: cues");
         progress.check()?;
 
         // Position prior and pop-up.
         let v_horizon_work = horizon * (wh as f32 - 1.0).max(0.0);
         let prior = position_prior(ww, wh, v_horizon_work, p.background_ramp);
-        let position_work = popup(&work, &prior, p.popup_edge, p.popup_carry);
+        let plane = |y: usize| water_rows.as_ref().is_some_and(|r| r.contains(&y));
+        let position_work = popup(&work, &prior, p.popup_edge, p.popup_carry, plane);
         progress.report(0.35, "depth: cues");
         progress.check()?;
 
@@ -349,26 +474,98 @@ impl ClassicalDepth {
         progress.report(0.6, "depth: cues");
         progress.check()?;
 
-        // Haze cue.
+        // Haze and detail cues.
         let (haze_work, haziness) = haze_cue(&work, p);
+        let detail_work = if landscape || p.detail_weight == 0.0 {
+            Raster::new(ww, wh, 0.0)
+        } else {
+            detail_cue(&texture, p.detail_scale)
+        };
 
-        // Fusion in nearness.
+        let aerial_work = if landscape && p.aerial_weight > 0.0 {
+            aerial_cue(&work, &sky_work, p.aerial_scale)
+        } else {
+            None
+        };
+        // The aerial cue counts above the horizon, fading out 5 % of the height below it.
+        let fade = (0.05 * wh as f32).max(1.0);
+        let above = |y: usize| ((v_horizon_work - y as f32) / fade + 1.0).clamp(0.0, 1.0);
+
+        // Fusion in nearness. Water is a plane: only the position cue.
         let wg = p.ground_weight;
         // In haze the haze cue already separates figure from ground; counting the object cue
         // too would flatten the ground-plane gradient of everything in front of the fog.
         let wo = p.object_weight * object_share * (1.0 - haziness);
         let wz = p.haze_weight * haziness;
+        // Detail is the fallback's figure/ground; where the object cue is reliable it already
+        // tells figure from ground.
+        let wd = if landscape {
+            0.0
+        } else {
+            p.detail_weight * (1.0 - object_share)
+        };
         let total = (wg + wo + wz).max(1e-6);
         let mut fused = Raster::from_fn(ww, wh, |x, y| {
+            if plane(y) {
+                return position_work.at(x, y);
+            }
             (wg * position_work.at(x, y) + wo * object_work.at(x, y) + wz * haze_work.at(x, y))
                 / total
+                + wd * detail_work.at(x, y)
+                + aerial_work
+                    .as_ref()
+                    .map_or(0.0, |a| {
+                        p.aerial_weight * above(y) * a.at(x, y) * (1.0 - position_work.at(x, y))
+                    })
         });
+        if let Some(rows) = water_rows.as_ref().filter(|r| !r.is_empty()) {
+            // The land beyond a lake is beyond its far edge.
+            let edge = fused.row(rows.start).iter().copied().fold(f32::INFINITY, f32::min);
+            for y in 0..rows.start {
+                for v in fused.row_mut(y) {
+                    *v = v.min(edge);
+                }
+            }
+        }
+        if std::env::var_os("MAKEIT4D_DEPTH_DEBUG").is_some() {
+            let skyf = sky_work.data().iter().filter(|v| **v > 0.5).count() as f32 / sky_work.len() as f32;
+            if let Some(path) = std::env::var_os("MAKEIT4D_DEPTH_DUMP") {
+                let img = detail_work.map(|v| [v + 0.5, v + 0.5, v + 0.5]);
+                let _ = crate::image_io::save_rgb_png(std::path::Path::new(&path), &img, false);
+                let img2 = fused.map(|v| [v, v, v]);
+                let mut p2 = std::path::PathBuf::from(&path); p2.set_extension("fused.png");
+                let _ = crate::image_io::save_rgb_png(&p2, &img2, false);
+            }
+            eprintln!("DBG horizon {horizon:.3} detected {horizon_detected} landscape {landscape} sky {skyf:.3} mirror {mirror:?} haze {haziness:.2} coh {border_coherence:.2} struct {object_structure:.2} wo {wo:.2}");
+        }
         normalise_robust(&mut fused, Some(&sky_work));
         for (n, s) in fused.data_mut().iter_mut().zip(sky_work.data()) {
             if *s > 0.5 {
                 *n = 0.0;
             }
         }
+        let cues = Raster::from_fn(ww, wh, |x, y| {
+            if sky_work.at(x, y) > 0.5 {
+                DepthCue::Sky
+            } else if plane(y) {
+                DepthCue::Water
+            } else if !landscape {
+                DepthCue::Fallback
+            } else {
+                let g = wg * position_work.at(x, y);
+                let o = wo * object_work.at(x, y);
+                let z = wz * haze_work.at(x, y);
+                if o > g && o >= z {
+                    DepthCue::Object
+                } else if z > g {
+                    DepthCue::Haze
+                } else if position_work.at(x, y) > prior.at(x, y) + 0.05 {
+                    DepthCue::PopUp
+                } else {
+                    DepthCue::Ground
+                }
+            }
+        });
         progress.report(0.7, "depth: refine");
         progress.check()?;
 
@@ -437,6 +634,10 @@ impl ClassicalDepth {
             position_work,
             object_work,
             haze_work,
+            detail_work,
+            mirror,
+            landscape,
+            cues,
         })
     }
 }
@@ -494,10 +695,23 @@ pub fn texture_energy(luma: &GrayRaster) -> GrayRaster {
     gaussian_blur(&grad, 1.5)
 }
 
+/// Whether a colour can be sky: not vegetation-green, and blue, or of low saturation (white,
+/// grey clouds, haze: `(max − min)/max ≤ 0.35`), or bright (luma ≥ 0.65: a sunset glow). A
+/// saturated, darker red, orange or brown (an autumn tree, a kite, a roof) is not sky.
+pub fn sky_coloured(c: Rgb) -> bool {
+    let max = c[0].max(c[1]).max(c[2]);
+    let min = c[0].min(c[1]).min(c[2]);
+    let saturation = if max > 1e-3 { (max - min) / max } else { 0.0 };
+    let vegetation = c[1] > c[0] + 0.03 && c[1] > c[2] + 0.03;
+    let blue = c[2] >= c[0].max(c[1]) - 0.02;
+    !vegetation && (blue || saturation <= 0.35 || luma(c) >= 0.65)
+}
+
 /// Hard sky mask (1 = sky): candidates 4-connected to a candidate in the top row. A candidate
-/// is not vegetation-green and is either light and smooth (luma ≥ `sky_min_luma`, texture ≤
+/// is [`sky_coloured`] and either light and smooth (luma ≥ `sky_min_luma`, texture ≤
 /// `sky_max_texture`) or much brighter than the image (luma ≥ `sky_bright_factor` × median
-/// luma: sky seen through branches, bright clouds).
+/// luma: sky seen through branches, bright clouds). A "sky" darker than the rest of the
+/// picture is none (a dark ceiling, the tops of cups seen from above).
 fn sky_mask(
     work: &RgbRaster,
     work_luma: &GrayRaster,
@@ -510,9 +724,8 @@ fn sky_mask(
     let candidate = Raster::from_fn(w, h, |x, y| {
         let c = work.at(x, y);
         let l = work_luma.at(x, y);
-        let vegetation = c[1] > c[0] + 0.03 && c[1] > c[2] + 0.03;
         let smooth_and_light = l >= p.sky_min_luma && texture.at(x, y) <= p.sky_max_texture;
-        !vegetation && (smooth_and_light || l >= bright)
+        sky_coloured(c) && (smooth_and_light || l >= bright)
     });
     let mut sky = Raster::new(w, h, 0.0f32);
     let mut queue = VecDeque::new();
@@ -546,7 +759,116 @@ fn sky_mask(
         }
         sky = grown;
     }
+    let (mut in_sky, mut rest) = (Vec::new(), Vec::new());
+    for (s, l) in sky.data().iter().zip(work_luma.data()) {
+        if *s > 0.5 { &mut in_sky } else { &mut rest }.push(*l);
+    }
+    if let (Some(a), Some(b)) = (quantile(&in_sky, 0.5), quantile(&rest, 0.5))
+        && a < b
+    {
+        sky.data_mut().fill(0.0);
+    }
     sky
+}
+
+/// Fills the holes of a sky mask that are sky too: a part of the picture surrounded by sky
+/// (not connected to the bottom row, nor to the side borders below row `horizon_row`) whose
+/// pixels are mostly [`sky_coloured`] is a cloud, and stays at the far plane with the sky. A
+/// hole of other colours (a kite, a bird, a balloon) is an object in front of the sky.
+fn fill_sky_holes(sky: &mut GrayRaster, work: &RgbRaster, horizon_row: f32) {
+    let (w, h) = sky.size();
+    if w == 0 || h == 0 || !sky.data().iter().any(|&s| s > 0.5) {
+        return;
+    }
+    // Everything not sky that the ground reaches.
+    let mut grounded = Raster::new(w, h, 0.0f32);
+    let mut queue = VecDeque::new();
+    let mut seed = |x: usize, y: usize, grounded: &mut GrayRaster| {
+        if sky.at(x, y) <= 0.5 && grounded.at(x, y) == 0.0 {
+            grounded.set(x, y, 1.0);
+            queue.push_back((x, y));
+        }
+    };
+    for x in 0..w {
+        seed(x, h - 1, &mut grounded);
+    }
+    for y in 0..h {
+        if y as f32 >= horizon_row {
+            seed(0, y, &mut grounded);
+            seed(w - 1, y, &mut grounded);
+        }
+    }
+    flood(&mut grounded, &mut queue, |_, _, nx, ny| sky.at(nx, ny) <= 0.5);
+    // The rest falls into holes; label them one by one.
+    let mut seen = grounded;
+    for start in 0..w * h {
+        let (sx, sy) = (start % w, start / w);
+        if seen.at(sx, sy) != 0.0 || sky.at(sx, sy) > 0.5 {
+            continue;
+        }
+        let mut part = vec![(sx, sy)];
+        seen.set(sx, sy, 1.0);
+        let mut i = 0;
+        while i < part.len() {
+            let (x, y) = part[i];
+            i += 1;
+            for (nx, ny) in neighbours(x, y, w, h) {
+                if seen.at(nx, ny) == 0.0 && sky.at(nx, ny) <= 0.5 {
+                    seen.set(nx, ny, 1.0);
+                    part.push((nx, ny));
+                }
+            }
+        }
+        let coloured = part
+            .iter()
+            .filter(|&&(x, y)| sky_coloured(work.at(x, y)))
+            .count();
+        if coloured * 10 >= part.len() * 6 {
+            for (x, y) in part {
+                sky.set(x, y, 1.0);
+            }
+        }
+    }
+}
+
+/// Aerial-perspective cue: `min(‖c − c_sky‖ / scale, 1)`, with `c_sky` the per-channel median
+/// colour of the sky pixels (`sky > ½`); `None` when under 1 % of the pixels are sky.
+pub fn aerial_cue(work: &RgbRaster, sky: &GrayRaster, scale: f32) -> Option<GrayRaster> {
+    let mut channels: [Vec<f32>; 3] = Default::default();
+    for (c, s) in work.data().iter().zip(sky.data()) {
+        if *s > 0.5 {
+            for (k, ch) in channels.iter_mut().enumerate() {
+                ch.push(c[k]);
+            }
+        }
+    }
+    if channels[0].len() * 100 < work.len().max(1) {
+        return None;
+    }
+    let mut sky_colour = [0.0f32; 3];
+    for (k, ch) in channels.iter().enumerate() {
+        sky_colour[k] = quantile(ch, 0.5)?;
+    }
+    let scale = scale.max(1e-6);
+    Some(work.map(|c| {
+        let d2: f32 = (0..3).map(|k| (c[k] - sky_colour[k]).powi(2)).sum();
+        (d2.sqrt() / scale).min(1.0)
+    }))
+}
+
+/// Local detail cue, a nearness offset: with `D = ln(G_σ ∗ texture + 10⁻³)` (σ = 1 % of the
+/// longer side), `clamp((D − G_8σ ∗ D)/scale, −½, ½)`. What is sharper and more detailed than
+/// its surroundings (a subject in focus, a rim against the smooth inside of a cup, moss
+/// against bare soil) comes forward; a smooth or defocused region recedes.
+pub fn detail_cue(texture: &GrayRaster, scale: f32) -> GrayRaster {
+    let long = texture.width().max(texture.height()) as f32;
+    let sigma = (0.01 * long).max(0.5);
+    let energy = gaussian_blur(texture, sigma).map(|t| (t.max(0.0) + 1e-3).ln());
+    let surround = gaussian_blur(&energy, 8.0 * sigma);
+    let scale = scale.max(1e-6);
+    Raster::from_fn(texture.width(), texture.height(), |x, y| {
+        ((energy.at(x, y) - surround.at(x, y)) / scale).clamp(-0.5, 0.5)
+    })
 }
 
 /// The 4-neighbours of `(x, y)` inside a `w × h` grid.
@@ -577,19 +899,44 @@ fn flood(
 }
 
 /// Horizon from a sky mask: the median over columns of the lower edge of each column's lowest
-/// sky pixel, as a fraction of the height; `None` when fewer than half of the columns have sky
-/// or the sky covers (almost) everything.
+/// pixel of the largest 4-connected part of the sky, as a fraction of the height; `None` when
+/// that part spans fewer than half of the columns (scattered bright patches along the top, the
+/// insides of cups seen from above, are not one sky) or the sky covers (almost) everything.
 pub fn horizon_from_sky(sky: &GrayRaster) -> Option<f32> {
     let (w, h) = sky.size();
     if h < 2 || w == 0 {
         return None;
     }
-    let mut bottoms = Vec::new();
-    for x in 0..w {
-        if let Some(y) = (0..h).rev().find(|&y| sky.at(x, y) > 0.5) {
-            bottoms.push(y as f32 + 0.5);
+    // Label the parts; keep the lowest row per column of the largest.
+    let mut label = vec![0u32; w * h];
+    let mut best: (usize, Vec<Option<usize>>) = (0, Vec::new());
+    let mut next = 0u32;
+    for start in 0..w * h {
+        if label[start] != 0 || sky.data()[start] <= 0.5 {
+            continue;
+        }
+        next += 1;
+        label[start] = next;
+        let mut stack = vec![start];
+        let mut bottom = vec![None::<usize>; w];
+        let mut count = 0usize;
+        while let Some(i) = stack.pop() {
+            count += 1;
+            let (x, y) = (i % w, i / w);
+            bottom[x] = Some(bottom[x].map_or(y, |b: usize| b.max(y)));
+            for (nx, ny) in neighbours(x, y, w, h) {
+                let j = ny * w + nx;
+                if label[j] == 0 && sky.data()[j] > 0.5 {
+                    label[j] = next;
+                    stack.push(j);
+                }
+            }
+        }
+        if count > best.0 {
+            best = (count, bottom);
         }
     }
+    let bottoms: Vec<f32> = best.1.iter().flatten().map(|&y| y as f32 + 0.5).collect();
     if bottoms.len() * 2 < w {
         return None;
     }
@@ -639,7 +986,14 @@ pub fn position_prior(width: usize, height: usize, v_horizon_px: f32, ramp: f32)
 /// `n(v) = a·n(v + 1) + (1 − a)·prior(v)` with `a = decay / (1 + (Δ/edge)⁴)`, where `Δ` is the
 /// colour step between rows `v` and `v + 1` and `decay = e^(−1/(carry·H))`. A region without
 /// horizontal edges keeps the nearness where it meets the ground; an edge resets to the prior.
-pub fn popup(work: &RgbRaster, prior: &GrayRaster, edge: f32, carry: f32) -> GrayRaster {
+/// Rows where `plane(v)` holds (water) keep the prior: a level surface, nothing stands on it.
+pub fn popup(
+    work: &RgbRaster,
+    prior: &GrayRaster,
+    edge: f32,
+    carry: f32,
+    plane: impl Fn(usize) -> bool,
+) -> GrayRaster {
     let (w, h) = work.size();
     let mut out = prior.clone();
     if h < 2 {
@@ -647,6 +1001,9 @@ pub fn popup(work: &RgbRaster, prior: &GrayRaster, edge: f32, carry: f32) -> Gra
     }
     let decay = (-1.0 / (carry * h as f32).max(1e-3)).exp();
     for y in (0..h - 1).rev() {
+        if plane(y) {
+            continue;
+        }
         for x in 0..w {
             let a = work.at(x, y);
             let b = work.at(x, y + 1);
@@ -975,7 +1332,7 @@ mod tests {
             }
         });
         let prior = position_prior(3, 40, 10.0, 0.0);
-        let out = popup(&img, &prior, 0.1, 100.0);
+        let out = popup(&img, &prior, 0.1, 100.0, |_| false);
         // The pole's top keeps the nearness at its contact row (29/30), not the prior (0).
         let contact = prior.at(1, 30);
         assert!(
@@ -1005,6 +1362,14 @@ mod tests {
         assert!((h - 3.5 / 8.0).abs() < 1e-6);
         assert_eq!(horizon_from_sky(&Raster::new(10, 9, 0.0)), None);
         assert_eq!(horizon_from_sky(&Raster::new(10, 9, 1.0)), None);
+        // Patches along the top, each a fifth of the width: no single sky, no horizon.
+        let patches = Raster::from_fn(10, 9, |x, y| if y < 4 && x % 5 < 2 { 1.0 } else { 0.0 });
+        assert_eq!(horizon_from_sky(&patches), None);
+        // One wide sky with a lower patch beside it: the wide one decides.
+        let two = Raster::from_fn(10, 9, |x, y| {
+            if y < 2 || (x == 9 && y < 7) { 1.0 } else { 0.0 }
+        });
+        assert!((horizon_from_sky(&two).unwrap() - 1.5 / 8.0).abs() < 1e-6);
     }
 
     #[test]

@@ -5,7 +5,9 @@ pub mod eval;
 pub mod filter;
 pub mod horizon;
 pub mod io;
+pub mod mirror;
 pub mod onnx;
+pub mod ordinal;
 pub mod paint;
 pub mod preview;
 
