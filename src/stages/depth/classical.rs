@@ -396,20 +396,22 @@ impl ClassicalDepth {
         let texture = texture_energy(&work_luma);
 
         // Reflection, sky and horizon.
-        let mirror = find_mirror_line(&gaussian_blur(&work_luma, 1.0));
+        let mut sky_work = sky_mask(&work, &work_luma, &texture, p);
+        let sky_horizon = horizon_from_sky(&sky_work);
+        let row_fraction = |row: f32| row / (wh as f32 - 1.0).max(1.0);
+        // Water lies below the sky (a symmetric cloud is not a lake).
+        let mirror = find_mirror_line(&gaussian_blur(&work_luma, 1.0))
+            .filter(|m| sky_horizon.is_none_or(|s| row_fraction(m.axis) >= s - 0.02));
         let water_rows = mirror.map(|m| {
             let from = (m.axis.floor() as usize + 1).min(wh);
             from..(from + m.extent).min(wh)
         });
-        let mut sky_work = sky_mask(&work, &work_luma, &texture, p);
-        let (horizon, horizon_detected) = match (p.horizon, mirror) {
-            (Some(h), _) => (h, false),
+        let (horizon, horizon_detected) = match (p.horizon, mirror, sky_horizon) {
+            (Some(h), _, _) => (h, false),
             // The far shore of a mirroring lake is at the horizon.
-            (None, Some(m)) => (m.axis / (wh as f32 - 1.0).max(1.0), true),
-            (None, None) => match horizon_from_sky(&sky_work) {
-                Some(h) => (h, true),
-                None => (p.default_horizon, false),
-            },
+            (None, Some(m), _) => (row_fraction(m.axis), true),
+            (None, None, Some(h)) => (h, true),
+            (None, None, None) => (p.default_horizon, false),
         };
         if horizon_detected || p.horizon.is_some() {
             let cut = (horizon + p.sky_below_horizon) * (wh as f32 - 1.0);
@@ -425,7 +427,9 @@ impl ClassicalDepth {
                 sky_work.row_mut(y).fill(0.0);
             }
         }
-        if !horizon_detected {
+        let sky_share =
+            sky_work.data().iter().filter(|s| **s > 0.5).count() as f32 / sky_work.len() as f32;
+        if !horizon_detected && sky_share < 0.9 {
             // No one sky over a horizon: what is left is sky seen through gaps (a canopy),
             // the brightest thing in the picture, or bright patches that are not sky (the
             // insides of cups from above).
@@ -444,13 +448,8 @@ impl ClassicalDepth {
         progress.report(0.2, "depth: cues");
         progress.check()?;
 
-        // Position prior and pop-up.
         let v_horizon_work = horizon * (wh as f32 - 1.0).max(0.0);
-        let prior = position_prior(ww, wh, v_horizon_work, p.background_ramp);
         let plane = |y: usize| water_rows.as_ref().is_some_and(|r| r.contains(&y));
-        let position_work = popup(&work, &prior, p.popup_edge, p.popup_carry, plane);
-        progress.report(0.35, "depth: cues");
-        progress.check()?;
 
         // Object cue.
         let (mut object_work, border_coherence) = object_cue(&work, &texture, p);
@@ -505,6 +504,13 @@ impl ClassicalDepth {
             p.detail_weight * (1.0 - object_share)
         };
         let total = (wg + wo + wz).max(1e-6);
+
+        // Position prior and pop-up.
+        let prior = position_prior(ww, wh, v_horizon_work, p.background_ramp);
+        let position_work = popup(&work, &prior, p.popup_edge, p.popup_carry, plane);
+        progress.report(0.65, "depth: cues");
+        progress.check()?;
+
         let mut fused = Raster::from_fn(ww, wh, |x, y| {
             if plane(y) {
                 return position_work.at(x, y);
@@ -512,31 +518,22 @@ impl ClassicalDepth {
             (wg * position_work.at(x, y) + wo * object_work.at(x, y) + wz * haze_work.at(x, y))
                 / total
                 + wd * detail_work.at(x, y)
-                + aerial_work
-                    .as_ref()
-                    .map_or(0.0, |a| {
-                        p.aerial_weight * above(y) * a.at(x, y) * (1.0 - position_work.at(x, y))
-                    })
+                + aerial_work.as_ref().map_or(0.0, |a| {
+                    p.aerial_weight * above(y) * a.at(x, y) * (1.0 - position_work.at(x, y))
+                })
         });
         if let Some(rows) = water_rows.as_ref().filter(|r| !r.is_empty()) {
             // The land beyond a lake is beyond its far edge.
-            let edge = fused.row(rows.start).iter().copied().fold(f32::INFINITY, f32::min);
+            let edge = fused
+                .row(rows.start)
+                .iter()
+                .copied()
+                .fold(f32::INFINITY, f32::min);
             for y in 0..rows.start {
                 for v in fused.row_mut(y) {
                     *v = v.min(edge);
                 }
             }
-        }
-        if std::env::var_os("MAKEIT4D_DEPTH_DEBUG").is_some() {
-            let skyf = sky_work.data().iter().filter(|v| **v > 0.5).count() as f32 / sky_work.len() as f32;
-            if let Some(path) = std::env::var_os("MAKEIT4D_DEPTH_DUMP") {
-                let img = detail_work.map(|v| [v + 0.5, v + 0.5, v + 0.5]);
-                let _ = crate::image_io::save_rgb_png(std::path::Path::new(&path), &img, false);
-                let img2 = fused.map(|v| [v, v, v]);
-                let mut p2 = std::path::PathBuf::from(&path); p2.set_extension("fused.png");
-                let _ = crate::image_io::save_rgb_png(&p2, &img2, false);
-            }
-            eprintln!("DBG horizon {horizon:.3} detected {horizon_detected} landscape {landscape} sky {skyf:.3} mirror {mirror:?} haze {haziness:.2} coh {border_coherence:.2} struct {object_structure:.2} wo {wo:.2}");
         }
         normalise_robust(&mut fused, Some(&sky_work));
         for (n, s) in fused.data_mut().iter_mut().zip(sky_work.data()) {
@@ -798,7 +795,9 @@ fn fill_sky_holes(sky: &mut GrayRaster, work: &RgbRaster, horizon_row: f32) {
             seed(w - 1, y, &mut grounded);
         }
     }
-    flood(&mut grounded, &mut queue, |_, _, nx, ny| sky.at(nx, ny) <= 0.5);
+    flood(&mut grounded, &mut queue, |_, _, nx, ny| {
+        sky.at(nx, ny) <= 0.5
+    });
     // The rest falls into holes; label them one by one.
     let mut seen = grounded;
     for start in 0..w * h {
@@ -856,15 +855,16 @@ pub fn aerial_cue(work: &RgbRaster, sky: &GrayRaster, scale: f32) -> Option<Gray
     }))
 }
 
-/// Local detail cue, a nearness offset: with `D = ln(G_σ ∗ texture + 10⁻³)` (σ = 1 % of the
-/// longer side), `clamp((D − G_8σ ∗ D)/scale, −½, ½)`. What is sharper and more detailed than
+/// Local detail cue, a nearness offset: with `D = ln(G_σ ∗ texture + 10⁻³)` (σ = 2.5 % of the
+/// longer side: region scale, so that a tree trunk's bark does not bend it),
+/// `clamp((D − G_4σ ∗ D)/scale, −½, ½)`. What is sharper and more detailed than
 /// its surroundings (a subject in focus, a rim against the smooth inside of a cup, moss
 /// against bare soil) comes forward; a smooth or defocused region recedes.
 pub fn detail_cue(texture: &GrayRaster, scale: f32) -> GrayRaster {
     let long = texture.width().max(texture.height()) as f32;
-    let sigma = (0.01 * long).max(0.5);
+    let sigma = (0.025 * long).max(0.5);
     let energy = gaussian_blur(texture, sigma).map(|t| (t.max(0.0) + 1e-3).ln());
-    let surround = gaussian_blur(&energy, 8.0 * sigma);
+    let surround = gaussian_blur(&energy, 4.0 * sigma);
     let scale = scale.max(1e-6);
     Raster::from_fn(texture.width(), texture.height(), |x, y| {
         ((energy.at(x, y) - surround.at(x, y)) / scale).clamp(-0.5, 0.5)
@@ -1366,9 +1366,13 @@ mod tests {
         let patches = Raster::from_fn(10, 9, |x, y| if y < 4 && x % 5 < 2 { 1.0 } else { 0.0 });
         assert_eq!(horizon_from_sky(&patches), None);
         // One wide sky with a lower patch beside it: the wide one decides.
-        let two = Raster::from_fn(10, 9, |x, y| {
-            if y < 2 || (x == 9 && y < 7) { 1.0 } else { 0.0 }
-        });
+        let two = Raster::from_fn(
+            10,
+            9,
+            |x, y| {
+                if y < 2 || (x == 9 && y < 7) { 1.0 } else { 0.0 }
+            },
+        );
         assert!((horizon_from_sky(&two).unwrap() - 1.5 / 8.0).abs() < 1e-6);
     }
 
@@ -1449,6 +1453,213 @@ mod tests {
             e.estimate(&empty, &intrinsics(1, 1), &Progress::none())
                 .is_err()
         );
+    }
+
+    /// A lake scene: sky over textured hills whose skyline varies, the hills ending at row
+    /// `shore`, and below it their reflection (flipped, darker, slightly bluer).
+    fn lake(w: usize, h: usize, shore: usize) -> RgbRaster {
+        let above = |x: usize, y: usize| -> Rgb {
+            let skyline = shore as f32 * (0.45 + 0.25 * ((x as f32 / w as f32) * 9.0).sin().abs());
+            if (y as f32) < skyline {
+                [0.55, 0.72, 0.95]
+            } else {
+                let n = hash(x / 2, y / 2) * 0.4;
+                [0.25 + n, 0.35 + n, 0.3 + 0.5 * n]
+            }
+        };
+        Raster::from_fn(w, h, |x, y| {
+            if y <= shore {
+                above(x, y)
+            } else {
+                let c = above(x, (2 * shore).saturating_sub(y));
+                [0.7 * c[0], 0.7 * c[1], 0.75 * c[2] + 0.05]
+            }
+        })
+    }
+
+    #[test]
+    fn a_mirroring_lake_is_a_water_plane_not_sky() {
+        let (w, h, shore) = (192, 120, 70);
+        let img = lake(w, h, shore);
+        let a = estimator()
+            .analyse(&img, &intrinsics(w, h), &Progress::none())
+            .unwrap();
+        check_sane(&a.estimate, w, h);
+        let m = a.mirror.expect("the reflection is found");
+        let scale = a.sky_work.height() as f32 / h as f32;
+        assert!((m.axis / scale - shore as f32).abs() < 2.0 / scale, "{m:?}");
+        assert!((a.horizon - shore as f32 / (h - 1) as f32).abs() < 0.03);
+        let d = &a.estimate.depth;
+        // The reflected sky is not sky, and the water's depth rises toward the top.
+        let col = w / 2;
+        for y in shore + 4..h {
+            assert!(a.estimate.sky.at(col, y) < 0.5, "row {y} is sky");
+        }
+        let rows: Vec<f32> = (shore + 6..h)
+            .step_by(6)
+            .map(|y| {
+                median_depth(
+                    d,
+                    [0.0, y as f32 / h as f32, 1.0, (y + 1) as f32 / h as f32],
+                )
+            })
+            .collect();
+        // (Within 3 %: the edge-aware refinement ripples at the bottom border.)
+        assert!(
+            rows.windows(2).all(|p| p[0] > 0.97 * p[1]) && rows[0] > 3.0 * rows[rows.len() - 1],
+            "water depth by row {rows:?}"
+        );
+        // The far shore is beyond the water, not the nearest thing in the picture.
+        let shore_band = median_depth(
+            d,
+            [
+                0.0,
+                (shore as f32 - 8.0) / h as f32,
+                1.0,
+                (shore as f32 - 2.0) / h as f32,
+            ],
+        );
+        let near_water = median_depth(d, [0.0, 0.9, 1.0, 1.0]);
+        let far_water = median_depth(
+            d,
+            [
+                0.0,
+                (shore + 4) as f32 / h as f32,
+                1.0,
+                (shore + 8) as f32 / h as f32,
+            ],
+        );
+        assert!(
+            shore_band >= far_water * 0.98 && far_water > near_water,
+            "{shore_band} {far_water} {near_water}"
+        );
+        let water = a
+            .cues
+            .data()
+            .iter()
+            .filter(|c| **c == DepthCue::Water)
+            .count();
+        assert!(
+            water as f32 > 0.25 * a.cues.len() as f32,
+            "water cue on {water} px"
+        );
+    }
+
+    #[test]
+    fn sky_colour_rule_known_answers() {
+        assert!(sky_coloured([0.5, 0.7, 0.95])); // blue sky
+        assert!(sky_coloured([0.8, 0.8, 0.82])); // grey cloud
+        assert!(sky_coloured([0.3, 0.3, 0.32])); // dark storm cloud
+        assert!(sky_coloured([1.0, 0.75, 0.5])); // bright sunset glow
+        assert!(!sky_coloured([0.85, 0.2, 0.15])); // a red kite
+        assert!(!sky_coloured([0.55, 0.3, 0.1])); // an autumn tree
+        assert!(!sky_coloured([0.3, 0.6, 0.2])); // foliage
+    }
+
+    #[test]
+    fn a_kite_is_in_front_of_the_sky_and_a_cloud_is_sky() {
+        let (w, h) = (160, 100);
+        let mut img = landscape(w, h, 50);
+        // A white cloud with a textured rim (not a smooth sky candidate) and a red kite, both
+        // surrounded by sky.
+        for y in 10..22 {
+            for x in 20..50 {
+                let edge = x < 22 || x > 47 || y < 12 || y > 19;
+                let n = if edge { hash(x, y) * 0.3 } else { 0.0 };
+                img.set(x, y, [0.9 - n, 0.9 - n, 0.92 - n]);
+            }
+        }
+        for y in 15..23 {
+            for x in 110..118 {
+                img.set(x, y, [0.85, 0.15 + 0.2 * hash(x, y), 0.1]);
+            }
+        }
+        let a = estimator()
+            .analyse(&img, &intrinsics(w, h), &Progress::none())
+            .unwrap();
+        let e = a.estimate;
+        check_sane(&e, w, h);
+        assert!(e.sky.at(35, 16) > 0.5, "the cloud is sky");
+        assert!(e.sky.at(114, 19) < 0.5, "the kite is not sky");
+        let far = e.depth.data().iter().copied().fold(0.0f32, f32::max);
+        assert!(
+            e.depth.at(114, 19) < 0.5 * far,
+            "the kite is in front of the sky"
+        );
+        // The cloud is not nearer than the ground below the horizon.
+        assert!(e.depth.at(35, 16) >= e.depth.at(80, 60));
+    }
+
+    #[test]
+    fn without_sky_the_fallback_orders_like_a_ramp_with_detail_on_top() {
+        // Top-down texture, no sky and no ground line: coarse blobs over fine grain, with one
+        // sharp patch and one smooth patch side by side on the same rows.
+        let (w, h) = (192, 120);
+        let img = Raster::from_fn(w, h, |x, y| {
+            let grain = if (64..80).contains(&y) && (40..80).contains(&x) {
+                hash(x, y) * 0.6 // sharp
+            } else if (64..80).contains(&y) && (112..152).contains(&x) {
+                0.3 // smooth
+            } else {
+                hash(x / 3, y / 3) * 0.25
+            };
+            [0.25 + grain, 0.2 + grain, 0.3 + grain]
+        });
+        let a = estimator()
+            .analyse(&img, &intrinsics(w, h), &Progress::none())
+            .unwrap();
+        check_sane(&a.estimate, w, h);
+        assert!(!a.landscape);
+        assert!(
+            a.cues
+                .data()
+                .iter()
+                .all(|c| *c == DepthCue::Fallback || *c == DepthCue::Sky)
+        );
+        let d = &a.estimate.depth;
+        // Lower is nearer, as the ramp says …
+        let top = median_depth(d, [0.0, 0.02, 1.0, 0.15]);
+        let bottom = median_depth(d, [0.0, 0.88, 1.0, 1.0]);
+        assert!(top > bottom, "{top} {bottom}");
+        // … and on the same rows the sharp patch is in front of the smooth one.
+        let sharp = median_depth(d, [0.25, 0.55, 0.4, 0.65]);
+        let smooth = median_depth(d, [0.62, 0.55, 0.78, 0.65]);
+        assert!(sharp < smooth, "sharp {sharp} smooth {smooth}");
+    }
+
+    #[test]
+    fn unusual_pictures_stay_honest() {
+        let e = estimator();
+        let check_flat_or_ramp = |img: &RgbRaster| {
+            let (w, h) = img.size();
+            let out = e
+                .estimate(img, &intrinsics(w, h), &Progress::none())
+                .unwrap();
+            check_sane(&out, w, h);
+            out
+        };
+        // All water: a smooth blue-grey surface with ripples, no sky above it.
+        let water = Raster::from_fn(80, 60, |x, y| {
+            let r = 0.03 * ((x as f32 * 0.7 + y as f32 * 2.0).sin());
+            [0.35 + r, 0.45 + r, 0.55 + r]
+        });
+        check_flat_or_ramp(&water);
+        // A single colour: flat or a ramp, never noise (rows constant).
+        let flat = check_flat_or_ramp(&Raster::new(64, 48, [0.6, 0.2, 0.2]));
+        for y in 0..48 {
+            let row = flat.depth.row(y);
+            let (lo, hi) = row
+                .iter()
+                .fold((f32::MAX, f32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+            assert!(hi - lo <= 1e-3 * hi, "row {y} varies: {lo}..{hi}");
+        }
+        // A vertical panorama (1:4) and an upside-down landscape.
+        check_flat_or_ramp(&landscape(40, 160, 60));
+        let upside = landscape(96, 64, 30);
+        let flipped = Raster::from_fn(96, 64, |x, y| upside.at(x, 63 - y));
+        let out = check_flat_or_ramp(&flipped);
+        // Nothing below the "sky" is mistaken for sky at the top.
+        assert!(out.sky.at(48, 2) < 0.5);
     }
 
     fn load_test_photo(name: &str) -> RgbRaster {

@@ -139,10 +139,15 @@ pub fn find_mirror_line(luma: &GrayRaster) -> Option<MirrorLine> {
         return None;
     }
     // A reflection is not brighter than what it reflects.
-    let span = max_span.min(axis as usize).min(h - 1 - axis.ceil() as usize);
+    let span = max_span
+        .min(axis as usize)
+        .min(h - 1 - axis.ceil() as usize);
     let mean_rows = |from: usize, to: usize| {
         let n = ((to - from) * w).max(1) as f32;
-        (from..to).map(|y| luma.row(y).iter().sum::<f32>()).sum::<f32>() / n
+        (from..to)
+            .map(|y| luma.row(y).iter().sum::<f32>())
+            .sum::<f32>()
+            / n
     };
     let above = mean_rows(axis as usize - span, axis as usize);
     let below = mean_rows(axis.ceil() as usize + 1, axis.ceil() as usize + 1 + span);
@@ -188,7 +193,8 @@ mod tests {
     use crate::raster::Raster;
 
     fn hash(x: usize, y: usize) -> f32 {
-        let mut v = (x as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (y as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+        let mut v = (x as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            ^ (y as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
         v ^= v >> 29;
         v = v.wrapping_mul(0xBF58_476D_1CE4_E5B9);
         v ^= v >> 32;
@@ -198,7 +204,11 @@ mod tests {
     /// A textured scene above row `axis` and below it its reflection, darker by `gain`.
     fn reflected(w: usize, h: usize, axis: usize, gain: f32) -> GrayRaster {
         Raster::from_fn(w, h, |x, y| {
-            let src_y = if y > axis { (2 * axis).saturating_sub(y) } else { y };
+            let src_y = if y > axis {
+                (2 * axis).saturating_sub(y)
+            } else {
+                y
+            };
             let v = 0.3 + 0.5 * hash(x / 3, src_y / 2) + 0.1 * (src_y as f32 / h as f32);
             if y > axis { gain * v } else { v }
         })
@@ -209,10 +219,18 @@ mod tests {
         for (h, axis) in [(120usize, 70usize), (96, 40), (200, 150)] {
             let luma = reflected(128, h, axis, 0.6);
             let m = find_mirror_line(&luma).expect("a reflection");
-            assert!((m.axis - axis as f32).abs() <= 0.5, "axis {} vs {axis}", m.axis);
+            assert!(
+                (m.axis - axis as f32).abs() <= 0.5,
+                "axis {} vs {axis}",
+                m.axis
+            );
             assert!(m.correlation > 0.9, "{m:?}");
             let below = h - axis - 1;
-            assert!(m.extent + 2 >= below.min(axis), "extent {} of {below}", m.extent);
+            assert!(
+                m.extent + 2 >= below.min(axis),
+                "extent {} of {below}",
+                m.extent
+            );
         }
     }
 

@@ -395,7 +395,9 @@ mod tests {
         assert_eq!(a.pair_count(), 1);
         assert_eq!(a.photos["a/b.jpg"][0], pair([0.5, 0.9], [0.5, 0.1]));
         let bad_shape = r#"{"photos": {"a.jpg": [[[0.5, 0.9]]]}}"#;
-        let e = OrdinalAnnotations::parse(bad_shape).unwrap_err().to_string();
+        let e = OrdinalAnnotations::parse(bad_shape)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("photos.a.jpg[0]"), "{e}");
         let outside = r#"{"photos": {"a.jpg": [[[0.5, 1.5], [0.5, 0.1]]]}}"#;
         let e = OrdinalAnnotations::parse(outside).unwrap_err().to_string();
@@ -429,7 +431,10 @@ mod tests {
         assert_eq!(table.group("wild"), vec![0.0, 0.5]);
         assert_eq!(table.overall(), vec![0.1, 0.5]);
         let md = table.to_markdown();
-        assert!(md.contains("| **overall** | 10 | 0.100 (1) | 0.500 (5) |"), "{md}");
+        assert!(
+            md.contains("| **overall** | 10 | 0.100 (1) | 0.500 (5) |"),
+            "{md}"
+        );
         assert!(table.to_json().unwrap().contains("\"overall\""));
     }
 }
