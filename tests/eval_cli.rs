@@ -1,4 +1,4 @@
-//! `makeit4d eval nvs`, `eval zoom` and `bench scene` end to end on the small copies in tests/data.
+//! `makeit4d eval nvs`, `eval zoom`, `eval ordinal` and `bench scene` end to end on the small copies in tests/data.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -214,4 +214,65 @@ fn eval_zoom_scores_the_renderer_against_resampling() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+}
+
+#[test]
+fn eval_ordinal_scores_the_estimator_against_the_ramp() {
+    let out = exe()
+        .args(["eval", "ordinal"])
+        .arg(data("ordinal.json"))
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let names: Vec<&str> = json["estimators"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["classical", "vertical ramp", "constant"]);
+    assert_eq!(json["rows"].as_array().unwrap().len(), 4);
+    let overall: Vec<f64> = json["overall"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    // The constant map ties every pair; the estimator does at least as well as the ramp.
+    assert_eq!(overall[2], 1.0);
+    assert!(overall[0] <= overall[1], "{overall:?}");
+
+    // A missing photo and a malformed file are one-line errors naming the problem.
+    let dir = std::env::temp_dir().join(format!("makeit4d-ordinal-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let missing = dir.join("missing.json");
+    std::fs::write(
+        &missing,
+        r#"{"photos": {"nope.jpg": [[[0.5, 0.9], [0.5, 0.1]]]}}"#,
+    )
+    .unwrap();
+    let out = exe()
+        .args(["eval", "ordinal"])
+        .arg(&missing)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("nope.jpg") && err.trim().lines().count() == 1,
+        "{err}"
+    );
+    let bad = dir.join("bad.json");
+    std::fs::write(&bad, r#"{"photos": {"a.jpg": [[[0.5, 0.9], [0.5]]]}}"#).unwrap();
+    let out = exe().args(["eval", "ordinal"]).arg(&bad).output().unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("photos.a.jpg[0]"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
 }

@@ -127,6 +127,25 @@ pub fn mask_overlay(
     ColorImage::new([w, h], pixels)
 }
 
+/// The depth cue that decided each pixel as a translucent colour overlay
+/// ([`DepthCue::colour`](crate::stages::depth::classical::DepthCue::colour)), at the map's own
+/// (working) resolution.
+pub fn cue_overlay(
+    map: &crate::raster::Raster<crate::stages::depth::classical::DepthCue>,
+    opacity: f32,
+) -> ColorImage {
+    let a = (opacity.clamp(0.0, 1.0) * 255.0).round() as u8;
+    let pixels = map
+        .data()
+        .iter()
+        .map(|cue| {
+            let [r, g, b] = cue.colour();
+            Color32::from_rgba_unmultiplied(r, g, b, a)
+        })
+        .collect();
+    ColorImage::new([map.width(), map.height()], pixels)
+}
+
 /// Textures keyed by name, re-uploaded only when their version changes.
 #[derive(Default)]
 pub struct Textures {

@@ -17,7 +17,7 @@
 //! Progress and one-off results come back as [`Event`]s on a second bounded channel, drained
 //! once per frame; each message is followed by a repaint request.
 
-use super::images::{DISPLAY_MAX_SIDE, mask_overlay, masked_rgb, rgb_image};
+use super::images::{DISPLAY_MAX_SIDE, cue_overlay, mask_overlay, masked_rgb, rgb_image};
 use super::viewport::PreviewRenderer;
 use crate::export::{ExportOptions, RenderSummary, render_sequence};
 use crate::geometry::View;
@@ -164,6 +164,10 @@ pub struct EarlyDepth {
     pub depth_range: Option<(f32, f32)>,
     /// The detected horizon.
     pub detected_horizon: Option<f32>,
+    /// Which cue decided each region (classical estimator only).
+    pub cues: Option<ColorImage>,
+    /// The cues present, in legend order.
+    pub cue_legend: Vec<crate::stages::depth::classical::DepthCue>,
     /// The depth strokes it includes.
     pub strokes: Vec<crate::stages::depth::paint::DepthStroke>,
 }
@@ -194,7 +198,12 @@ impl EarlyDepth {
                 DISPLAY_MAX_SIDE,
             ),
             depth_range: crate::stages::depth::preview::disparity_range(&e.depth, Some(&e.sky)),
-            detected_horizon: crate::stages::depth::classical::horizon_from_sky(&e.sky),
+            detected_horizon: detected_horizon(depth),
+            cues: depth
+                .cues
+                .as_ref()
+                .map(|c| cue_overlay(&c.map, CUE_OPACITY)),
+            cue_legend: cue_legend(depth),
             strokes: project.depth.strokes.clone(),
         }
     }
@@ -240,8 +249,13 @@ pub struct DisplayImages {
     /// The disparities at the depth colour map's two ends (`lo`: far, `hi`: near), for its
     /// legend.
     pub depth_range: Option<(f32, f32)>,
-    /// Horizon detected from the sky, fraction of the photo height from the top.
+    /// Horizon detected from the sky or a reflection, fraction of the photo height from the
+    /// top.
     pub detected_horizon: Option<f32>,
+    /// Which cue decided each region of the depth (classical estimator only).
+    pub cues: Option<ColorImage>,
+    /// The cues present, in legend order.
+    pub cue_legend: Vec<crate::stages::depth::classical::DepthCue>,
     /// Histogram of the canvas disparity `1/Z`: `[bin centre, fraction of pixels]`.
     pub histogram: Vec<[f64; 2]>,
     /// The layers, nearest first.
@@ -727,6 +741,31 @@ pub fn display_images(scene: &Scene) -> DisplayImages {
     display_images_reusing(scene, None)
 }
 
+/// Opacity of the depth-cue overlay.
+const CUE_OPACITY: f32 = 0.55;
+
+/// The horizon the depth stage found: the classical estimator's (sky or reflection), else the
+/// lower edge of the sky mask.
+fn detected_horizon(depth: &crate::stages::depth::DepthStageOutput) -> Option<f32> {
+    match &depth.cues {
+        Some(c) => c.detected_horizon,
+        None => crate::stages::depth::classical::horizon_from_sky(&depth.estimate.sky),
+    }
+}
+
+/// The cues present in the depth's cue map, in legend order.
+fn cue_legend(
+    depth: &crate::stages::depth::DepthStageOutput,
+) -> Vec<crate::stages::depth::classical::DepthCue> {
+    let Some(c) = &depth.cues else {
+        return Vec::new();
+    };
+    crate::stages::depth::classical::DepthCue::ALL
+        .into_iter()
+        .filter(|cue| c.map.data().contains(cue))
+        .collect()
+}
+
 /// [`display_images`], copying the images of `previous` whose stage output `scene` shares (a
 /// camera edit remakes none; a threshold drag only the layers').
 pub fn display_images_reusing(
@@ -740,13 +779,15 @@ pub fn display_images_reusing(
         Some(d) => d.input.clone(),
         None => rgb_image(&scene.input.rgb, DISPLAY_MAX_SIDE),
     };
-    let (depth_image, sky, detected_horizon, depth_range) =
+    let (depth_image, sky, detected_horizon, depth_range, cues, cue_legend) =
         match reuse(&|old| Arc::ptr_eq(&old.depth, &scene.depth)) {
             Some(d) => (
                 d.depth.clone(),
                 d.sky.clone(),
                 d.detected_horizon,
                 d.depth_range,
+                d.cues.clone(),
+                d.cue_legend.clone(),
             ),
             None => (
                 rgb_image(
@@ -759,8 +800,14 @@ pub fn display_images_reusing(
                     0.5,
                     DISPLAY_MAX_SIDE,
                 ),
-                crate::stages::depth::classical::horizon_from_sky(&depth.sky),
+                detected_horizon(&scene.depth),
                 crate::stages::depth::preview::disparity_range(&depth.depth, Some(&depth.sky)),
+                scene
+                    .depth
+                    .cues
+                    .as_ref()
+                    .map(|c| cue_overlay(&c.map, CUE_OPACITY)),
+                cue_legend(&scene.depth),
             ),
         };
     let (canvas_image, synthesised, histogram) =
@@ -810,6 +857,8 @@ pub fn display_images_reusing(
         sky,
         depth_range,
         detected_horizon,
+        cues,
+        cue_legend,
         histogram,
         layers,
         motion_mask,

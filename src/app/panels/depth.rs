@@ -19,6 +19,7 @@ pub enum DepthTool {
 pub struct DepthPanel {
     transform: ViewTransform,
     show_sky: bool,
+    show_cues: bool,
     tool: DepthTool,
     radius_px: f32,
     strength: f32,
@@ -31,6 +32,7 @@ impl Default for DepthPanel {
         Self {
             transform: ViewTransform::default(),
             show_sky: true,
+            show_cues: false,
             tool: DepthTool::Horizon,
             radius_px: 20.0,
             strength: 0.3,
@@ -117,6 +119,31 @@ impl StagePanel for DepthPanel {
         {
             painter.image(
                 sky,
+                view.rect,
+                Rect::from_min_max(pos2(0.0, 0.0), pos2(1.0, 1.0)),
+                Color32::WHITE,
+            );
+        }
+        let cue_texture = match early {
+            Some(e) => e.cues.as_ref().map(|c| {
+                cx.textures
+                    .get(ui.ctx(), "cues-early", e.generation, || c.clone())
+                    .id()
+            }),
+            None => match &snapshot.display.cues {
+                Some(c) => Some(
+                    cx.textures
+                        .get(ui.ctx(), "cues", snapshot.generation, || c.clone())
+                        .id(),
+                ),
+                None => None,
+            },
+        };
+        if self.show_cues
+            && let Some(cues) = cue_texture
+        {
+            painter.image(
+                cues,
                 view.rect,
                 Rect::from_min_max(pos2(0.0, 0.0), pos2(1.0, 1.0)),
                 Color32::WHITE,
@@ -289,6 +316,41 @@ impl StagePanel for DepthPanel {
             cx.edit("Depth method", |p| p.depth.method = method);
         }
         ui.checkbox(&mut self.show_sky, "Show the sky mask");
+        let legend = match (cx.early_depth, cx.snapshot) {
+            (Some(e), _) => e.cue_legend.clone(),
+            (None, Some(s)) => s.display.cue_legend.clone(),
+            (None, None) => Vec::new(),
+        };
+        if legend.is_empty() {
+            ui.add_enabled(
+                false,
+                egui::Checkbox::new(&mut self.show_cues, "Show which cue decided"),
+            )
+            .on_disabled_hover_text("Only the classical estimator reports its cues");
+        } else {
+            ui.checkbox(&mut self.show_cues, "Show which cue decided (C)")
+                .on_hover_text(
+                    "Colours each region by the cue that set its depth, so you know where a \
+                     brush stroke is needed",
+                );
+            if ui.input(|i| i.key_pressed(egui::Key::C) && i.modifiers.is_none())
+                && !ui.ctx().egui_wants_keyboard_input()
+            {
+                self.show_cues = !self.show_cues;
+            }
+            if self.show_cues {
+                ui.horizontal_wrapped(|ui| {
+                    for cue in legend {
+                        let [r, g, b] = cue.colour();
+                        let (rect, _) =
+                            ui.allocate_exact_size(egui::vec2(12.0, 12.0), Sense::hover());
+                        ui.painter()
+                            .rect_filled(rect, 2.0, Color32::from_rgb(r, g, b));
+                        ui.label(cue.label());
+                    }
+                });
+            }
+        }
         ui.separator();
         ui.heading("Horizon");
         match cx.project.depth.classical.horizon {

@@ -93,6 +93,27 @@ pub struct DepthStageOutput {
     pub estimator: String,
     /// Fallbacks and adjustments worth a message (each one line).
     pub warnings: Vec<String>,
+    /// Which cue decided each region, when the classical estimator ran.
+    pub cues: Option<DepthCues>,
+}
+
+/// The classical estimator's account of a depth map, for the editor.
+#[derive(Clone, Debug)]
+pub struct DepthCues {
+    /// The cue that decided each pixel, at the estimator's working resolution.
+    pub map: crate::raster::Raster<classical::DepthCue>,
+    /// The horizon it found (sky or reflection), fraction of the height from the top.
+    pub detected_horizon: Option<f32>,
+}
+
+impl DepthCues {
+    fn of(analysis: &classical::ClassicalAnalysis, user_horizon: bool) -> Self {
+        Self {
+            map: analysis.cues.clone(),
+            detected_horizon: (analysis.horizon_detected && !user_horizon)
+                .then_some(analysis.horizon),
+        }
+    }
 }
 
 /// Runs the depth stage: import or estimate, then apply the painted strokes.
@@ -104,7 +125,16 @@ pub fn run_depth_stage(
 ) -> Result<DepthStageOutput> {
     let (w, h) = image.size();
     let mut warnings = Vec::new();
-    let classical = || classical::ClassicalDepth::new(settings.classical.clone());
+    let mut cues = None;
+    let mut classical = || -> Result<DepthEstimate> {
+        let analysis = classical::ClassicalDepth::new(settings.classical.clone())
+            .analyse(image, intrinsics, progress)?;
+        cues = Some(DepthCues::of(
+            &analysis,
+            settings.classical.horizon.is_some(),
+        ));
+        Ok(analysis.estimate)
+    };
     let (mut estimate, estimator) = if let Some(import) = &settings.import {
         let imported = io::import_depth(&import.path, import.kind, w, h)?;
         warnings.extend(imported.warnings);
@@ -120,10 +150,7 @@ pub fn run_depth_stage(
         (estimate, format!("imported {}", import.path.display()))
     } else {
         match settings.method {
-            DepthMethod::Classical => (
-                classical().estimate(image, intrinsics, progress)?,
-                "classical".into(),
-            ),
+            DepthMethod::Classical => (classical()?, "classical".into()),
             DepthMethod::Horizon => {
                 let prior = horizon::HorizonPrior {
                     params: settings.horizon,
@@ -158,10 +185,7 @@ pub fn run_depth_stage(
                         ) {
                             warnings.push(notice);
                         }
-                        (
-                            classical().estimate(image, intrinsics, progress)?,
-                            "classical (fallback)".into(),
-                        )
+                        (classical()?, "classical (fallback)".into())
                     }
                 }
             }
@@ -174,5 +198,52 @@ pub fn run_depth_stage(
         estimate,
         estimator,
         warnings,
+        cues,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::classical::DepthCue;
+    use super::*;
+    use crate::raster::Raster;
+
+    #[test]
+    fn the_classical_stage_reports_its_cues_and_horizon() {
+        // Sky over a textured ground: the sky cue on top, the horizon at the sky's edge.
+        let (w, h) = (96, 64);
+        let img = Raster::from_fn(w, h, |x, y| {
+            if y < 24 {
+                [0.5, 0.7, 0.95]
+            } else {
+                let n = ((x * 7 + y * 13) % 11) as f32 / 22.0;
+                [0.3 + n, 0.25 + n, 0.1 + n]
+            }
+        });
+        let intrinsics = Intrinsics::from_hfov(w, h, 60.0);
+        let out = run_depth_stage(
+            &DepthSettings::default(),
+            &img,
+            &intrinsics,
+            &Progress::none(),
+        )
+        .unwrap();
+        let cues = out.cues.expect("the classical estimator reports its cues");
+        assert_eq!(cues.map.at(cues.map.width() / 2, 0), DepthCue::Sky);
+        let bottom = cues.map.at(cues.map.width() / 2, cues.map.height() - 1);
+        assert!(matches!(
+            bottom,
+            DepthCue::Ground | DepthCue::PopUp | DepthCue::Object
+        ));
+        let horizon = cues.detected_horizon.expect("a horizon");
+        assert!((horizon - 24.0 / 63.0).abs() < 0.05, "{horizon}");
+        // A horizon the user set is not "detected", and the ground-plane method reports none.
+        let mut settings = DepthSettings::default();
+        settings.classical.horizon = Some(0.5);
+        let out = run_depth_stage(&settings, &img, &intrinsics, &Progress::none()).unwrap();
+        assert_eq!(out.cues.unwrap().detected_horizon, None);
+        settings.method = DepthMethod::Horizon;
+        let out = run_depth_stage(&settings, &img, &intrinsics, &Progress::none()).unwrap();
+        assert!(out.cues.is_none());
+    }
 }
