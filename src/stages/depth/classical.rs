@@ -1564,7 +1564,7 @@ mod tests {
         // surrounded by sky.
         for y in 10..22 {
             for x in 20..50 {
-                let edge = x < 22 || x > 47 || y < 12 || y > 19;
+                let edge = !(22..=47).contains(&x) || !(12..=19).contains(&y);
                 let n = if edge { hash(x, y) * 0.3 } else { 0.0 };
                 img.set(x, y, [0.9 - n, 0.9 - n, 0.92 - n]);
             }
