@@ -809,3 +809,33 @@ fn the_gpu_preview_has_no_gaps_when_the_output_is_small() {
         "{dark} of {total} preview pixels are black (gaps between points)"
     );
 }
+
+#[test]
+fn the_depth_tab_shows_which_cue_decided() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(mut h) = harness(fast_project(dir.path())) else {
+        return;
+    };
+    wait_idle(&mut h, Duration::from_secs(600));
+    h.get_by_label("3 Depth").click();
+    h.step();
+    h.step();
+    assert!(
+        h.query_by_label("sky").is_none(),
+        "no legend before it is asked for"
+    );
+    h.get_by_label("Show which cue decided (C)").click();
+    h.step();
+    h.step();
+    // The sample is a lake under a sky: its legend names the sky and the ground.
+    for cue in ["sky", "ground"] {
+        assert!(h.query_by_label(cue).is_some(), "legend entry {cue}");
+    }
+    let unnamed = h.unnamed_widgets();
+    assert!(unnamed.is_empty(), "unnamed widgets {unnamed:#?}");
+    // The same checkbox again hides it.
+    h.get_by_label("Show which cue decided (C)").click();
+    h.step();
+    h.step();
+    assert!(h.query_by_label("sky").is_none());
+}

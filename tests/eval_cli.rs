@@ -237,7 +237,7 @@ fn eval_ordinal_scores_the_estimator_against_the_ramp() {
         .map(|v| v.as_str().unwrap())
         .collect();
     assert_eq!(names, ["classical", "vertical ramp", "constant"]);
-    assert_eq!(json["rows"].as_array().unwrap().len(), 4);
+    assert_eq!(json["rows"].as_array().unwrap().len(), 5);
     let overall: Vec<f64> = json["overall"]
         .as_array()
         .unwrap()

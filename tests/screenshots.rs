@@ -130,6 +130,18 @@ fn regenerate_screenshots() {
         h.step();
     }
     shot(&mut h, &out.join("10-save-as-prompt.png"));
+    h.get_by_label("Cancel").click();
+    h.step();
+
+    // Which cue decided each region of the depth.
+    h.get_by_label("3 Depth").click();
+    h.step();
+    h.get_by_label("Show which cue decided (C)").click();
+    h.remove_cursor();
+    for _ in 0..6 {
+        h.step();
+    }
+    shot(&mut h, &out.join("11-depth-cues.png"));
 }
 
 /// Writes the window at three quarters of its size (small files, readable text).

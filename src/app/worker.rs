@@ -742,7 +742,7 @@ pub fn display_images(scene: &Scene) -> DisplayImages {
 }
 
 /// Opacity of the depth-cue overlay.
-const CUE_OPACITY: f32 = 0.55;
+const CUE_OPACITY: f32 = 0.75;
 
 /// The horizon the depth stage found: the classical estimator's (sky or reflection), else the
 /// lower edge of the sky mask.

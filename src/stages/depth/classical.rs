@@ -97,9 +97,9 @@ pub struct ClassicalDepthParams {
     /// Weight of the local detail (focus / figure-ground) cue in photos where the landscape
     /// cues do not apply (no sky, no reflection): sharper, more detailed than its
     /// surroundings is nearer. Added to the fused nearness as `weight · clamp(local / scale,
-    /// −½, ½)`. Default 0 (off): at 0.5 it orders the cups and other close-ups of the
-    /// ordinal set right, but it also raises fern-covered ground into a wall across
-    /// `forest_path`'s footpath, and the autocruise stops there.
+    /// −½, ½)`. Default 0 (off): at 0.5 it orders the cups of the ordinal set right, but it
+    /// reshapes `forest_path`'s canopy enough that the autocruise no longer follows the
+    /// footpath.
     pub detail_weight: f32,
     /// Local detail difference (natural log of the gradient energy against its
     /// neighbourhood) that counts as a full step of the detail cue. Default 3.0.
@@ -480,7 +480,7 @@ impl ClassicalDepth {
         let detail_work = if landscape || p.detail_weight == 0.0 {
             Raster::new(ww, wh, 0.0)
         } else {
-            detail_cue(&texture, p.detail_scale)
+            detail_cue(&texture, &work_luma, p.detail_scale)
         };
 
         let aerial_work = if landscape && p.aerial_weight > 0.0 {
@@ -857,15 +857,21 @@ pub fn aerial_cue(work: &RgbRaster, sky: &GrayRaster, scale: f32) -> Option<Gray
     }))
 }
 
-/// Local detail cue, a nearness offset: with `D = ln(G_σ ∗ texture + 10⁻³)` (σ = 2.5 % of the
-/// longer side: region scale, so that a tree trunk's bark does not bend it),
+/// Local detail cue, a nearness offset: with the relative (Weber) detail
+/// `D = ln(G_σ ∗ texture / (G_σ ∗ luma + 0.05) + 10⁻³)` (σ = 2.5 % of the longer side: region
+/// scale, so that a tree trunk's bark does not bend it; relative, so that a dark but detailed
+/// canopy is not taken for a smooth one),
 /// `clamp((D − G_4σ ∗ D)/scale, −½, ½)`. What is sharper and more detailed than
 /// its surroundings (a subject in focus, a rim against the smooth inside of a cup, moss
 /// against bare soil) comes forward; a smooth or defocused region recedes.
-pub fn detail_cue(texture: &GrayRaster, scale: f32) -> GrayRaster {
+pub fn detail_cue(texture: &GrayRaster, luma: &GrayRaster, scale: f32) -> GrayRaster {
     let long = texture.width().max(texture.height()) as f32;
     let sigma = (0.025 * long).max(0.5);
-    let energy = gaussian_blur(texture, sigma).map(|t| (t.max(0.0) + 1e-3).ln());
+    let mean = gaussian_blur(luma, sigma);
+    let blurred = gaussian_blur(texture, sigma);
+    let energy = Raster::from_fn(texture.width(), texture.height(), |x, y| {
+        (blurred.at(x, y).max(0.0) / (mean.at(x, y).max(0.0) + 0.05) + 1e-3).ln()
+    });
     let surround = gaussian_blur(&energy, 4.0 * sigma);
     let scale = scale.max(1e-6);
     Raster::from_fn(texture.width(), texture.height(), |x, y| {
