@@ -386,16 +386,47 @@ pub enum SizeRule {
         /// Input height in pixels.
         height: usize,
     },
-    /// Keep the aspect ratio, scale the long side to `long_side` (the image's own size when
-    /// absent), and round each side to the nearest multiple of `multiple` (MiDaS/DPT: 32,
-    /// Depth Anything: 14, LaMa: 8).
+    /// Keep the aspect ratio, scale the long side to `long_side` or the short side to
+    /// `short_side` (the image's own size when neither is given; not both), and round each side
+    /// to the nearest multiple of `multiple` (MiDaS/DPT: 32, Depth Anything: 14 with
+    /// `short_side` 518, as its reference preprocessor does, LaMa: 8).
     MultipleOf {
         /// Each side is a multiple of this.
         multiple: usize,
-        /// Target long side in pixels; `None` keeps the image's size.
+        /// Target long side in pixels.
         #[serde(default)]
         long_side: Option<usize>,
+        /// Target short side in pixels.
+        #[serde(default)]
+        short_side: Option<usize>,
     },
+}
+
+/// How an image is resampled to and from the network's size.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Resample {
+    /// Box-filtered when shrinking, bilinear when enlarging ([`crate::raster::Raster::resized`]).
+    #[default]
+    Bilinear,
+    /// Bicubic (Keys, a = −½, PIL's and torchvision's kernel), widened when shrinking so it
+    /// also averages (antialiased): what the Depth Anything and MiDaS references use.
+    Bicubic,
+}
+
+impl Resample {
+    /// `image` resampled to `width × height`.
+    pub fn resize(
+        self,
+        image: &crate::raster::RgbRaster,
+        width: usize,
+        height: usize,
+    ) -> crate::raster::RgbRaster {
+        match self {
+            Resample::Bilinear => image.resized(width, height),
+            Resample::Bicubic => crate::raster::resize_bicubic(image, width, height),
+        }
+    }
 }
 
 impl SizeRule {
@@ -406,11 +437,14 @@ impl SizeRule {
             SizeRule::MultipleOf {
                 multiple,
                 long_side,
+                short_side,
             } => {
                 let m = multiple.max(1);
-                let scale = long_side
-                    .map(|l| l as f64 / width.max(height).max(1) as f64)
-                    .unwrap_or(1.0);
+                let scale = match (long_side, short_side) {
+                    (Some(l), _) => l as f64 / width.max(height).max(1) as f64,
+                    (None, Some(s)) => s as f64 / width.min(height).max(1) as f64,
+                    (None, None) => 1.0,
+                };
                 let side = |s: usize| {
                     let rounded = ((s as f64 * scale) / m as f64).round() as usize * m;
                     rounded.max(m)
@@ -429,10 +463,22 @@ impl SizeRule {
                 Err("size.multiple_of.multiple must be ≥ 1".to_string())
             }
             SizeRule::MultipleOf {
+                long_side: Some(_),
+                short_side: Some(_),
+                ..
+            } => Err("size.multiple_of: give long_side or short_side, not both".to_string()),
+            SizeRule::MultipleOf {
                 multiple,
-                long_side: Some(long),
-            } if long < multiple => Err(format!(
-                "size.multiple_of.long_side ({long}) is smaller than the multiple ({multiple})"
+                long_side: Some(side),
+                ..
+            }
+            | SizeRule::MultipleOf {
+                multiple,
+                short_side: Some(side),
+                ..
+            } if side < multiple => Err(format!(
+                "size.multiple_of: the target side ({side}) is smaller than the multiple \
+                 ({multiple})"
             )),
             _ => Ok(()),
         }
@@ -534,6 +580,9 @@ pub struct DepthSpec {
     pub output: Option<String>,
     /// How the input size is chosen.
     pub size: SizeRule,
+    /// How the image is resampled to that size (bilinear when absent).
+    #[serde(default)]
+    pub resample: Resample,
     /// How colours are normalised.
     pub normalization: Normalization,
     /// What the output means.
@@ -559,6 +608,10 @@ pub struct InpaintSpec {
     pub output: Option<String>,
     /// The model's size (tile size in tile mode).
     pub size: SizeRule,
+    /// How the image is resampled to the model's size and back in resize mode (bilinear when
+    /// absent).
+    #[serde(default)]
+    pub resample: Resample,
     /// `[black, white]`: the value the network expects for colour 0 and 1 (`[0, 1]` default,
     /// `[0, 255]` for some exports).
     #[serde(default = "unit_range")]
@@ -566,10 +619,9 @@ pub struct InpaintSpec {
     /// `[known, hole]`: the mask values for a kept and for a filled pixel (`[0, 1]` default).
     #[serde(default = "unit_range")]
     pub mask_range: [f32; 2],
-    /// `[black, white]` of the output; the image range when absent (LaMa exports often take
-    /// `[0, 1]` and return `[0, 255]`).
-    #[serde(default)]
-    pub output_range: Option<[f32; 2]>,
+    /// `[black, white]` of the output. Required: LaMa exports take `[0, 1]` and return
+    /// `[0, 255]`, and guessing the image range would turn every filled pixel white.
+    pub output_range: [f32; 2],
     /// Resize or tile.
     #[serde(default)]
     pub mode: InpaintMode,
@@ -614,7 +666,8 @@ impl fmt::Display for ModelKind {
 ///   "file": "depth_anything_v2_vits.onnx",
 ///   "input": "image",
 ///   "output": "depth",
-///   "size": { "multiple_of": { "multiple": 14, "long_side": 518 } },
+///   "size": { "multiple_of": { "multiple": 14, "short_side": 518 } },
+///   "resample": "bicubic",
 ///   "normalization": "imagenet",
 ///   "output_meaning": "relative_disparity"
 /// }
@@ -683,8 +736,8 @@ impl ModelManifest {
             }
             ModelSpec::Inpaint(i) => {
                 i.size.validate().map_err(&error)?;
-                let ranges = [Some(i.image_range), Some(i.mask_range), i.output_range];
-                for range in ranges.into_iter().flatten() {
+                let ranges = [i.image_range, i.mask_range, i.output_range];
+                for range in ranges {
                     if !range.iter().all(|v| v.is_finite()) || range[0] == range[1] {
                         return Err(error(format!(
                             "range {range:?} must be two different finite numbers"
@@ -1100,14 +1153,37 @@ mod tests {
         let dpt = SizeRule::MultipleOf {
             multiple: 14,
             long_side: Some(518),
+            short_side: None,
         };
         assert_eq!(dpt.input_size(1000, 400), (518, 210));
         assert_eq!(dpt.input_size(1, 1), (518, 518));
+        // Depth Anything's reference: short side 518, multiple of 14 (848×480 → 910×518).
+        let depth_anything = SizeRule::MultipleOf {
+            multiple: 14,
+            long_side: None,
+            short_side: Some(518),
+        };
+        assert_eq!(depth_anything.input_size(848, 480), (910, 518));
+        assert_eq!(depth_anything.input_size(480, 848), (518, 910));
+        assert_eq!(depth_anything.input_size(1280, 800), (826, 518));
         let native = SizeRule::MultipleOf {
             multiple: 8,
             long_side: None,
+            short_side: None,
         };
         assert_eq!(native.input_size(30, 3), (32, 8));
+        let both = SizeRule::MultipleOf {
+            multiple: 8,
+            long_side: Some(64),
+            short_side: Some(32),
+        };
+        assert!(both.validate().is_err());
+        let small = SizeRule::MultipleOf {
+            multiple: 14,
+            long_side: None,
+            short_side: Some(7),
+        };
+        assert!(small.validate().is_err());
     }
 
     #[test]
@@ -1138,8 +1214,11 @@ mod tests {
             r#"{ "kind": "inpaint", "file": "m.onnx", "image_input": "i", "mask_input": "m",
                 "size": { "fixed": { "width": 16, "height": 16 } }, "image_range": [1, 1] }"#,
             r#"{ "kind": "inpaint", "file": "m.onnx", "image_input": "i", "mask_input": "m",
-                "size": { "fixed": { "width": 16, "height": 16 } },
+                "size": { "fixed": { "width": 16, "height": 16 } }, "output_range": [0, 1],
                 "mode": { "tile": { "overlap": 8 } } }"#,
+            // No output range: refused, not guessed.
+            r#"{ "kind": "inpaint", "file": "m.onnx", "image_input": "i", "mask_input": "m",
+                "size": { "fixed": { "width": 16, "height": 16 } } }"#,
             "not json",
         ];
         for text in bad {

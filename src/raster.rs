@@ -305,8 +305,142 @@ pub fn quantile(values: &[f32], q: f32) -> Option<f32> {
     Some(*v)
 }
 
+/// The Keys cubic convolution kernel with `a = −½` (Catmull-Rom; PIL's and torchvision's
+/// "bicubic"): 1 at 0, 0 at every other integer, support `(−2, 2)`.
+pub fn keys_cubic(x: f32) -> f32 {
+    const A: f32 = -0.5;
+    let x = x.abs();
+    if x <= 1.0 {
+        ((A + 2.0) * x - (A + 3.0)) * x * x + 1.0
+    } else if x < 2.0 {
+        ((A * x - 5.0 * A) * x + 8.0 * A) * x - 4.0 * A
+    } else {
+        0.0
+    }
+}
+
+/// Taps of one axis of [`resize_bicubic`]: per output index, the first source index and the
+/// normalised weights of the consecutive sources from there.
+fn cubic_taps(src: usize, dst: usize) -> Vec<(usize, Vec<f32>)> {
+    let scale = src as f32 / dst as f32;
+    // Shrinking widens the kernel so that it averages (antialiasing, as PIL does).
+    let stretch = scale.max(1.0);
+    let support = 2.0 * stretch;
+    (0..dst)
+        .map(|i| {
+            let centre = (i as f32 + 0.5) * scale;
+            let first = ((centre - support).floor().max(0.0) as usize).min(src - 1);
+            let last = ((centre + support).ceil() as usize).min(src);
+            let mut weights: Vec<f32> = (first..last.max(first + 1))
+                .map(|j| keys_cubic((j as f32 + 0.5 - centre) / stretch))
+                .collect();
+            let sum: f32 = weights.iter().sum();
+            if sum.abs() > 1e-6 {
+                for w in &mut weights {
+                    *w /= sum;
+                }
+            } else {
+                weights = vec![1.0];
+            }
+            (first, weights)
+        })
+        .collect()
+}
+
+/// `image` resampled to `width × height` by separable bicubic convolution ([`keys_cubic`],
+/// antialiased when shrinking, taps outside the image dropped and the rest renormalised),
+/// clamped to `[0, 1]`. An empty image or size gives an empty or black raster.
+pub fn resize_bicubic(image: &RgbRaster, width: usize, height: usize) -> RgbRaster {
+    let (w, h) = image.size();
+    if w == 0 || h == 0 || width == 0 || height == 0 {
+        return Raster::new(width, height, [0.0; 3]);
+    }
+    let xs = cubic_taps(w, width);
+    let ys = cubic_taps(h, height);
+    let mut horizontal = vec![[0.0f32; 3]; width * h];
+    for y in 0..h {
+        let row = image.row(y);
+        for (x, (first, weights)) in xs.iter().enumerate() {
+            let mut acc = [0.0f32; 3];
+            for (k, wt) in weights.iter().enumerate() {
+                let c = row[first + k];
+                for ch in 0..3 {
+                    acc[ch] += wt * c[ch];
+                }
+            }
+            horizontal[y * width + x] = acc;
+        }
+    }
+    let mut out = vec![[0.0f32; 3]; width * height];
+    for (y, (first, weights)) in ys.iter().enumerate() {
+        for x in 0..width {
+            let mut acc = [0.0f32; 3];
+            for (k, wt) in weights.iter().enumerate() {
+                let c = horizontal[(first + k) * width + x];
+                for ch in 0..3 {
+                    acc[ch] += wt * c[ch];
+                }
+            }
+            out[y * width + x] = [
+                acc[0].clamp(0.0, 1.0),
+                acc[1].clamp(0.0, 1.0),
+                acc[2].clamp(0.0, 1.0),
+            ];
+        }
+    }
+    Raster::from_vec(width, height, out).unwrap_or_else(|| Raster::new(width, height, [0.0; 3]))
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn keys_cubic_known_answers() {
+        assert_eq!(keys_cubic(0.0), 1.0);
+        for x in [1.0f32, 2.0, -1.0, 2.5] {
+            assert!(keys_cubic(x).abs() < 1e-6, "{x}");
+        }
+        // a = −½: W(½) = 0.5625, W(1.5) = −0.0625, and the four taps at ±½, ±1½ sum to 1.
+        assert!((keys_cubic(0.5) - 0.5625).abs() < 1e-6);
+        assert!((keys_cubic(1.5) + 0.0625).abs() < 1e-6);
+    }
+
+    #[test]
+    fn bicubic_resize_known_answers() {
+        // A constant stays constant, up and down.
+        let flat = Raster::new(7, 5, [0.25, 0.5, 0.75]);
+        for (w, h) in [(14, 10), (3, 2), (1, 1), (20, 3)] {
+            let r = resize_bicubic(&flat, w, h);
+            assert_eq!(r.size(), (w, h));
+            assert!(r.data().iter().all(|c| (c[0] - 0.25).abs() < 1e-5
+                && (c[1] - 0.5).abs() < 1e-5
+                && (c[2] - 0.75).abs() < 1e-5));
+        }
+        // A linear ramp doubled is the same ramp at the new sample positions, away from the
+        // borders (cubic convolution reproduces linear functions).
+        let ramp = Raster::from_fn(16, 4, |x, _| [x as f32 / 32.0 + 0.2; 3]);
+        let up = resize_bicubic(&ramp, 32, 8);
+        for x in 4..28 {
+            let expected = ((x as f32 + 0.5) / 2.0 - 0.5) / 32.0 + 0.2;
+            assert!(
+                (up.at(x, 3)[0] - expected).abs() < 1e-5,
+                "{x}: {:?}",
+                up.at(x, 3)
+            );
+        }
+        // Halving a fine checkerboard averages it (antialiased), it does not alias.
+        let checker = Raster::from_fn(32, 32, |x, y| [((x + y) % 2) as f32; 3]);
+        let half = resize_bicubic(&checker, 16, 16);
+        for c in half.data() {
+            assert!((c[0] - 0.5).abs() < 0.1, "{c:?}");
+        }
+        // Empty in, empty or black out.
+        assert_eq!(
+            resize_bicubic(&Raster::new(0, 0, [0.0; 3]), 4, 4).size(),
+            (4, 4)
+        );
+        assert_eq!(resize_bicubic(&flat, 0, 3).size(), (0, 3));
+    }
+
     use super::*;
 
     #[test]

@@ -131,6 +131,62 @@ fn linear_depth_model_matches_reference() {
     assert!(far > 0 && far == sky, "far {far}, sky {sky}");
 }
 
+/// Depth Anything's reference preprocessing: short side 518, a multiple of 14, bicubic. An
+/// 848×480 photo reaches the network at 910×518 (not 518×294, as a long-side rule gave).
+#[test]
+fn short_side_rule_and_bicubic_feed_the_reference_size() {
+    if !runtime_ready() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(
+        fixture("depth_linear.onnx"),
+        dir.path().join("depth_linear.onnx"),
+    )
+    .unwrap();
+    let manifest = dir.path().join("depth_anything_like.json");
+    std::fs::write(
+        &manifest,
+        r#"{ "kind": "depth", "file": "depth_linear.onnx", "input": "image",
+            "output": "disparity",
+            "size": { "multiple_of": { "multiple": 14, "short_side": 518 } },
+            "resample": "bicubic",
+            "normalization": { "mean_std": { "mean": [0.485, 0.456, 0.406],
+                                             "std": [0.229, 0.224, 0.225] } },
+            "output_meaning": "relative_disparity" }"#,
+    )
+    .unwrap();
+    let model = OnnxDepth::from_manifest(&manifest).unwrap();
+    let (w, h) = (848, 480);
+    let image = picture(w, h);
+    let est = model
+        .estimate(&image, &intrinsics(w, h), &Progress::none())
+        .unwrap();
+    let norm = Normalization::MeanStd {
+        mean: [0.485, 0.456, 0.406],
+        std: [0.229, 0.224, 0.225],
+    };
+    let reference = |small: &RgbRaster| {
+        let raw = small.map(|px| {
+            (0..3)
+                .map(|c| LINEAR_WEIGHTS[c] * norm.apply(c, px[c]))
+                .sum::<f32>()
+                + LINEAR_BIAS
+        });
+        reference_disparity(&raw, w, h)
+    };
+    let got = est.depth.map(|z| 1.0 / z);
+    let right = reference(&makeit4d::raster::resize_bicubic(&image, 910, 518));
+    assert!(
+        max_abs_diff(&got, &right) < 1e-4,
+        "{}",
+        max_abs_diff(&got, &right)
+    );
+    // The old long-side size would not match.
+    let wrong = reference(&makeit4d::raster::resize_bicubic(&image, 518, 294));
+    assert!(max_abs_diff(&got, &wrong) > 1e-3);
+}
+
 #[test]
 fn fixed_size_depth_output_is_inverted_and_resized() {
     if !runtime_ready() {

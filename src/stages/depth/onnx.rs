@@ -117,7 +117,7 @@ impl OnnxDepth {
                 "network input {in_w}×{in_h} is larger than {MAX_INPUT_SIDE} pixels a side"
             )));
         }
-        let resized = image.resized(in_w, in_h);
+        let resized = self.spec.resample.resize(image, in_w, in_h);
         let normalization = self.spec.normalization;
         let data = rgb_to_nchw(&resized, |c, v| normalization.apply(c, v));
         progress.report(0.1, "depth (onnx)");

@@ -152,7 +152,7 @@ impl OnnxInpainter {
                 self.output, out.shape
             )));
         }
-        let [out_black, out_white] = self.spec.output_range.unwrap_or(self.spec.image_range);
+        let [out_black, out_white] = self.spec.output_range;
         let scale = 1.0 / (out_white - out_black);
         let mut bad = 0usize;
         let pixels = (0..n)
@@ -187,7 +187,7 @@ impl OnnxInpainter {
     ) -> Result<RgbRaster> {
         let (w, h) = image.size();
         let (in_w, in_h) = self.spec.size.input_size(w, h);
-        let small = image.resized(in_w, in_h);
+        let small = self.spec.resample.resize(image, in_w, in_h);
         // A model pixel is blocked when any blocked pixel contributes to it (no hole shrinks).
         let small_blocked = blocked
             .map(|b| if b { 1.0f32 } else { 0.0 })
@@ -198,7 +198,7 @@ impl OnnxInpainter {
             |x, y| (small.at(x, y), small_blocked.at(x, y) > 0.0),
             progress,
         )?;
-        Ok(filled.resized(w, h))
+        Ok(self.spec.resample.resize(&filled, w, h))
     }
 
     /// Tile mode: overlapping model-sized tiles over the hole, blended with feathered weights.
@@ -349,22 +349,30 @@ fn check_sizes(request: &InpaintRequest<'_>) -> Result<()> {
     Ok(())
 }
 
-/// The tile size for an image of `w × h`: the fixed size, a square of the long side for a
-/// multiple-of rule with a long side, else the image rounded up to the multiple (one tile).
+/// The tile size for an image of `w × h`: the fixed size, a square of the target side for a
+/// multiple-of rule with a long or short side, else the image rounded up to the multiple (one
+/// tile).
 fn tile_size(rule: SizeRule, w: usize, h: usize) -> (usize, usize) {
     match rule {
         SizeRule::Fixed { width, height } => (width, height),
         SizeRule::MultipleOf {
             multiple,
-            long_side: Some(long),
+            long_side: Some(side),
+            ..
+        }
+        | SizeRule::MultipleOf {
+            multiple,
+            short_side: Some(side),
+            ..
         } => {
             let m = multiple.max(1);
-            let side = (long / m).max(1) * m;
+            let side = (side / m).max(1) * m;
             (side, side)
         }
         SizeRule::MultipleOf {
             multiple,
             long_side: None,
+            short_side: None,
         } => {
             let m = multiple.max(1);
             (w.div_ceil(m).max(1) * m, h.div_ceil(m).max(1) * m)
