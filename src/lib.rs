@@ -10,6 +10,7 @@ pub mod geometry;
 pub mod image_io;
 pub mod metrics;
 pub mod ml;
+pub mod models;
 pub mod path;
 pub mod progress;
 pub mod project;

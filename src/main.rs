@@ -52,6 +52,51 @@ enum Command {
     Bench(BenchCommand),
     /// Print what this machine offers: GPU adapter, ONNX Runtime, models, ffmpeg.
     Doctor(DoctorArgs),
+    /// The built-in catalogue of learned models: list, install, remove, print a manifest.
+    #[command(subcommand)]
+    Models(ModelsCommand),
+}
+
+#[derive(Subcommand, Debug)]
+enum ModelsCommand {
+    /// The catalogue, and which models are installed (with their size on disk).
+    List(ModelsDirArgs),
+    /// Download a model (or take a file you have, with --file), check it and install it.
+    Install(ModelsInstallArgs),
+    /// Remove an installed model.
+    Remove(ModelsNameArgs),
+    /// Print a model's manifest (to adapt it to another export).
+    Manifest(ModelsNameArgs),
+}
+
+#[derive(Args, Debug)]
+struct ModelsDirArgs {
+    /// The models folder (default: $MAKEIT4D_MODELS_DIR, else $XDG_DATA_HOME/makeit4d/models).
+    #[arg(long)]
+    dir: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+struct ModelsNameArgs {
+    /// The model's name (see `makeit4d models list`).
+    name: String,
+    #[command(flatten)]
+    dir: ModelsDirArgs,
+}
+
+#[derive(Args, Debug)]
+struct ModelsInstallArgs {
+    /// The model's name (see `makeit4d models list`).
+    name: String,
+    /// Install this file (downloaded by hand, copied from another machine) instead of
+    /// downloading.
+    #[arg(long)]
+    file: Option<PathBuf>,
+    /// Download from this address instead of the catalogue's (a mirror).
+    #[arg(long)]
+    url: Option<String>,
+    #[command(flatten)]
+    dir: ModelsDirArgs,
 }
 
 #[derive(Args, Debug)]
@@ -583,6 +628,7 @@ fn main() -> ExitCode {
         Command::Eval(EvalCommand::Nvs(args)) => eval_nvs(args, cancel),
         Command::Eval(EvalCommand::Zoom(args)) => eval_zoom(args, cancel),
         Command::Eval(EvalCommand::Ordinal(args)) => eval_ordinal(args, cancel),
+        Command::Models(command) => models(command),
         Command::Bench(BenchCommand::Depth(args)) => bench_depth(args),
         Command::Bench(BenchCommand::Inpaint(args)) => bench_inpaint(args, cancel),
         Command::Bench(BenchCommand::Motion(args)) => bench_motion(args),
@@ -1101,6 +1147,140 @@ fn bench_scene_case(args: BenchSceneCaseArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The models folder of `args`, or the default one.
+fn models_dir(args: &ModelsDirArgs) -> anyhow::Result<PathBuf> {
+    match &args.dir {
+        Some(d) => Ok(d.clone()),
+        None => makeit4d::models::models_dir()
+            .ok_or_else(|| anyhow::anyhow!("no models folder: set MAKEIT4D_MODELS_DIR or HOME")),
+    }
+}
+
+/// The catalogue entry called `name`, or an error listing the names.
+fn catalogue_entry(name: &str) -> anyhow::Result<&'static makeit4d::models::CatalogueEntry> {
+    makeit4d::models::find(name).ok_or_else(|| {
+        let names: Vec<&str> = makeit4d::models::CATALOGUE.iter().map(|e| e.name).collect();
+        anyhow::anyhow!(
+            "no model called \"{name}\" in the catalogue ({})",
+            names.join(", ")
+        )
+    })
+}
+
+/// Loads `manifest`'s graph through ONNX Runtime and checks it against the manifest; without
+/// the runtime, says that the check waits for the first use.
+fn check_model_graph(manifest: &makeit4d::ml::ModelManifest) -> makeit4d::Result<()> {
+    use makeit4d::ml::ModelKind;
+    if !makeit4d::ml::ort_available() {
+        eprintln!(
+            "note: ONNX Runtime is not installed, so the graph is checked on first use ({})",
+            makeit4d::ml::ort_status()
+        );
+        return Ok(());
+    }
+    match manifest.kind() {
+        ModelKind::Depth => {
+            makeit4d::stages::depth::onnx::OnnxDepth::new(manifest.clone()).map(|_| ())
+        }
+        ModelKind::Inpaint => {
+            makeit4d::stages::inpaint::onnx::OnnxInpainter::new(manifest.clone()).map(|_| ())
+        }
+    }
+}
+
+fn models(command: ModelsCommand) -> anyhow::Result<()> {
+    use makeit4d::models::{self, CATALOGUE};
+    match command {
+        ModelsCommand::List(args) => {
+            let dir = models_dir(&args)?;
+            println!("models folder: {}", dir.display());
+            println!("| name | kind | size | licence | installed | what it is |");
+            println!("|---|---|---:|---|---|---|");
+            for e in CATALOGUE {
+                let installed = match models::installed(&dir, e) {
+                    Some(m) => format!("yes, {:.1} MB", m.bytes as f64 / 1e6),
+                    None => "no".into(),
+                };
+                let licence = if e.non_commercial {
+                    format!("{} (non-commercial)", e.licence)
+                } else {
+                    e.licence.to_string()
+                };
+                println!(
+                    "| {} | {} | {} | {licence} | {installed} | {} |",
+                    e.name, e.kind, e.published_size, e.description
+                );
+            }
+            println!(
+                "\ninstall one with `makeit4d models install NAME`, then use it by name: \
+                      `render photo.jpg --depth-model depth-anything-v2-small`"
+            );
+            Ok(())
+        }
+        ModelsCommand::Manifest(args) => {
+            let entry = catalogue_entry(&args.name)?;
+            println!("{}", entry.manifest);
+            Ok(())
+        }
+        ModelsCommand::Remove(args) => {
+            let entry = catalogue_entry(&args.name)?;
+            let dir = models_dir(&args.dir)?;
+            if models::remove(&dir, entry)? {
+                println!("removed {} from {}", entry.name, dir.display());
+            } else {
+                println!("{} is not installed in {}", entry.name, dir.display());
+            }
+            Ok(())
+        }
+        ModelsCommand::Install(args) => {
+            let entry = catalogue_entry(&args.name)?;
+            let dir = models_dir(&args.dir)?;
+            if entry.non_commercial {
+                eprintln!(
+                    "note: {} is licensed {}: not for commercial use",
+                    entry.name, entry.licence
+                );
+            }
+            let installed = match &args.file {
+                Some(file) => models::install_from_file(&dir, entry, file, &check_model_graph)?,
+                None => {
+                    let bar = ProgressBar::new(0);
+                    bar.set_style(
+                        ProgressStyle::with_template(
+                            "{msg} [{bar:40}] {bytes}/{total_bytes} {bytes_per_sec} {eta}",
+                        )
+                        .unwrap_or_else(|_| ProgressStyle::default_bar())
+                        .progress_chars("=> "),
+                    );
+                    bar.set_message(entry.name);
+                    let progress = |done: u64, total: Option<u64>| {
+                        if let Some(t) = total {
+                            bar.set_length(t);
+                        }
+                        bar.set_position(done);
+                    };
+                    let result = models::install_from_url(
+                        &dir,
+                        entry,
+                        args.url.as_deref(),
+                        &progress,
+                        &check_model_graph,
+                    );
+                    bar.finish_and_clear();
+                    result?
+                }
+            };
+            println!(
+                "installed {} ({:.1} MB) in {}",
+                entry.name,
+                installed.bytes as f64 / 1e6,
+                installed.manifest_path.parent().unwrap_or(&dir).display()
+            );
+            Ok(())
+        }
+    }
+}
+
 fn doctor(args: DoctorArgs) -> anyhow::Result<()> {
     println!("makeit4d {}", env!("CARGO_PKG_VERSION"));
     match makeit4d::render::gpu::GpuContext::new() {
@@ -1124,6 +1304,37 @@ fn doctor(args: DoctorArgs) -> anyhow::Result<()> {
             }
         }
         None => println!("models: none configured (pass --project to list a project's models)"),
+    }
+    match makeit4d::models::models_dir() {
+        Some(dir) => {
+            let installed: Vec<String> = makeit4d::models::CATALOGUE
+                .iter()
+                .filter_map(|e| makeit4d::models::installed(&dir, e))
+                .map(|m| {
+                    let check = makeit4d::ml::ModelManifest::load(&m.manifest_path)
+                        .and_then(|manifest| check_model_graph(&manifest));
+                    match check {
+                        Ok(()) => {
+                            format!("{} ({:.1} MB, checked)", m.entry.name, m.bytes as f64 / 1e6)
+                        }
+                        Err(e) => format!("{} (broken: {e:#})", m.entry.name),
+                    }
+                })
+                .collect();
+            if installed.is_empty() {
+                println!(
+                    "installed models: none in {} (`makeit4d models list` shows the catalogue)",
+                    dir.display()
+                );
+            } else {
+                println!(
+                    "installed models ({}): {}",
+                    dir.display(),
+                    installed.join(", ")
+                );
+            }
+        }
+        None => println!("installed models: no models folder (no HOME)"),
     }
     let ffmpeg = VideoOptions::new(VideoFormat::Mp4).ffmpeg;
     match std::process::Command::new(&ffmpeg).arg("-version").output() {

@@ -42,7 +42,22 @@ pub const ORT_INSTALL_HINT: &str = "python3 -m pip install --target ~/.local/sha
      onnxruntime==1.31.1 (or set ORT_DYLIB_PATH to libonnxruntime.so)";
 
 /// The folder, below the data directory, where the runtime's shared library lies.
-const DATA_SUBDIR: &str = "makeit4d/ort/onnxruntime/capi";
+const DATA_SUBDIR_IN_APP: &str = "ort/onnxruntime/capi";
+
+/// The program's per-user data folder: `$XDG_DATA_HOME/makeit4d` (an absolute
+/// `XDG_DATA_HOME` only, as the XDG spec says), else `~/.local/share/makeit4d`; `None` without
+/// a home. ONNX Runtime, the models and the editor's recovery file live under it.
+pub fn user_data_dir() -> Option<PathBuf> {
+    std::env::var_os("XDG_DATA_HOME")
+        .map(PathBuf::from)
+        .filter(|p| p.is_absolute())
+        .or_else(|| {
+            std::env::var_os("HOME")
+                .filter(|h| !h.is_empty())
+                .map(|home| PathBuf::from(home).join(".local/share"))
+        })
+        .map(|d| d.join("makeit4d"))
+}
 
 // ---------------------------------------------------------------------------------------------
 // Finding and loading the runtime.
@@ -69,18 +84,10 @@ impl OrtSearch {
         let exe_dir = std::env::current_exe()
             .ok()
             .and_then(|exe| exe.parent().map(Path::to_path_buf));
-        let data_home = std::env::var_os("XDG_DATA_HOME")
-            .map(PathBuf::from)
-            .filter(|p| p.is_absolute())
-            .or_else(|| {
-                std::env::var_os("HOME")
-                    .filter(|h| !h.is_empty())
-                    .map(|home| PathBuf::from(home).join(".local/share"))
-            });
         Self {
             dylib_path,
             exe_dir,
-            data_dir: data_home.map(|d| d.join(DATA_SUBDIR)),
+            data_dir: user_data_dir().map(|d| d.join(DATA_SUBDIR_IN_APP)),
         }
     }
 
@@ -700,8 +707,11 @@ pub struct ModelManifest {
 }
 
 impl ModelManifest {
-    /// Reads and checks a manifest file.
+    /// Reads and checks a manifest file; a catalogue model's name (`lama`) stands for its
+    /// installed manifest ([`crate::models::resolve`]).
     pub fn load(path: &Path) -> Result<Self> {
+        let resolved = crate::models::resolve(path)?;
+        let path = resolved.as_path();
         let text = std::fs::read_to_string(path).map_err(|err| Error::Model {
             path: path.to_path_buf(),
             message: format!("cannot read the manifest: {err}"),

@@ -236,17 +236,25 @@ impl Project {
         self.render.validate()
     }
 
-    /// Applies `f` to every file path the project refers to (input, models, imports).
+    /// Applies `f` to every file path the project refers to (input, models, imports); a
+    /// catalogue model's name (`lama`) is not a path and stays as it is.
     pub fn map_paths(&mut self, f: impl Fn(&Path) -> PathBuf) {
+        let model = |m: &Path| {
+            if crate::models::looks_like_name(m) {
+                m.to_path_buf()
+            } else {
+                f(m)
+            }
+        };
         self.input = f(&self.input);
         if let Some(m) = &self.depth.model {
-            self.depth.model = Some(f(m));
+            self.depth.model = Some(model(m));
         }
         if let Some(import) = &mut self.depth.import {
             import.path = f(&import.path);
         }
         if let Some(m) = &self.inpaint.model {
-            self.inpaint.model = Some(f(m));
+            self.inpaint.model = Some(model(m));
         }
         if let Some(d) = &self.export.folder {
             self.export.folder = Some(f(d));

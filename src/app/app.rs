@@ -65,12 +65,7 @@ const RECOVERY_ORIGIN: &str = "recovery.origin";
 
 /// The default recovery folder.
 fn default_recovery_dir() -> Option<PathBuf> {
-    if let Some(d) = std::env::var_os("XDG_DATA_HOME").filter(|d| !d.is_empty()) {
-        return Some(PathBuf::from(d).join("makeit4d"));
-    }
-    std::env::var_os("HOME")
-        .filter(|h| !h.is_empty())
-        .map(|h| PathBuf::from(h).join(".local/share/makeit4d"))
+    crate::ml::user_data_dir()
 }
 
 /// What waits on an answer to "save the changes?".

@@ -1,0 +1,777 @@
+//! The built-in model catalogue and the models folder: `makeit4d models list | install |
+//! remove | manifest`, and model names wherever a manifest path is accepted.
+//!
+//! Each catalogue entry is a public ONNX export with the manifest that matches it exactly (input
+//! and output names, size rule, resampling, normalisation, value ranges). An installed model is
+//! `<models>/<name>/<file>` plus `<models>/<name>/manifest.json`; the models folder is
+//! `$MAKEIT4D_MODELS_DIR`, else `$XDG_DATA_HOME/makeit4d/models`, else
+//! `~/.local/share/makeit4d/models`.
+//!
+//! Installing downloads to `<file>.part` (streamed to disk, resumed with an HTTP `Range`
+//! request when a previous download broke off), checks the size and SHA-256 where the catalogue
+//! knows them, checks the graph against the manifest where ONNX Runtime is available, and only
+//! then renames the file into place and writes the manifest: a model is installed completely or
+//! not at all. Proxies come from `HTTPS_PROXY` / `HTTP_PROXY` (never for loopback addresses).
+
+use crate::error::{Error, Result};
+use crate::ml::{ModelKind, ModelManifest};
+use sha2::{Digest, Sha256};
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+
+/// One model a user can install by name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CatalogueEntry {
+    /// The name used on the command line and in project files.
+    pub name: &'static str,
+    /// Depth or inpainting.
+    pub kind: ModelKind,
+    /// One line: what it is and what it improves.
+    pub description: &'static str,
+    /// The model file's name on disk.
+    pub file: &'static str,
+    /// Where it is downloaded from.
+    pub url: &'static str,
+    /// Its size as published (for the listing; not a check).
+    pub published_size: &'static str,
+    /// Exact size in bytes, when known from a public source.
+    pub size_bytes: Option<u64>,
+    /// SHA-256 (lower-case hex), when known from a public source.
+    pub sha256: Option<&'static str>,
+    /// Its licence.
+    pub licence: &'static str,
+    /// Whether the licence forbids commercial use (said when installing).
+    pub non_commercial: bool,
+    /// The manifest, JSON, `"file"` naming [`CatalogueEntry::file`].
+    pub manifest: &'static str,
+}
+
+/// Every model the program knows by name.
+pub const CATALOGUE: &[CatalogueEntry] = &[
+    CatalogueEntry {
+        name: "depth-anything-v2-small",
+        kind: ModelKind::Depth,
+        description: "Depth Anything V2 Small (onnx-community export): learned relative depth, \
+                      much better than the classical estimator on indoor scenes, objects and \
+                      clutter",
+        file: "model.onnx",
+        url: "https://huggingface.co/onnx-community/depth-anything-v2-small/resolve/main/onnx/model.onnx",
+        published_size: "99.1 MB",
+        size_bytes: None,
+        sha256: None,
+        licence: "Apache-2.0",
+        non_commercial: false,
+        manifest: r#"{
+  "name": "Depth Anything V2 Small",
+  "kind": "depth",
+  "file": "model.onnx",
+  "input": "pixel_values",
+  "output": "predicted_depth",
+  "size": { "multiple_of": { "multiple": 14, "short_side": 518 } },
+  "resample": "bicubic",
+  "normalization": "imagenet",
+  "output_meaning": "relative_disparity"
+}"#,
+    },
+    CatalogueEntry {
+        name: "lama",
+        kind: ModelKind::Inpaint,
+        description: "LaMa (Carve's ONNX export, 512×512): learned inpainting of the hidden \
+                      layers and the outpainted margin, tiled at full resolution",
+        file: "lama_fp32.onnx",
+        url: "https://huggingface.co/Carve/LaMa-ONNX/resolve/main/lama_fp32.onnx",
+        published_size: "208 MB",
+        size_bytes: None,
+        sha256: None,
+        licence: "Apache-2.0",
+        non_commercial: false,
+        manifest: r#"{
+  "name": "LaMa",
+  "kind": "inpaint",
+  "file": "lama_fp32.onnx",
+  "image_input": "image",
+  "mask_input": "mask",
+  "output": "output",
+  "size": { "fixed": { "width": 512, "height": 512 } },
+  "image_range": [0, 1],
+  "mask_range": [0, 1],
+  "output_range": [0, 255],
+  "mode": { "tile": { "overlap": 64 } }
+}"#,
+    },
+    CatalogueEntry {
+        name: "lama-opencv",
+        kind: ModelKind::Inpaint,
+        description: "LaMa (OpenCV Zoo, block-quantised, 512×512): the same inpainting at less \
+                      than half the download",
+        file: "inpainting_lama_2025jan.onnx",
+        url: "https://github.com/opencv/opencv_zoo/raw/main/models/inpainting_lama/inpainting_lama_2025jan.onnx",
+        published_size: "92.6 MB",
+        size_bytes: None,
+        sha256: None,
+        licence: "Apache-2.0",
+        non_commercial: false,
+        manifest: r#"{
+  "name": "LaMa (OpenCV Zoo)",
+  "kind": "inpaint",
+  "file": "inpainting_lama_2025jan.onnx",
+  "image_input": "image",
+  "mask_input": "mask",
+  "output": "output",
+  "size": { "fixed": { "width": 512, "height": 512 } },
+  "image_range": [0, 1],
+  "mask_range": [0, 1],
+  "output_range": [0, 255],
+  "mode": { "tile": { "overlap": 64 } }
+}"#,
+    },
+];
+
+/// The catalogue entry called `name`.
+pub fn find(name: &str) -> Option<&'static CatalogueEntry> {
+    CATALOGUE.iter().find(|e| e.name == name)
+}
+
+/// Whether `text` could be a model name rather than a path (no separator, no extension).
+pub fn looks_like_name(text: &Path) -> bool {
+    let s = text.to_string_lossy();
+    !s.is_empty() && !s.contains(['/', '\\', '.'])
+}
+
+/// The models folder (see the module documentation); `None` when no home is known.
+pub fn models_dir() -> Option<PathBuf> {
+    if let Some(d) = std::env::var_os("MAKEIT4D_MODELS_DIR").filter(|d| !d.is_empty()) {
+        return Some(PathBuf::from(d));
+    }
+    crate::ml::user_data_dir().map(|d| d.join("models"))
+}
+
+/// Where an installed model lives inside `dir`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct InstalledModel {
+    /// The catalogue entry.
+    pub entry: &'static CatalogueEntry,
+    /// `<dir>/<name>/manifest.json`.
+    pub manifest_path: PathBuf,
+    /// The model file.
+    pub model_path: PathBuf,
+    /// Its size on disk, bytes.
+    pub bytes: u64,
+}
+
+/// The folder of `entry` inside the models folder `dir`.
+pub fn entry_dir(dir: &Path, entry: &CatalogueEntry) -> PathBuf {
+    dir.join(entry.name)
+}
+
+/// `entry` as installed in `dir`, when its manifest and model file are both there.
+pub fn installed(dir: &Path, entry: &'static CatalogueEntry) -> Option<InstalledModel> {
+    let folder = entry_dir(dir, entry);
+    let manifest_path = folder.join("manifest.json");
+    let model_path = folder.join(entry.file);
+    let bytes = std::fs::metadata(&model_path).ok()?.len();
+    manifest_path.is_file().then_some(InstalledModel {
+        entry,
+        manifest_path,
+        model_path,
+        bytes,
+    })
+}
+
+/// The manifest path for `name_or_path`: itself when it is a file or does not look like a
+/// name; the installed manifest of the catalogue model of that name; else an error that says
+/// how to install it.
+pub fn resolve(name_or_path: &Path) -> Result<PathBuf> {
+    if name_or_path.exists() || !looks_like_name(name_or_path) {
+        return Ok(name_or_path.to_path_buf());
+    }
+    let name = name_or_path.to_string_lossy();
+    let Some(entry) = find(&name) else {
+        let known: Vec<&str> = CATALOGUE.iter().map(|e| e.name).collect();
+        return Err(Error::invalid(format!(
+            "\"{name}\" is neither a manifest file nor a catalogue model ({})",
+            known.join(", ")
+        )));
+    };
+    let dir = models_dir()
+        .ok_or_else(|| Error::invalid("no models folder: set MAKEIT4D_MODELS_DIR or HOME"))?;
+    match installed(&dir, entry) {
+        Some(m) => Ok(m.manifest_path),
+        None => Err(Error::invalid(format!(
+            "model {name} is not installed in {}: run `makeit4d models install {name}` \
+             (or `--file PATH` for a file downloaded by hand)",
+            dir.display()
+        ))),
+    }
+}
+
+/// SHA-256 of a file, lower-case hex.
+pub fn sha256_file(path: &Path) -> Result<String> {
+    let mut file = std::fs::File::open(path).map_err(|e| Error::file(path, e))?;
+    let mut hasher = Sha256::new();
+    let mut buf = vec![0u8; 1 << 20];
+    loop {
+        let n = file.read(&mut buf).map_err(|e| Error::file(path, e))?;
+        if n == 0 {
+            break;
+        }
+        hasher.update(&buf[..n]);
+    }
+    Ok(hasher
+        .finalize()
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect())
+}
+
+/// Checks a downloaded or copied model file against the catalogue (size, SHA-256) and, through
+/// `check_graph`, against the manifest. The message names what did not match.
+fn verify(
+    entry: &CatalogueEntry,
+    file: &Path,
+    manifest_path: &Path,
+    check_graph: &dyn Fn(&ModelManifest) -> Result<()>,
+) -> Result<()> {
+    let bytes = std::fs::metadata(file)
+        .map_err(|e| Error::file(file, e))?
+        .len();
+    if let Some(want) = entry.size_bytes
+        && bytes != want
+    {
+        return Err(Error::file(
+            file,
+            format!("is {bytes} bytes; {} is {want} bytes", entry.name),
+        ));
+    }
+    if let Some(want) = entry.sha256 {
+        let got = sha256_file(file)?;
+        if got != want {
+            return Err(Error::file(
+                file,
+                format!("SHA-256 {got} does not match {}'s {want}", entry.name),
+            ));
+        }
+    }
+    let manifest = ModelManifest::parse(entry.manifest, manifest_path)?;
+    let manifest = ModelManifest {
+        model_path: file.to_path_buf(),
+        ..manifest
+    };
+    check_graph(&manifest)
+}
+
+/// Writes `bytes` to `path` through a temporary file and a rename.
+fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    crate::image_io::write_atomic(path, bytes)
+}
+
+/// Moves the verified `file` into place as `entry`'s model and writes its manifest.
+fn finish(dir: &Path, entry: &'static CatalogueEntry, file: &Path) -> Result<InstalledModel> {
+    let folder = entry_dir(dir, entry);
+    let model_path = folder.join(entry.file);
+    std::fs::rename(file, &model_path).map_err(|e| Error::file(&model_path, e))?;
+    write_atomic(&folder.join("manifest.json"), entry.manifest.as_bytes())?;
+    installed(dir, entry).ok_or_else(|| Error::file(&folder, "the installed files vanished"))
+}
+
+/// Installs `entry` from a file the user has (downloaded by hand, copied from another
+/// machine): copied to `<file>.part`, verified, renamed into place.
+pub fn install_from_file(
+    dir: &Path,
+    entry: &'static CatalogueEntry,
+    source: &Path,
+    check_graph: &dyn Fn(&ModelManifest) -> Result<()>,
+) -> Result<InstalledModel> {
+    if !source.is_file() {
+        return Err(Error::file(source, "no such file"));
+    }
+    let folder = entry_dir(dir, entry);
+    std::fs::create_dir_all(&folder).map_err(|e| Error::file(&folder, e))?;
+    let part = folder.join(format!("{}.part", entry.file));
+    let copied = std::fs::copy(source, &part).map_err(|e| Error::file(&part, e));
+    let result =
+        copied.and_then(|_| verify(entry, &part, &folder.join("manifest.json"), check_graph));
+    match result {
+        Ok(()) => finish(dir, entry, &part),
+        Err(e) => {
+            let _ = std::fs::remove_file(&part);
+            remove_if_empty(&folder);
+            Err(e)
+        }
+    }
+}
+
+/// Progress of a download: bytes so far and the total when the server said.
+pub type DownloadProgress<'a> = &'a dyn Fn(u64, Option<u64>);
+
+/// Whether `url`'s host is a loopback address (no proxy for those).
+fn is_loopback(url: &str) -> bool {
+    let rest = url.split_once("://").map_or(url, |(_, r)| r);
+    let host = rest.split(['/', ':']).next().unwrap_or("");
+    host == "localhost" || host.starts_with("127.") || rest.starts_with("[::1]")
+}
+
+/// Downloads `entry` from `url` (its catalogue address unless given) into `dir`, resuming a
+/// `.part` left by a download that broke off, then verifies and installs it. A failed check
+/// removes the partial file; a broken connection keeps it for the next attempt and says so.
+pub fn install_from_url(
+    dir: &Path,
+    entry: &'static CatalogueEntry,
+    url: Option<&str>,
+    progress: DownloadProgress<'_>,
+    check_graph: &dyn Fn(&ModelManifest) -> Result<()>,
+) -> Result<InstalledModel> {
+    let result = download_and_install(dir, entry, url, progress, check_graph);
+    if result.is_err() {
+        remove_if_empty(&entry_dir(dir, entry));
+    }
+    result
+}
+
+fn download_and_install(
+    dir: &Path,
+    entry: &'static CatalogueEntry,
+    url: Option<&str>,
+    progress: DownloadProgress<'_>,
+    check_graph: &dyn Fn(&ModelManifest) -> Result<()>,
+) -> Result<InstalledModel> {
+    let url = url.unwrap_or(entry.url);
+    let folder = entry_dir(dir, entry);
+    std::fs::create_dir_all(&folder).map_err(|e| Error::file(&folder, e))?;
+    let part = folder.join(format!("{}.part", entry.file));
+    let by_hand = format!(
+        "download {} by hand and run `makeit4d models install {} --file PATH`",
+        entry.url, entry.name
+    );
+    let mut config = ureq::Agent::config_builder()
+        .timeout_connect(Some(std::time::Duration::from_secs(20)))
+        .timeout_recv_response(Some(std::time::Duration::from_secs(60)))
+        .http_status_as_error(false);
+    if is_loopback(url) {
+        config = config.proxy(None);
+    }
+    let agent: ureq::Agent = config.build().into();
+    let have = std::fs::metadata(&part).map(|m| m.len()).unwrap_or(0);
+    let mut request = agent.get(url);
+    if have > 0 {
+        request = request.header("Range", format!("bytes={have}-"));
+    }
+    let response = request
+        .call()
+        .map_err(|e| Error::invalid(format!("cannot download {url}: {e}; {by_hand}")))?;
+    let status = response.status().as_u16();
+    let append = match status {
+        206 if have > 0 => true,
+        200 => false,
+        416 if have > 0 => {
+            // The part is already whole (or the server will not resume): check it as it is.
+            return match verify(entry, &part, &folder.join("manifest.json"), check_graph) {
+                Ok(()) => finish(dir, entry, &part),
+                Err(e) => {
+                    let _ = std::fs::remove_file(&part);
+                    Err(e)
+                }
+            };
+        }
+        code => {
+            return Err(Error::invalid(format!(
+                "cannot download {url}: the server answered HTTP {code}; {by_hand}"
+            )));
+        }
+    };
+    let length = response
+        .headers()
+        .get("content-length")
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<u64>().ok());
+    let start = if append { have } else { 0 };
+    let total = length.map(|l| l + start);
+    let mut file = std::fs::OpenOptions::new()
+        .create(true)
+        .write(true)
+        .append(append)
+        .truncate(!append)
+        .open(&part)
+        .map_err(|e| Error::file(&part, e))?;
+    let mut reader = response.into_body().into_reader();
+    let mut buf = vec![0u8; 1 << 16];
+    let mut done = start;
+    progress(done, total);
+    loop {
+        let n = match reader.read(&mut buf) {
+            Ok(n) => n,
+            Err(e) => {
+                let _ = file.flush();
+                return Err(Error::invalid(format!(
+                    "the download of {url} broke off after {done} bytes ({e}); run the same \
+                     command again to resume it, or {by_hand}"
+                )));
+            }
+        };
+        if n == 0 {
+            break;
+        }
+        file.write_all(&buf[..n]).map_err(|e| {
+            let _ = std::fs::remove_file(&part);
+            Error::file(&part, e)
+        })?;
+        done += n as u64;
+        progress(done, total);
+    }
+    file.flush().map_err(|e| Error::file(&part, e))?;
+    drop(file);
+    if let Some(total) = total
+        && done < total
+    {
+        return Err(Error::invalid(format!(
+            "the download of {url} broke off after {done} of {total} bytes; run the same \
+             command again to resume it, or {by_hand}"
+        )));
+    }
+    match verify(entry, &part, &folder.join("manifest.json"), check_graph) {
+        Ok(()) => finish(dir, entry, &part),
+        Err(e) => {
+            let _ = std::fs::remove_file(&part);
+            Err(e)
+        }
+    }
+}
+
+/// Removes `folder` when it is empty (a failed first install leaves nothing behind).
+fn remove_if_empty(folder: &Path) {
+    if std::fs::read_dir(folder).is_ok_and(|mut d| d.next().is_none()) {
+        let _ = std::fs::remove_dir(folder);
+    }
+}
+
+/// Removes `entry` (and any partial download) from `dir`; `false` when nothing was there.
+pub fn remove(dir: &Path, entry: &CatalogueEntry) -> Result<bool> {
+    let folder = entry_dir(dir, entry);
+    if !folder.exists() {
+        return Ok(false);
+    }
+    std::fs::remove_dir_all(&folder).map_err(|e| Error::file(&folder, e))?;
+    Ok(true)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_catalogue_manifest_parses_and_names_its_file() {
+        for e in CATALOGUE {
+            let m = ModelManifest::parse(e.manifest, Path::new("/m/manifest.json"))
+                .unwrap_or_else(|err| panic!("{}: {err}", e.name));
+            assert_eq!(m.kind(), e.kind, "{}", e.name);
+            assert_eq!(m.model_path, Path::new("/m").join(e.file), "{}", e.name);
+            assert!(looks_like_name(Path::new(e.name)), "{}", e.name);
+            assert_eq!(find(e.name), Some(e));
+        }
+        assert_eq!(find("nope"), None);
+    }
+
+    #[test]
+    fn names_and_paths_are_told_apart() {
+        assert!(looks_like_name(Path::new("lama")));
+        assert!(!looks_like_name(Path::new("models/lama.json")));
+        assert!(!looks_like_name(Path::new("lama.json")));
+        // A path is passed through untouched, existing or not.
+        assert_eq!(
+            resolve(Path::new("x/y.json")).unwrap(),
+            Path::new("x/y.json")
+        );
+        let e = resolve(Path::new("no-such-model")).unwrap_err().to_string();
+        assert!(e.contains("depth-anything-v2-small"), "{e}");
+        assert!(is_loopback("http://127.0.0.1:8080/a"));
+        assert!(is_loopback("http://localhost/a"));
+        assert!(!is_loopback("https://huggingface.co/x"));
+    }
+
+    use std::io::{BufRead, BufReader};
+    use std::net::TcpListener;
+
+    /// What the test server answers to one request (its text, headers included).
+    type Reply = Box<dyn Fn(&str) -> Vec<u8> + Send>;
+
+    /// A server on 127.0.0.1 answering one connection per reply, in order; its base URL.
+    fn serve(replies: Vec<Reply>) -> (String, std::thread::JoinHandle<()>) {
+        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+        let url = format!("http://{}", listener.local_addr().unwrap());
+        let handle = std::thread::spawn(move || {
+            for reply in replies {
+                let Ok((mut stream, _)) = listener.accept() else {
+                    return;
+                };
+                let mut reader = BufReader::new(stream.try_clone().unwrap());
+                let mut request = String::new();
+                loop {
+                    let mut line = String::new();
+                    if reader.read_line(&mut line).unwrap_or(0) == 0 || line == "\r\n" {
+                        break;
+                    }
+                    request.push_str(&line);
+                }
+                let _ = stream.write_all(&reply(&request));
+            }
+        });
+        (url, handle)
+    }
+
+    fn ok(body: &[u8]) -> Vec<u8> {
+        let mut r = format!(
+            "HTTP/1.1 200 OK\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+            body.len()
+        )
+        .into_bytes();
+        r.extend_from_slice(body);
+        r
+    }
+
+    /// The payload, and a reply that honours `Range: bytes=N-` with 206.
+    fn payload() -> Vec<u8> {
+        (0..200_000u32).map(|i| (i * 7 % 251) as u8).collect()
+    }
+
+    fn ranged(body: Vec<u8>) -> Reply {
+        Box::new(move |request: &str| {
+            let from = request
+                .lines()
+                .find_map(|l| {
+                    l.to_ascii_lowercase()
+                        .strip_prefix("range: bytes=")
+                        .map(str::to_string)
+                })
+                .and_then(|r| r.trim_end_matches('-').trim().parse::<usize>().ok());
+            match from {
+                Some(from) => {
+                    let rest = &body[from..];
+                    let mut r = format!(
+                        "HTTP/1.1 206 Partial Content\r\nContent-Length: {}\r\nContent-Range: \
+                         bytes {from}-{}/{}\r\nConnection: close\r\n\r\n",
+                        rest.len(),
+                        body.len() - 1,
+                        body.len()
+                    )
+                    .into_bytes();
+                    r.extend_from_slice(rest);
+                    r
+                }
+                None => ok(&body),
+            }
+        })
+    }
+
+    static TEST_ENTRY: CatalogueEntry = CatalogueEntry {
+        name: "test-model",
+        kind: ModelKind::Inpaint,
+        description: "a test",
+        file: "test.onnx",
+        url: "http://127.0.0.1:9/unused",
+        published_size: "0.2 MB",
+        size_bytes: None,
+        sha256: None,
+        licence: "none",
+        non_commercial: false,
+        manifest: r#"{ "kind": "inpaint", "file": "test.onnx", "image_input": "image",
+            "mask_input": "mask", "size": { "fixed": { "width": 8, "height": 8 } },
+            "output_range": [0, 1] }"#,
+    };
+
+    fn no_graph_check(_: &ModelManifest) -> Result<()> {
+        Ok(())
+    }
+
+    fn files_in(dir: &Path) -> Vec<String> {
+        let mut names: Vec<String> = walk(dir)
+            .into_iter()
+            .map(|p| p.strip_prefix(dir).unwrap().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    }
+
+    fn walk(dir: &Path) -> Vec<PathBuf> {
+        let mut out = Vec::new();
+        if let Ok(entries) = std::fs::read_dir(dir) {
+            for e in entries.flatten() {
+                let p = e.path();
+                if p.is_dir() {
+                    out.push(p.clone());
+                    out.extend(walk(&p));
+                } else {
+                    out.push(p);
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn a_download_installs_the_file_and_its_manifest() {
+        let dir = tempfile::tempdir().unwrap();
+        let body = payload();
+        let (url, server) = serve(vec![ranged(body.clone())]);
+        let seen = std::sync::Mutex::new(0u64);
+        let progress = |done: u64, _: Option<u64>| *seen.lock().unwrap() = done;
+        let m = install_from_url(
+            dir.path(),
+            &TEST_ENTRY,
+            Some(&format!("{url}/test.onnx")),
+            &progress,
+            &no_graph_check,
+        )
+        .unwrap();
+        server.join().unwrap();
+        assert_eq!(std::fs::read(&m.model_path).unwrap(), body);
+        assert_eq!(*seen.lock().unwrap(), body.len() as u64);
+        assert_eq!(
+            files_in(dir.path()),
+            [
+                "test-model",
+                "test-model/manifest.json",
+                "test-model/test.onnx"
+            ]
+        );
+        assert_eq!(installed(dir.path(), &TEST_ENTRY), Some(m));
+        assert!(remove(dir.path(), &TEST_ENTRY).unwrap());
+        assert!(files_in(dir.path()).is_empty());
+    }
+
+    #[test]
+    fn a_broken_download_resumes_to_the_same_bytes() {
+        let dir = tempfile::tempdir().unwrap();
+        let body = payload();
+        let half = body.len() / 2;
+        let full = body.clone();
+        // First answer: the whole length announced, half sent, the connection dropped.
+        let broken: Reply = Box::new(move |_| {
+            let mut r = ok(&full);
+            r.truncate(r.len() - (full.len() - half));
+            r
+        });
+        let (url, server) = serve(vec![broken, ranged(body.clone())]);
+        let url = format!("{url}/test.onnx");
+        let err = install_from_url(
+            dir.path(),
+            &TEST_ENTRY,
+            Some(&url),
+            &|_, _| {},
+            &no_graph_check,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("broke off") && err.contains("resume"), "{err}");
+        let part = dir.path().join("test-model/test.onnx.part");
+        assert_eq!(std::fs::metadata(&part).unwrap().len(), half as u64);
+        assert!(installed(dir.path(), &TEST_ENTRY).is_none());
+        let m = install_from_url(
+            dir.path(),
+            &TEST_ENTRY,
+            Some(&url),
+            &|_, _| {},
+            &no_graph_check,
+        )
+        .unwrap();
+        server.join().unwrap();
+        assert_eq!(std::fs::read(&m.model_path).unwrap(), body);
+        assert!(!part.exists());
+    }
+
+    #[test]
+    fn bad_downloads_leave_nothing_behind() {
+        static CHECKED: CatalogueEntry = CatalogueEntry {
+            sha256: Some("0000000000000000000000000000000000000000000000000000000000000000"),
+            ..TEST_ENTRY
+        };
+        static SIZED: CatalogueEntry = CatalogueEntry {
+            size_bytes: Some(5),
+            ..TEST_ENTRY
+        };
+        let cases: Vec<(&'static CatalogueEntry, Reply, &str)> = vec![
+            (
+                &TEST_ENTRY,
+                Box::new(|_: &str| {
+                    b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\nConnection: close\r\n\r\n"
+                        .to_vec()
+                }),
+                "HTTP 404",
+            ),
+            (&CHECKED, ranged(payload()), "SHA-256"),
+            (&SIZED, ranged(payload()), "bytes"),
+        ];
+        for (entry, reply, needle) in cases {
+            let dir = tempfile::tempdir().unwrap();
+            let (url, server) = serve(vec![reply]);
+            let err = install_from_url(
+                dir.path(),
+                entry,
+                Some(&format!("{url}/m.onnx")),
+                &|_, _| {},
+                &no_graph_check,
+            )
+            .unwrap_err()
+            .to_string();
+            server.join().unwrap();
+            assert!(err.contains(needle), "{needle}: {err}");
+            assert!(err.lines().count() == 1, "{err}");
+            assert!(
+                files_in(dir.path()).is_empty(),
+                "{needle}: {:?}",
+                files_in(dir.path())
+            );
+        }
+        // Nobody listening: a clear line that says how to install by hand.
+        let dir = tempfile::tempdir().unwrap();
+        let closed = TcpListener::bind("127.0.0.1:0").unwrap();
+        let url = format!("http://{}/m.onnx", closed.local_addr().unwrap());
+        drop(closed);
+        let err = install_from_url(
+            dir.path(),
+            &TEST_ENTRY,
+            Some(&url),
+            &|_, _| {},
+            &no_graph_check,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("--file"), "{err}");
+        assert!(files_in(dir.path()).is_empty());
+    }
+
+    #[test]
+    fn a_file_by_hand_is_checked_like_a_download() {
+        let dir = tempfile::tempdir().unwrap();
+        let src = dir.path().join("downloaded.onnx");
+        std::fs::write(&src, payload()).unwrap();
+        let models = dir.path().join("models");
+        // A graph that does not match the manifest is refused and leaves nothing.
+        let refuse = |_: &ModelManifest| Err(Error::invalid("input 'image' is missing"));
+        let err = install_from_file(&models, &TEST_ENTRY, &src, &refuse)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("input 'image'"), "{err}");
+        assert!(files_in(&models).is_empty());
+        let m = install_from_file(&models, &TEST_ENTRY, &src, &no_graph_check).unwrap();
+        assert_eq!(std::fs::read(&m.model_path).unwrap(), payload());
+        assert!(src.exists(), "the user's file is copied, not moved");
+        let missing = install_from_file(
+            &models,
+            &TEST_ENTRY,
+            &dir.path().join("nope"),
+            &no_graph_check,
+        );
+        assert!(missing.unwrap_err().to_string().contains("no such file"));
+    }
+
+    #[test]
+    fn sha256_known_answer() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("abc");
+        std::fs::write(&p, b"abc").unwrap();
+        assert_eq!(
+            sha256_file(&p).unwrap(),
+            "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+        );
+    }
+}

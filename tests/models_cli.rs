@@ -1,0 +1,189 @@
+//! `makeit4d models` end to end: catalogue models installed from a server on 127.0.0.1 (never
+//! any other address) and from files, checked against their built-in manifests, then run by
+//! name. The graphs are the tiny fixtures with each catalogue entry's exact input and output
+//! names, shapes and value ranges (tests/fixtures/make_fixtures.py).
+
+use makeit4d::ml;
+use makeit4d::progress::Progress;
+use makeit4d::raster::{MaskRaster, Raster, RgbRaster};
+use makeit4d::stages::inpaint::onnx::OnnxInpainter;
+use makeit4d::stages::inpaint::{InpaintRequest, Inpainter};
+use std::io::{BufRead, BufReader, Write};
+use std::net::TcpListener;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn exe() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_makeit4d"))
+}
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(name)
+}
+
+/// Whether ONNX Runtime can be loaded (required under CI, as in tests/onnx_models.rs).
+fn runtime_ready() -> bool {
+    if ml::ort_available() {
+        return true;
+    }
+    assert!(
+        std::env::var_os("CI").is_none(),
+        "CI needs ONNX Runtime: {}",
+        ml::ort_status()
+    );
+    false
+}
+
+/// Serves `body` to `requests` GET requests on 127.0.0.1; the base URL.
+fn serve(body: Vec<u8>, requests: usize) -> (String, std::thread::JoinHandle<()>) {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let url = format!("http://{}", listener.local_addr().unwrap());
+    let handle = std::thread::spawn(move || {
+        for _ in 0..requests {
+            let Ok((mut stream, _)) = listener.accept() else {
+                return;
+            };
+            let mut reader = BufReader::new(stream.try_clone().unwrap());
+            loop {
+                let mut line = String::new();
+                if reader.read_line(&mut line).unwrap_or(0) == 0 || line == "\r\n" {
+                    break;
+                }
+            }
+            let head = format!(
+                "HTTP/1.1 200 OK\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+                body.len()
+            );
+            let _ = stream.write_all(head.as_bytes());
+            let _ = stream.write_all(&body);
+        }
+    });
+    (url, handle)
+}
+
+fn run(command: &mut Command) -> Output {
+    let out = command.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{:?}: {}",
+        command,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+#[test]
+fn catalogue_models_install_check_and_run_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let models = dir.path().join("models");
+    let ready = runtime_ready();
+
+    // LaMa from the loopback server.
+    let (url, server) = serve(std::fs::read(fixture("catalogue_lama.onnx")).unwrap(), 1);
+    let out = run(exe()
+        .args(["models", "install", "lama", "--url"])
+        .arg(format!("{url}/lama_fp32.onnx"))
+        .arg("--dir")
+        .arg(&models));
+    server.join().unwrap();
+    assert!(String::from_utf8_lossy(&out.stdout).contains("installed lama"));
+    // Depth Anything from a file "downloaded by hand".
+    run(exe()
+        .args(["models", "install", "depth-anything-v2-small", "--file"])
+        .arg(fixture("catalogue_depth_anything_v2_small.onnx"))
+        .arg("--dir")
+        .arg(&models));
+    let list = run(exe().args(["models", "list", "--dir"]).arg(&models));
+    let list = String::from_utf8_lossy(&list.stdout);
+    for name in ["lama", "depth-anything-v2-small"] {
+        let line = list
+            .lines()
+            .find(|l| l.starts_with(&format!("| {name} |")))
+            .unwrap_or_else(|| panic!("{name} listed:\n{list}"));
+        assert!(line.contains("| yes, "), "{line}");
+    }
+    assert!(
+        list.contains("| lama-opencv |") && list.contains("| no |"),
+        "{list}"
+    );
+
+    // The printed manifest is the built-in one.
+    let manifest = run(exe().args(["models", "manifest", "lama"]));
+    let manifest: serde_json::Value = serde_json::from_slice(&manifest.stdout).unwrap();
+    assert_eq!(manifest["output_range"][1], 255.0);
+
+    if ready {
+        // A graph that does not match the entry's manifest is refused and leaves nothing.
+        let out = exe()
+            .args(["models", "install", "lama-opencv", "--file"])
+            .arg(fixture("catalogue_depth_anything_v2_small.onnx"))
+            .arg("--dir")
+            .arg(&models)
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(!models.join("lama-opencv").exists());
+
+        // Depth by name through the command line.
+        let depth = dir.path().join("d.png");
+        let out = run(exe()
+            .env("MAKEIT4D_MODELS_DIR", &models)
+            .arg("depth")
+            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/evening_glow_320.jpg"))
+            .arg("--out")
+            .arg(&depth)
+            .args(["--model", "depth-anything-v2-small"]));
+        let said = String::from_utf8_lossy(&out.stdout).to_string()
+            + &String::from_utf8_lossy(&out.stderr);
+        assert!(said.contains("onnx Depth Anything V2 Small"), "{said}");
+        assert!(depth.exists());
+
+        // LaMa through its manifest: a 0..255 output decoded to colours, not clamped to white.
+        let lama = OnnxInpainter::from_manifest(&models.join("lama/manifest.json")).unwrap();
+        let image: RgbRaster =
+            Raster::from_fn(96, 64, |x, y| [x as f32 / 96.0, y as f32 / 64.0, 0.2]);
+        let hole: MaskRaster = Raster::from_fn(96, 64, |x, y| {
+            (40..56).contains(&x) && (24..40).contains(&y)
+        });
+        let request = InpaintRequest {
+            image: &image,
+            hole: &hole,
+            allowed_source: None,
+            guide: None,
+            seed: 0,
+        };
+        let filled = lama.inpaint(&request, &Progress::none()).unwrap();
+        let c = filled.image.at(48, 32);
+        assert!(c.iter().all(|v| (v - 0.5).abs() < 0.02), "{c:?}");
+        assert_eq!(filled.image.at(5, 5), image.at(5, 5));
+    }
+
+    // Not installed: the error names the install command.
+    let out = exe()
+        .env("MAKEIT4D_MODELS_DIR", dir.path().join("empty"))
+        .arg("depth")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/evening_glow_320.jpg"))
+        .arg("--out")
+        .arg(dir.path().join("e.png"))
+        .args(["--model", "lama-opencv"])
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        said.contains("makeit4d models install lama-opencv"),
+        "{said}"
+    );
+
+    run(exe()
+        .args(["models", "remove", "lama", "--dir"])
+        .arg(&models));
+    assert!(!models.join("lama").exists());
+    // An unknown name lists the catalogue.
+    let out = exe().args(["models", "install", "nope"]).output().unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("depth-anything-v2-small"));
+}
