@@ -95,11 +95,12 @@ pub struct ClassicalDepthParams {
     /// Object-cue structure at which the cue has its full weight. Default 0.25.
     pub object_structure_full: f32,
     /// Weight of the local detail (focus / figure-ground) cue in photos where the landscape
-    /// cues do not apply (no sky, no reflection): sharper, more detailed than its
-    /// surroundings is nearer. Added to the fused nearness as `weight · clamp(local / scale,
-    /// −½, ½)`. Default 0 (off): at 0.5 it orders the cups of the ordinal set right, but it
-    /// reshapes `forest_path`'s canopy enough that the autocruise no longer follows the
-    /// footpath.
+    /// cues do not apply (no sky, no reflection) and the border is not one background (the
+    /// weight fades out as the border's coherence rises from `object_coherence_onset` to
+    /// `object_coherence_full`: against one background the object cue decides, and a forest
+    /// floor or canopy has no figure): sharper, more detailed than its surroundings is
+    /// nearer. Added to the fused nearness as `weight · clamp(local / scale, −½, ½)`.
+    /// Default 0.5.
     pub detail_weight: f32,
     /// Local detail difference (natural log of the gradient energy against its
     /// neighbourhood) that counts as a full step of the detail cue. Default 3.0.
@@ -156,7 +157,7 @@ impl Default for ClassicalDepthParams {
             object_structure_sigma: 0.06,
             object_structure_onset: 0.15,
             object_structure_full: 0.25,
-            detail_weight: 0.0,
+            detail_weight: 0.5,
             detail_scale: 3.0,
             aerial_weight: 0.15,
             aerial_scale: 0.6,
@@ -466,9 +467,10 @@ impl ClassicalDepth {
         }
         let object_structure =
             cue_structure(&object_work, p.object_structure_sigma * ww.max(wh) as f32);
-        let object_share = ((border_coherence - p.object_coherence_onset)
+        let coherent_border = ((border_coherence - p.object_coherence_onset)
             / (p.object_coherence_full - p.object_coherence_onset))
-            .clamp(0.0, 1.0)
+            .clamp(0.0, 1.0);
+        let object_share = coherent_border
             * ((object_structure - p.object_structure_onset)
                 / (p.object_structure_full - p.object_structure_onset))
                 .clamp(0.0, 1.0);
@@ -498,12 +500,13 @@ impl ClassicalDepth {
         // too would flatten the ground-plane gradient of everything in front of the fog.
         let wo = p.object_weight * object_share * (1.0 - haziness);
         let wz = p.haze_weight * haziness;
-        // Detail is the fallback's figure/ground; where the object cue is reliable it already
-        // tells figure from ground.
+        // Detail is the fallback's figure/ground where the border is many things. Where the
+        // border is one background, figure/ground against it is the object cue's to find;
+        // when that finds only texture (a forest floor, a canopy), there is no figure there.
         let wd = if landscape {
             0.0
         } else {
-            p.detail_weight * (1.0 - object_share)
+            p.detail_weight * (1.0 - coherent_border)
         };
         let total = (wg + wo + wz).max(1e-6);
 
