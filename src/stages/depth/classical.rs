@@ -291,6 +291,9 @@ pub struct ClassicalAnalysis {
     pub haze_work: GrayRaster,
     /// Detail cue, a nearness offset in `[−½, ½]` (zero in landscapes).
     pub detail_work: GrayRaster,
+    /// Weight of the detail cue in the fusion, after its gate (0 in a landscape or against
+    /// one background).
+    pub detail_weight: f32,
     /// The reflection found, in working-resolution rows.
     pub mirror: Option<MirrorLine>,
     /// Whether the landscape cues (horizon, ground plane) applied.
@@ -637,6 +640,7 @@ impl ClassicalDepth {
             object_work,
             haze_work,
             detail_work,
+            detail_weight: wd,
             mirror,
             landscape,
             cues,
@@ -1603,28 +1607,37 @@ mod tests {
 
     #[test]
     fn without_sky_the_fallback_orders_like_a_ramp_with_detail_on_top() {
-        // Top-down texture, no sky and no ground line: coarse blobs over fine grain, with one
-        // sharp patch and one smooth patch side by side on the same rows.
+        // Things seen from above, no sky and no ground line: tiles of many colours (a border
+        // that is not one background) over fine grain, with one sharp patch and one smooth
+        // patch side by side on the same rows.
         let (w, h) = (192, 120);
+        let tile = |x: usize, y: usize| -> Rgb {
+            let k = (x / 24 + 3 * (y / 20)) % 5;
+            [
+                [0.7, 0.2, 0.2],
+                [0.2, 0.6, 0.3],
+                [0.2, 0.3, 0.8],
+                [0.8, 0.7, 0.2],
+                [0.5, 0.2, 0.6],
+            ][k]
+        };
         let img = Raster::from_fn(w, h, |x, y| {
-            let grain = if (64..80).contains(&y) && (40..80).contains(&x) {
-                hash(x, y) * 0.6 // sharp
+            let (c, grain) = if (64..80).contains(&y) && (40..80).contains(&x) {
+                ([0.4, 0.4, 0.4], hash(x, y) * 0.5) // sharp
             } else if (64..80).contains(&y) && (112..152).contains(&x) {
-                0.3 // smooth
+                ([0.4, 0.4, 0.4], 0.2) // smooth
             } else {
-                hash(x / 3, y / 3) * 0.25
+                (tile(x, y), hash(x / 3, y / 3) * 0.15)
             };
-            [0.25 + grain, 0.2 + grain, 0.3 + grain]
+            [c[0] + grain, c[1] + grain, c[2] + grain]
         });
-        let detail = ClassicalDepth::new(ClassicalDepthParams {
-            detail_weight: 0.5,
-            ..ClassicalDepthParams::default()
-        });
+        let detail = ClassicalDepth::default();
         let a = detail
             .analyse(&img, &intrinsics(w, h), &Progress::none())
             .unwrap();
         check_sane(&a.estimate, w, h);
         assert!(!a.landscape);
+        assert_eq!(a.detail_weight, 0.5, "the border is many things");
         assert!(
             a.cues
                 .data()
@@ -1640,6 +1653,16 @@ mod tests {
         let sharp = median_depth(d, [0.25, 0.55, 0.4, 0.65]);
         let smooth = median_depth(d, [0.62, 0.55, 0.78, 0.65]);
         assert!(sharp < smooth, "sharp {sharp} smooth {smooth}");
+        // Against one background (the same fine grain all round) the gate turns it off.
+        let uniform = Raster::from_fn(w, h, |x, y| {
+            let g = hash(x / 3, y / 3) * 0.1;
+            [0.25 + g, 0.2 + g, 0.3 + g]
+        });
+        let a = detail
+            .analyse(&uniform, &intrinsics(w, h), &Progress::none())
+            .unwrap();
+        assert!(!a.landscape);
+        assert_eq!(a.detail_weight, 0.0);
     }
 
     #[test]
