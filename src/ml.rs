@@ -821,10 +821,25 @@ pub struct TensorInfo {
     pub name: String,
     /// Dimensions; `-1` for a dynamic one. Empty for non-tensor values.
     pub shape: Vec<i64>,
-    /// True for 32-bit float tensors (the only kind this crate feeds or reads).
-    pub is_f32: bool,
+    /// Its element type, as far as this crate feeds or reads it.
+    pub kind: TensorKind,
     /// The element type as text, for messages.
     pub element: String,
+}
+
+/// The element types a model's inputs and outputs may have. Values are always `f32` on this
+/// side; float16 and uint8 tensors are converted at the boundary (uint8: rounded and clamped
+/// to `[0, 255]`, so the manifest's ranges must be `[0, 255]`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TensorKind {
+    /// 32-bit float.
+    F32,
+    /// 16-bit float (fp16 exports).
+    F16,
+    /// 8-bit unsigned integer (MI-GAN's pipeline).
+    U8,
+    /// Anything else (refused).
+    Other,
 }
 
 impl TensorInfo {
@@ -833,7 +848,12 @@ impl TensorInfo {
         Self {
             name: outlet.name().to_string(),
             shape: dtype.tensor_shape().map(|s| s.to_vec()).unwrap_or_default(),
-            is_f32: dtype.tensor_type() == Some(ort::value::TensorElementType::Float32),
+            kind: match dtype.tensor_type() {
+                Some(ort::value::TensorElementType::Float32) => TensorKind::F32,
+                Some(ort::value::TensorElementType::Float16) => TensorKind::F16,
+                Some(ort::value::TensorElementType::Uint8) => TensorKind::U8,
+                _ => TensorKind::Other,
+            },
             element: dtype.to_string(),
         }
     }
@@ -857,9 +877,9 @@ impl TensorInfo {
     /// Checks that this is a float tensor of rank `dims.len()` whose static dimensions agree
     /// with `dims` (`None` = anything). `role` names it in the error (e.g. "input 'image'").
     pub fn expect(&self, role: &str, dims: &[Option<i64>]) -> std::result::Result<(), String> {
-        if !self.is_f32 {
+        if self.kind == TensorKind::Other {
             return Err(format!(
-                "{role} is {} but must be a float32 tensor",
+                "{role} is {} but must be a float32, float16 or uint8 tensor",
                 self.element
             ));
         }
@@ -1069,12 +1089,45 @@ impl OnnxSession {
                     input.shape
                 )));
             }
-            let tensor = ort::value::TensorRef::from_array_view((input.shape.to_vec(), input.data))
-                .map_err(|err| self.error(format!("cannot make input '{}': {err}", input.name)))?;
-            values.push((
-                Cow::Borrowed(input.name),
-                ort::session::SessionInputValue::from(tensor),
-            ));
+            let kind = self
+                .inputs
+                .iter()
+                .find(|t| t.name == input.name)
+                .map_or(TensorKind::F32, |t| t.kind);
+            let shape = input.shape.to_vec();
+            let made =
+                |err: ort::Error| self.error(format!("cannot make input '{}': {err}", input.name));
+            let value: ort::session::SessionInputValue<'_> = match kind {
+                TensorKind::F16 => {
+                    let data: Vec<half::f16> =
+                        input.data.iter().map(|&v| half::f16::from_f32(v)).collect();
+                    ort::value::Tensor::from_array((shape, data))
+                        .map_err(made)?
+                        .into()
+                }
+                TensorKind::U8 => {
+                    let data: Vec<u8> = input
+                        .data
+                        .iter()
+                        .map(|&v| {
+                            if v.is_finite() {
+                                v.round().clamp(0.0, 255.0) as u8
+                            } else {
+                                0
+                            }
+                        })
+                        .collect();
+                    ort::value::Tensor::from_array((shape, data))
+                        .map_err(made)?
+                        .into()
+                }
+                TensorKind::F32 | TensorKind::Other => {
+                    ort::value::TensorRef::from_array_view((shape, input.data))
+                        .map_err(made)?
+                        .into()
+                }
+            };
+            values.push((Cow::Borrowed(input.name), value));
         }
         let options = ort::session::RunOptions::new()
             .map_err(|err| self.error(format!("cannot make run options: {err}")))?;
@@ -1103,10 +1156,28 @@ impl OnnxSession {
                     let value = outputs.get(output).ok_or_else(|| {
                         ort::Error::new(format!("the model produced no output '{output}'"))
                     })?;
-                    let (shape, data) = value.try_extract_tensor::<f32>()?;
+                    let kind = self
+                        .outputs
+                        .iter()
+                        .find(|t| t.name == output)
+                        .map_or(TensorKind::F32, |t| t.kind);
+                    let (shape, data): (Vec<i64>, Vec<f32>) = match kind {
+                        TensorKind::F16 => {
+                            let (shape, data) = value.try_extract_tensor::<half::f16>()?;
+                            (shape.to_vec(), data.iter().map(|v| v.to_f32()).collect())
+                        }
+                        TensorKind::U8 => {
+                            let (shape, data) = value.try_extract_tensor::<u8>()?;
+                            (shape.to_vec(), data.iter().map(|&v| v as f32).collect())
+                        }
+                        TensorKind::F32 | TensorKind::Other => {
+                            let (shape, data) = value.try_extract_tensor::<f32>()?;
+                            (shape.to_vec(), data.to_vec())
+                        }
+                    };
                     Ok(OutputTensor {
                         shape: shape.iter().map(|&d| d.max(0) as usize).collect(),
-                        data: data.to_vec(),
+                        data,
                     })
                 });
             done.store(true, Ordering::Release);

@@ -74,6 +74,30 @@ pub const CATALOGUE: &[CatalogueEntry] = &[
 }"#,
     },
     CatalogueEntry {
+        name: "depth-anything-v2-small-fp16",
+        kind: ModelKind::Depth,
+        description: "Depth Anything V2 Small, float16 (onnx-community export): the same depth \
+                      at half the download",
+        file: "model_fp16.onnx",
+        url: "https://huggingface.co/onnx-community/depth-anything-v2-small/resolve/main/onnx/model_fp16.onnx",
+        published_size: "49.6 MB",
+        size_bytes: None,
+        sha256: None,
+        licence: "Apache-2.0",
+        non_commercial: false,
+        manifest: r#"{
+  "name": "Depth Anything V2 Small (fp16)",
+  "kind": "depth",
+  "file": "model_fp16.onnx",
+  "input": "pixel_values",
+  "output": "predicted_depth",
+  "size": { "multiple_of": { "multiple": 14, "short_side": 518 } },
+  "resample": "bicubic",
+  "normalization": "imagenet",
+  "output_meaning": "relative_disparity"
+}"#,
+    },
+    CatalogueEntry {
         name: "lama",
         kind: ModelKind::Inpaint,
         description: "LaMa (Carve's ONNX export, 512×512): learned inpainting of the hidden \
@@ -123,6 +147,32 @@ pub const CATALOGUE: &[CatalogueEntry] = &[
   "mask_range": [0, 1],
   "output_range": [0, 255],
   "mode": { "tile": { "overlap": 64 } }
+}"#,
+    },
+    CatalogueEntry {
+        name: "migan",
+        kind: ModelKind::Inpaint,
+        description: "MI-GAN pipeline (Picsart): fast learned inpainting at any size, uint8 in \
+                      and out",
+        file: "migan_pipeline_v2.onnx",
+        url: "https://huggingface.co/andraniksargsyan/migan/resolve/main/migan_pipeline_v2.onnx",
+        published_size: "28 MB",
+        size_bytes: None,
+        sha256: None,
+        licence: "MIT",
+        non_commercial: false,
+        manifest: r#"{
+  "name": "MI-GAN",
+  "kind": "inpaint",
+  "file": "migan_pipeline_v2.onnx",
+  "image_input": "image",
+  "mask_input": "mask",
+  "output": "result",
+  "size": { "multiple_of": { "multiple": 1 } },
+  "image_range": [0, 255],
+  "mask_range": [255, 0],
+  "output_range": [0, 255],
+  "mode": "resize"
 }"#,
     },
 ];

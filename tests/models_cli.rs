@@ -162,6 +162,66 @@ fn catalogue_models_install_check_and_run_by_name() {
         assert_eq!(filled.image.at(5, 5), image.at(5, 5));
     }
 
+    if ready {
+        // The float16 export and MI-GAN's uint8 pipeline, converted at the tensor boundary.
+        for (name, file) in [
+            (
+                "depth-anything-v2-small-fp16",
+                "catalogue_depth_anything_v2_small_fp16.onnx",
+            ),
+            ("migan", "catalogue_migan.onnx"),
+        ] {
+            run(exe()
+                .args(["models", "install", name, "--file"])
+                .arg(fixture(file))
+                .arg("--dir")
+                .arg(&models));
+        }
+        let depth = dir.path().join("d16.png");
+        let out = run(exe()
+            .env("MAKEIT4D_MODELS_DIR", &models)
+            .arg("depth")
+            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/evening_glow_320.jpg"))
+            .arg("--out")
+            .arg(&depth)
+            .args(["--model", "depth-anything-v2-small-fp16"]));
+        let said = String::from_utf8_lossy(&out.stdout).to_string()
+            + &String::from_utf8_lossy(&out.stderr);
+        assert!(
+            said.contains("onnx Depth Anything V2 Small (fp16)"),
+            "{said}"
+        );
+        // The fp16 depth equals the fp32 one up to float16 rounding.
+        let a = image::open(dir.path().join("d.png")).unwrap().to_luma16();
+        let b = image::open(&depth).unwrap().to_luma16();
+        let worst = a
+            .pixels()
+            .zip(b.pixels())
+            .map(|(p, q)| (p[0] as i32 - q[0] as i32).abs())
+            .max()
+            .unwrap();
+        assert!(worst < 800, "fp16 vs fp32 differ by {worst} of 65535");
+
+        let migan = OnnxInpainter::from_manifest(&models.join("migan/manifest.json")).unwrap();
+        let image: RgbRaster =
+            Raster::from_fn(50, 30, |x, y| [x as f32 / 50.0, y as f32 / 30.0, 0.6]);
+        let hole: MaskRaster = Raster::from_fn(50, 30, |x, y| {
+            (20..30).contains(&x) && (10..20).contains(&y)
+        });
+        let request = InpaintRequest {
+            image: &image,
+            hole: &hole,
+            allowed_source: None,
+            guide: None,
+            seed: 0,
+        };
+        let filled = migan.inpaint(&request, &Progress::none()).unwrap();
+        // 128 of 255 in the hole; known pixels untouched.
+        let c = filled.image.at(25, 15);
+        assert!(c.iter().all(|v| (v - 128.0 / 255.0).abs() < 0.01), "{c:?}");
+        assert_eq!(filled.image.at(2, 2), image.at(2, 2));
+    }
+
     // Not installed: the error names the install command.
     let out = exe()
         .env("MAKEIT4D_MODELS_DIR", dir.path().join("empty"))

@@ -64,6 +64,12 @@ impl OnnxDepth {
 
         session.expect_inputs(&[spec.input.as_str()])?;
         let input = session.input(&spec.input)?;
+        if input.kind == crate::ml::TensorKind::U8 {
+            return Err(mismatch(format!(
+                "input '{}' is uint8; a depth model's normalised input needs float32 or float16",
+                input.name
+            )));
+        }
         let (height, width) = match spec.size {
             SizeRule::Fixed { width, height } => (Some(height as i64), Some(width as i64)),
             SizeRule::MultipleOf { .. } => (None, None),

@@ -87,6 +87,29 @@ impl OnnxInpainter {
         check(session.input(&spec.mask_input)?, 1)?;
         let output = session.output(spec.output.as_deref())?;
         check(output, 3)?;
+        // A uint8 tensor holds 0 … 255: its range in the manifest must say so.
+        for (info, range, field) in [
+            (
+                session.input(&spec.image_input)?,
+                spec.image_range,
+                "image_range",
+            ),
+            (
+                session.input(&spec.mask_input)?,
+                spec.mask_range,
+                "mask_range",
+            ),
+            (output, spec.output_range, "output_range"),
+        ] {
+            if info.kind == crate::ml::TensorKind::U8
+                && !range.iter().all(|v| (0.0..=255.0).contains(v))
+            {
+                return Err(mismatch(format!(
+                    "'{}' is uint8, so {field} must lie in [0, 255] (it is {range:?})",
+                    info.name
+                )));
+            }
+        }
         let output_name = output.name.clone();
         let name = format!("onnx:{}", manifest.display_name());
         Ok(Self {
