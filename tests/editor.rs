@@ -839,3 +839,39 @@ fn the_depth_tab_shows_which_cue_decided() {
     h.step();
     assert!(h.query_by_label("sky").is_none());
 }
+
+#[test]
+fn the_depth_tab_offers_the_installed_models() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(mut h) = harness(fast_project(dir.path())) else {
+        return;
+    };
+    wait_idle(&mut h, Duration::from_secs(600));
+    h.get_by_label("3 Depth").click();
+    h.step();
+    h.step();
+    let installed: Vec<&str> = makeit4d::models::models_dir()
+        .map(|d| {
+            makeit4d::models::CATALOGUE
+                .iter()
+                .filter(|e| {
+                    e.kind == makeit4d::ml::ModelKind::Depth
+                        && makeit4d::models::installed(&d, e).is_some()
+                })
+                .map(|e| e.name)
+                .collect()
+        })
+        .unwrap_or_default();
+    assert!(
+        h.query_by_role_and_label(egui::accesskit::Role::ComboBox, "learned model")
+            .is_some(),
+        "the picker is reachable by its label"
+    );
+    if installed.is_empty() {
+        // Nothing installed here: the tab says how to get one.
+        assert!(
+            h.query_by_label_contains("makeit4d models install depth-anything-v2-small")
+                .is_some()
+        );
+    }
+}

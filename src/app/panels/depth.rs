@@ -315,6 +315,23 @@ impl StagePanel for DepthPanel {
         if method != cx.project.depth.method {
             cx.edit("Depth method", |p| p.depth.method = method);
         }
+        if let Some(model) = super::model_picker(
+            ui,
+            "depth-model",
+            crate::ml::ModelKind::Depth,
+            cx.project.depth.model.as_deref(),
+        ) {
+            cx.edit("Depth model", |p| {
+                p.depth.method = if model.is_some() {
+                    DepthMethod::Onnx
+                } else if p.depth.method == DepthMethod::Onnx {
+                    DepthMethod::Classical
+                } else {
+                    p.depth.method
+                };
+                p.depth.model = model;
+            });
+        }
         ui.checkbox(&mut self.show_sky, "Show the sky mask");
         let legend = match (cx.early_depth, cx.snapshot) {
             (Some(e), _) => e.cue_legend.clone(),

@@ -66,6 +66,14 @@ impl StagePanel for InputPanel {
         if preset != cx.project.inpaint.preset {
             cx.edit("Inpaint quality", |p| p.inpaint.preset = preset);
         }
+        if let Some(model) = super::model_picker(
+            ui,
+            "inpaint-model",
+            crate::ml::ModelKind::Inpaint,
+            cx.project.inpaint.model.as_deref(),
+        ) {
+            cx.edit("Inpaint model", |p| p.inpaint.model = model);
+        }
         if let Some(v) = committed(ui, "seed", cx.project.inpaint.seed, |ui, v| {
             labelled(ui, "seed", egui::DragValue::new(v))
         }) {

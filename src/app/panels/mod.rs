@@ -393,6 +393,67 @@ pub fn turbo_colour(t: f32) -> egui::Color32 {
     )
 }
 
+/// A picker of the learned models of `kind` installed from the catalogue (and the project's
+/// own manifest path, when it has one). Returns the new choice when the user picks one
+/// (`None` = no learned model). Without any installed, it says how to install one.
+pub fn model_picker(
+    ui: &mut Ui,
+    id: &str,
+    kind: crate::ml::ModelKind,
+    current: Option<&std::path::Path>,
+) -> Option<Option<PathBuf>> {
+    let installed: Vec<&'static str> = crate::models::models_dir()
+        .map(|dir| {
+            crate::models::CATALOGUE
+                .iter()
+                .filter(|e| e.kind == kind && crate::models::installed(&dir, e).is_some())
+                .map(|e| e.name)
+                .collect()
+        })
+        .unwrap_or_default();
+    let label = |p: Option<&std::path::Path>| {
+        p.map_or("none (classical)".to_string(), |p| p.display().to_string())
+    };
+    let mut choice: Option<Option<PathBuf>> = None;
+    ui.horizontal(|ui| {
+        let name = ui.label("learned model");
+        egui::ComboBox::from_id_salt(id)
+            .selected_text(label(current))
+            .show_ui(ui, |ui| {
+                if ui
+                    .selectable_label(current.is_none(), label(None))
+                    .clicked()
+                {
+                    choice = Some(None);
+                }
+                for name in &installed {
+                    let path = std::path::Path::new(name);
+                    if ui.selectable_label(current == Some(path), *name).clicked() {
+                        choice = Some(Some(path.to_path_buf()));
+                    }
+                }
+                if let Some(p) =
+                    current.filter(|p| !installed.iter().any(|n| *p == std::path::Path::new(n)))
+                {
+                    let _ = ui.selectable_label(true, p.display().to_string());
+                }
+            })
+            .response
+            .labelled_by(name.id);
+    });
+    if installed.is_empty() {
+        let suggestion = crate::models::CATALOGUE
+            .iter()
+            .find(|e| e.kind == kind)
+            .map_or("", |e| e.name);
+        ui.weak(format!(
+            "none installed: run `makeit4d models install {suggestion}` (`makeit4d models list` \
+             shows them all)"
+        ));
+    }
+    choice.filter(|c| c.as_deref() != current)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
