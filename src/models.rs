@@ -46,6 +46,39 @@ pub struct CatalogueEntry {
     pub manifest: &'static str,
 }
 
+/// The manifest of onnx-community's Depth Anything V2 exports (fp32 and fp16 share it).
+macro_rules! depth_anything_manifest {
+    ($name:literal, $file:literal) => {
+        concat!(
+            r#"{ "name": ""#,
+            $name,
+            r#"", "kind": "depth", "file": ""#,
+            $file,
+            r#"",
+  "input": "pixel_values", "output": "predicted_depth",
+  "size": { "multiple_of": { "multiple": 14, "short_side": 518 } }, "resample": "bicubic",
+  "normalization": "imagenet", "output_meaning": "relative_disparity" }"#
+        )
+    };
+}
+
+/// The manifest of the LaMa exports (Carve's and OpenCV Zoo's share their interface).
+macro_rules! lama_manifest {
+    ($name:literal, $file:literal) => {
+        concat!(
+            r#"{ "name": ""#,
+            $name,
+            r#"", "kind": "inpaint", "file": ""#,
+            $file,
+            r#"",
+  "image_input": "image", "mask_input": "mask", "output": "output",
+  "size": { "fixed": { "width": 512, "height": 512 } },
+  "image_range": [0, 1], "mask_range": [0, 1], "output_range": [0, 255],
+  "mode": { "tile": { "overlap": 64 } } }"#
+        )
+    };
+}
+
 /// Every model the program knows by name.
 pub const CATALOGUE: &[CatalogueEntry] = &[
     CatalogueEntry {
@@ -61,17 +94,7 @@ pub const CATALOGUE: &[CatalogueEntry] = &[
         sha256: None,
         licence: "Apache-2.0",
         non_commercial: false,
-        manifest: r#"{
-  "name": "Depth Anything V2 Small",
-  "kind": "depth",
-  "file": "model.onnx",
-  "input": "pixel_values",
-  "output": "predicted_depth",
-  "size": { "multiple_of": { "multiple": 14, "short_side": 518 } },
-  "resample": "bicubic",
-  "normalization": "imagenet",
-  "output_meaning": "relative_disparity"
-}"#,
+        manifest: depth_anything_manifest!("Depth Anything V2 Small", "model.onnx"),
     },
     CatalogueEntry {
         name: "depth-anything-v2-small-fp16",
@@ -85,17 +108,7 @@ pub const CATALOGUE: &[CatalogueEntry] = &[
         sha256: None,
         licence: "Apache-2.0",
         non_commercial: false,
-        manifest: r#"{
-  "name": "Depth Anything V2 Small (fp16)",
-  "kind": "depth",
-  "file": "model_fp16.onnx",
-  "input": "pixel_values",
-  "output": "predicted_depth",
-  "size": { "multiple_of": { "multiple": 14, "short_side": 518 } },
-  "resample": "bicubic",
-  "normalization": "imagenet",
-  "output_meaning": "relative_disparity"
-}"#,
+        manifest: depth_anything_manifest!("Depth Anything V2 Small (fp16)", "model_fp16.onnx"),
     },
     CatalogueEntry {
         name: "lama",
@@ -109,19 +122,7 @@ pub const CATALOGUE: &[CatalogueEntry] = &[
         sha256: None,
         licence: "Apache-2.0",
         non_commercial: false,
-        manifest: r#"{
-  "name": "LaMa",
-  "kind": "inpaint",
-  "file": "lama_fp32.onnx",
-  "image_input": "image",
-  "mask_input": "mask",
-  "output": "output",
-  "size": { "fixed": { "width": 512, "height": 512 } },
-  "image_range": [0, 1],
-  "mask_range": [0, 1],
-  "output_range": [0, 255],
-  "mode": { "tile": { "overlap": 64 } }
-}"#,
+        manifest: lama_manifest!("LaMa", "lama_fp32.onnx"),
     },
     CatalogueEntry {
         name: "lama-opencv",
@@ -135,19 +136,7 @@ pub const CATALOGUE: &[CatalogueEntry] = &[
         sha256: None,
         licence: "Apache-2.0",
         non_commercial: false,
-        manifest: r#"{
-  "name": "LaMa (OpenCV Zoo)",
-  "kind": "inpaint",
-  "file": "inpainting_lama_2025jan.onnx",
-  "image_input": "image",
-  "mask_input": "mask",
-  "output": "output",
-  "size": { "fixed": { "width": 512, "height": 512 } },
-  "image_range": [0, 1],
-  "mask_range": [0, 1],
-  "output_range": [0, 255],
-  "mode": { "tile": { "overlap": 64 } }
-}"#,
+        manifest: lama_manifest!("LaMa (OpenCV Zoo)", "inpainting_lama_2025jan.onnx"),
     },
     CatalogueEntry {
         name: "migan",

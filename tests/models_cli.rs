@@ -63,6 +63,18 @@ fn serve(body: Vec<u8>, requests: usize) -> (String, std::thread::JoinHandle<()>
     (url, handle)
 }
 
+/// Runs `depth` on the sample with the installed model `name`; what it said.
+fn depth_by_name(models: &Path, name: &str, out: &Path) -> String {
+    let done = run(exe()
+        .env("MAKEIT4D_MODELS_DIR", models)
+        .arg("depth")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/evening_glow_320.jpg"))
+        .arg("--out")
+        .arg(out)
+        .args(["--model", name]));
+    String::from_utf8_lossy(&done.stdout).to_string() + &String::from_utf8_lossy(&done.stderr)
+}
+
 fn run(command: &mut Command) -> Output {
     let out = command.output().unwrap();
     assert!(
@@ -130,15 +142,7 @@ fn catalogue_models_install_check_and_run_by_name() {
 
         // Depth by name through the command line.
         let depth = dir.path().join("d.png");
-        let out = run(exe()
-            .env("MAKEIT4D_MODELS_DIR", &models)
-            .arg("depth")
-            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/evening_glow_320.jpg"))
-            .arg("--out")
-            .arg(&depth)
-            .args(["--model", "depth-anything-v2-small"]));
-        let said = String::from_utf8_lossy(&out.stdout).to_string()
-            + &String::from_utf8_lossy(&out.stderr);
+        let said = depth_by_name(&models, "depth-anything-v2-small", &depth);
         assert!(said.contains("onnx Depth Anything V2 Small"), "{said}");
         assert!(depth.exists());
 
@@ -178,15 +182,7 @@ fn catalogue_models_install_check_and_run_by_name() {
                 .arg(&models));
         }
         let depth = dir.path().join("d16.png");
-        let out = run(exe()
-            .env("MAKEIT4D_MODELS_DIR", &models)
-            .arg("depth")
-            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/evening_glow_320.jpg"))
-            .arg("--out")
-            .arg(&depth)
-            .args(["--model", "depth-anything-v2-small-fp16"]));
-        let said = String::from_utf8_lossy(&out.stdout).to_string()
-            + &String::from_utf8_lossy(&out.stderr);
+        let said = depth_by_name(&models, "depth-anything-v2-small-fp16", &depth);
         assert!(
             said.contains("onnx Depth Anything V2 Small (fp16)"),
             "{said}"
