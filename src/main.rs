@@ -343,6 +343,19 @@ enum BenchCommand {
     /// One case of `bench scene` (run in a child process for a clean peak memory); prints JSON.
     #[command(hide = true)]
     SceneCase(BenchSceneCaseArgs),
+    /// `models install`'s download against curl, from a server on 127.0.0.1: seconds, MB/s
+    /// and peak memory.
+    Download(BenchDownloadArgs),
+}
+
+#[derive(Args, Debug)]
+struct BenchDownloadArgs {
+    /// Size of the download, MB.
+    #[arg(long, default_value_t = 200)]
+    mb: u64,
+    /// Downloads per client (the median is printed).
+    #[arg(long, default_value_t = 3)]
+    runs: usize,
 }
 
 #[derive(Args, Debug)]
@@ -637,6 +650,7 @@ fn main() -> ExitCode {
         Command::Inpaint(args) => inpaint(args, cancel),
         Command::Bench(BenchCommand::Scene(args)) => bench_scene(args, cancel),
         Command::Bench(BenchCommand::SceneCase(args)) => bench_scene_case(args),
+        Command::Bench(BenchCommand::Download(args)) => bench_download(args),
         Command::Doctor(args) => doctor(args),
     };
     match result {
@@ -1145,6 +1159,22 @@ fn bench_scene_case(args: BenchSceneCaseArgs) -> anyhow::Result<()> {
         makeit4d::eval::bench::run_scene_case(&args.image, preset, &args.frame, &Progress::none())?;
     println!("{}", serde_json::to_string(&case)?);
     Ok(())
+}
+
+fn bench_download(args: BenchDownloadArgs) -> anyhow::Result<()> {
+    let scratch = tempfile_dir()?;
+    let bench = makeit4d::models::bench_download(args.mb, args.runs, &scratch);
+    let _ = std::fs::remove_dir_all(&scratch);
+    print!("{}", bench?.to_markdown());
+    Ok(())
+}
+
+/// A fresh scratch folder under the system's temporary folder.
+fn tempfile_dir() -> anyhow::Result<PathBuf> {
+    let dir = std::env::temp_dir().join(format!("makeit4d-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| anyhow::anyhow!("{}: cannot create: {e}", dir.display()))?;
+    Ok(dir)
 }
 
 /// The models folder of `args`, or the default one.
