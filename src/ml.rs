@@ -629,6 +629,10 @@ pub struct InpaintSpec {
     /// `[black, white]` of the output. Required: LaMa exports take `[0, 1]` and return
     /// `[0, 255]`, and guessing the image range would turn every filled pixel white.
     pub output_range: [f32; 2],
+    /// The colour (`[0, 1]` RGB) the image input holds inside the hole; black when absent
+    /// (LaMa's exports expect the hole zeroed, others a mid grey).
+    #[serde(default)]
+    pub hole_fill: Option<[f32; 3]>,
     /// Resize or tile.
     #[serde(default)]
     pub mode: InpaintMode,
@@ -753,6 +757,15 @@ impl ModelManifest {
                             "range {range:?} must be two different finite numbers"
                         )));
                     }
+                }
+                if let Some(fill) = i.hole_fill
+                    && !fill
+                        .iter()
+                        .all(|v| v.is_finite() && (0.0..=1.0).contains(v))
+                {
+                    return Err(error(format!(
+                        "hole_fill {fill:?} must be an RGB colour with values in [0, 1]"
+                    )));
                 }
                 if let (InpaintMode::Tile { overlap }, SizeRule::Fixed { width, height }) =
                     (i.mode, i.size)

@@ -548,6 +548,55 @@ fn inpainting_blur_matches_reference_and_hides_disallowed_sources() {
     }
 }
 
+/// What the image input holds in the hole is the manifest's `hole_fill` (black by default):
+/// the identity fixture hands it straight back.
+#[test]
+fn the_hole_holds_the_manifests_fill_colour() {
+    if !runtime_ready() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(fixture("inpaint_identity.onnx"), dir.path().join("id.onnx")).unwrap();
+    let (w, h) = (24, 16);
+    let image = picture(w, h);
+    let hole = rect_hole(w, h, 8, 4, 16, 12);
+    for (fill, want) in [
+        ("", [0.0f32; 3]),
+        (r#", "hole_fill": [0.5, 0.25, 1.0]"#, [0.5, 0.25, 1.0]),
+    ] {
+        let manifest = dir.path().join("id.json");
+        std::fs::write(
+            &manifest,
+            format!(
+                r#"{{ "kind": "inpaint", "file": "id.onnx", "image_input": "image",
+                    "mask_input": "mask", "size": {{ "multiple_of": {{ "multiple": 1 }} }},
+                    "image_range": [0, 255], "output_range": [0, 255]{fill} }}"#
+            ),
+        )
+        .unwrap();
+        let model = OnnxInpainter::from_manifest(&manifest).unwrap();
+        let out = model
+            .inpaint(&request(&image, &hole), &Progress::none())
+            .unwrap();
+        let got = out.image.at(12, 8);
+        for c in 0..3 {
+            assert!((got[c] - want[c]).abs() < 1e-4, "{fill}: {got:?}");
+        }
+        assert_eq!(out.image.at(2, 2), image.at(2, 2));
+    }
+    // A fill outside [0, 1] is refused, naming the field.
+    let bad = dir.path().join("bad.json");
+    std::fs::write(
+        &bad,
+        r#"{ "kind": "inpaint", "file": "id.onnx", "image_input": "image", "mask_input": "mask",
+            "size": { "multiple_of": { "multiple": 1 } }, "output_range": [0, 1],
+            "hole_fill": [2, 0, 0] }"#,
+    )
+    .unwrap();
+    let err = OnnxInpainter::from_manifest(&bad).unwrap_err().to_string();
+    assert!(err.contains("hole_fill"), "{err}");
+}
+
 #[test]
 fn inpainting_empty_and_full_holes() {
     if !runtime_ready() {

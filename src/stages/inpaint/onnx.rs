@@ -138,6 +138,7 @@ impl OnnxInpainter {
         let n = w * h;
         let [black, white] = self.spec.image_range;
         let [known, hole] = self.spec.mask_range;
+        let fill = self.spec.hole_fill.unwrap_or([0.0; 3]);
         let mut image = vec![black; 3 * n];
         let mut mask = vec![known; n];
         for y in 0..h {
@@ -146,6 +147,9 @@ impl OnnxInpainter {
                 let (colour, is_hole) = pixel(x, y);
                 if is_hole {
                     mask[i] = hole;
+                    for c in 0..3 {
+                        image[c * n + i] = black + fill[c] * (white - black);
+                    }
                 } else {
                     for c in 0..3 {
                         image[c * n + i] = black + colour[c] * (white - black);
