@@ -594,6 +594,10 @@ pub struct DepthSpec {
     pub normalization: Normalization,
     /// What the output means.
     pub output_meaning: DepthOutput,
+    /// A second output holding the sky's probability in `[0, 1]` (1 = sky), shaped like the
+    /// depth output; when named it replaces the sky taken from the farthest disparities.
+    #[serde(default)]
+    pub sky_output: Option<String>,
 }
 
 /// An inpainting model's manifest (`"kind": "inpaint"`), LaMa-style: image `[1,3,H,W]` and mask
@@ -1090,6 +1094,19 @@ impl OnnxSession {
         output: &str,
         progress: &Progress,
     ) -> Result<OutputTensor> {
+        let mut outputs = self.run_many(inputs, &[output], progress)?;
+        outputs
+            .pop()
+            .ok_or_else(|| self.error(format!("the model produced no output '{output}'")))
+    }
+
+    /// [`OnnxSession::run`] returning several outputs, in the order of `names`.
+    pub fn run_many(
+        &self,
+        inputs: &[InputTensor<'_>],
+        names: &[&str],
+        progress: &Progress,
+    ) -> Result<Vec<OutputTensor>> {
         progress.check()?;
         let mut values = Vec::with_capacity(inputs.len());
         for input in inputs {
@@ -1166,32 +1183,36 @@ impl OnnxSession {
             let outcome = session
                 .run_with_options(values, &options)
                 .and_then(|outputs| {
-                    let value = outputs.get(output).ok_or_else(|| {
-                        ort::Error::new(format!("the model produced no output '{output}'"))
-                    })?;
-                    let kind = self
-                        .outputs
-                        .iter()
-                        .find(|t| t.name == output)
-                        .map_or(TensorKind::F32, |t| t.kind);
-                    let (shape, data): (Vec<i64>, Vec<f32>) = match kind {
-                        TensorKind::F16 => {
-                            let (shape, data) = value.try_extract_tensor::<half::f16>()?;
-                            (shape.to_vec(), data.iter().map(|v| v.to_f32()).collect())
-                        }
-                        TensorKind::U8 => {
-                            let (shape, data) = value.try_extract_tensor::<u8>()?;
-                            (shape.to_vec(), data.iter().map(|&v| v as f32).collect())
-                        }
-                        TensorKind::F32 | TensorKind::Other => {
-                            let (shape, data) = value.try_extract_tensor::<f32>()?;
-                            (shape.to_vec(), data.to_vec())
-                        }
-                    };
-                    Ok(OutputTensor {
-                        shape: shape.iter().map(|&d| d.max(0) as usize).collect(),
-                        data,
-                    })
+                    let mut out = Vec::with_capacity(names.len());
+                    for &output in names {
+                        let value = outputs.get(output).ok_or_else(|| {
+                            ort::Error::new(format!("the model produced no output '{output}'"))
+                        })?;
+                        let kind = self
+                            .outputs
+                            .iter()
+                            .find(|t| t.name == output)
+                            .map_or(TensorKind::F32, |t| t.kind);
+                        let (shape, data): (Vec<i64>, Vec<f32>) = match kind {
+                            TensorKind::F16 => {
+                                let (shape, data) = value.try_extract_tensor::<half::f16>()?;
+                                (shape.to_vec(), data.iter().map(|v| v.to_f32()).collect())
+                            }
+                            TensorKind::U8 => {
+                                let (shape, data) = value.try_extract_tensor::<u8>()?;
+                                (shape.to_vec(), data.iter().map(|&v| v as f32).collect())
+                            }
+                            TensorKind::F32 | TensorKind::Other => {
+                                let (shape, data) = value.try_extract_tensor::<f32>()?;
+                                (shape.to_vec(), data.to_vec())
+                            }
+                        };
+                        out.push(OutputTensor {
+                            shape: shape.iter().map(|&d| d.max(0) as usize).collect(),
+                            data,
+                        });
+                    }
+                    Ok(out)
                 });
             done.store(true, Ordering::Release);
             if let Ok(handle) = watcher {

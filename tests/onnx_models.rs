@@ -18,6 +18,9 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::sync::Arc;
 
+/// Keep in sync with `SKY_WEIGHTS` in make_fixtures.py.
+const SKY_WEIGHTS: [f32; 3] = [-4.0, 0.0, 4.0];
+
 /// Keep in sync with `LINEAR_WEIGHTS` and `LINEAR_BIAS` in make_fixtures.py.
 const LINEAR_WEIGHTS: [f32; 3] = [0.7, -0.2, 0.4];
 const LINEAR_BIAS: f32 = 0.25;
@@ -185,6 +188,62 @@ fn short_side_rule_and_bicubic_feed_the_reference_size() {
     // The old long-side size would not match.
     let wrong = reference(&makeit4d::raster::resize_bicubic(&image, 518, 294));
     assert!(max_abs_diff(&got, &wrong) > 1e-3);
+}
+
+/// A model's own sky output, named by `sky_output`, replaces the sky taken from the far
+/// disparities, and its sky goes to the far plane.
+#[test]
+fn a_models_sky_output_is_the_sky() {
+    if !runtime_ready() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(fixture("depth_with_sky.onnx"), dir.path().join("m.onnx")).unwrap();
+    let manifest = dir.path().join("m.json");
+    std::fs::write(
+        &manifest,
+        r#"{ "kind": "depth", "file": "m.onnx", "input": "image", "output": "disparity",
+            "sky_output": "sky", "size": { "multiple_of": { "multiple": 1 } },
+            "normalization": "unit", "output_meaning": "relative_disparity" }"#,
+    )
+    .unwrap();
+    let model = OnnxDepth::from_manifest(&manifest).unwrap();
+    let (w, h) = (40, 30);
+    let image = picture(w, h);
+    let est = model
+        .estimate(&image, &intrinsics(w, h), &Progress::none())
+        .unwrap();
+    let want = image.map(|c| {
+        let logit: f32 = (0..3).map(|k| SKY_WEIGHTS[k] * c[k]).sum();
+        1.0 / (1.0 + (-logit).exp())
+    });
+    assert!(
+        max_abs_diff(&est.sky, &want) < 1e-4,
+        "{}",
+        max_abs_diff(&est.sky, &want)
+    );
+    // Where the model is surest of sky, the depth goes far: beyond the median depth.
+    let median = quantile(est.depth.data(), 0.5).unwrap();
+    let surest = quantile(est.sky.data(), 0.95).unwrap();
+    let mut skies = 0;
+    for (z, s) in est.depth.data().iter().zip(est.sky.data()) {
+        if *s >= surest {
+            skies += 1;
+            assert!(*z > median, "sky at depth {z}, median {median}");
+        }
+    }
+    assert!(skies > 0);
+    // A sky output the model does not have is refused at load.
+    let bad = dir.path().join("bad.json");
+    std::fs::write(
+        &bad,
+        r#"{ "kind": "depth", "file": "m.onnx", "input": "image", "output": "disparity",
+            "sky_output": "clouds", "size": { "multiple_of": { "multiple": 1 } },
+            "normalization": "unit", "output_meaning": "relative_disparity" }"#,
+    )
+    .unwrap();
+    let err = OnnxDepth::from_manifest(&bad).unwrap_err().to_string();
+    assert!(err.contains("clouds"), "{err}");
 }
 
 #[test]

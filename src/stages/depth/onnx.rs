@@ -90,15 +90,20 @@ impl OnnxDepth {
             )));
         }
 
-        let output = session.output(spec.output.as_deref())?;
-        let role = format!("output '{}'", output.name);
-        let shape_ok = match output.shape.len() {
-            2 => output.expect(&role, &[None, None]),
-            3 => output.expect(&role, &[Some(1), None, None]),
-            _ => output.expect(&role, &[Some(1), Some(1), None, None]),
+        let image_like = |output: &crate::ml::TensorInfo| {
+            let role = format!("output '{}'", output.name);
+            match output.shape.len() {
+                2 => output.expect(&role, &[None, None]),
+                3 => output.expect(&role, &[Some(1), None, None]),
+                _ => output.expect(&role, &[Some(1), Some(1), None, None]),
+            }
         };
-        shape_ok.map_err(&mismatch)?;
+        let output = session.output(spec.output.as_deref())?;
+        image_like(output).map_err(&mismatch)?;
         let output_name = output.name.clone();
+        if let Some(sky) = &spec.sky_output {
+            image_like(session.output(Some(sky))?).map_err(&mismatch)?;
+        }
         let name = format!("onnx:{}", manifest.display_name());
         Ok(Self {
             manifest,
@@ -114,8 +119,13 @@ impl OnnxDepth {
         &self.manifest
     }
 
-    /// Runs the network on `image` and returns its raw output at the network's resolution.
-    fn run_network(&self, image: &RgbRaster, progress: &Progress) -> Result<GrayRaster> {
+    /// Runs the network on `image` and returns its raw output (and its sky output, when the
+    /// manifest names one) at the network's resolution.
+    fn run_network(
+        &self,
+        image: &RgbRaster,
+        progress: &Progress,
+    ) -> Result<(GrayRaster, Option<GrayRaster>)> {
         let (width, height) = image.size();
         let (in_w, in_h) = self.spec.size.input_size(width, height);
         if in_w > MAX_INPUT_SIDE || in_h > MAX_INPUT_SIDE {
@@ -127,26 +137,37 @@ impl OnnxDepth {
         let normalization = self.spec.normalization;
         let data = rgb_to_nchw(&resized, |c, v| normalization.apply(c, v));
         progress.report(0.1, "depth (onnx)");
-        let out = self.session.run(
+        let mut names = vec![self.output.as_str()];
+        if let Some(sky) = &self.spec.sky_output {
+            names.push(sky.as_str());
+        }
+        let outputs = self.session.run_many(
             &[InputTensor {
                 name: &self.spec.input,
                 shape: &[1, 3, in_h, in_w],
                 data: &data,
             }],
-            &self.output,
+            &names,
             progress,
         )?;
         progress.report(0.8, "depth (onnx)");
-        let (out_h, out_w) = spatial_size(&out.shape, 1)
-            .filter(|&(h, w)| h > 0 && w > 0 && h * w == out.data.len())
-            .ok_or_else(|| {
-                self.session.error(format!(
-                    "output '{}' has shape {:?}; expected [1, 1, H, W], [1, H, W] or [H, W]",
-                    self.output, out.shape
-                ))
-            })?;
-        GrayRaster::from_vec(out_w, out_h, out.data)
-            .ok_or_else(|| self.session.error("output size does not match its shape"))
+        let mut rasters = outputs.into_iter().zip(&names).map(|(out, name)| {
+            let (out_h, out_w) = spatial_size(&out.shape, 1)
+                .filter(|&(h, w)| h > 0 && w > 0 && h * w == out.data.len())
+                .ok_or_else(|| {
+                    self.session.error(format!(
+                        "output '{name}' has shape {:?}; expected [1, 1, H, W], [1, H, W] or [H, W]",
+                        out.shape
+                    ))
+                })?;
+            GrayRaster::from_vec(out_w, out_h, out.data)
+                .ok_or_else(|| self.session.error("output size does not match its shape"))
+        });
+        let depth = rasters
+            .next()
+            .unwrap_or_else(|| Err(self.session.error("the model produced no output")))?;
+        let sky = rasters.next().transpose()?;
+        Ok((depth, sky))
     }
 }
 
@@ -165,10 +186,13 @@ impl DepthEstimator for OnnxDepth {
             return Err(Error::invalid("depth: the image has no pixels"));
         }
         progress.report(0.0, "depth (onnx)");
-        let raw = self.run_network(image, progress)?;
+        let (raw, sky) = self.run_network(image, progress)?;
         let disparity = DisparityMap::from_output(&raw, self.spec.output_meaning)
             .map_err(|message| self.session.error(message))?;
-        let estimate = disparity.to_estimate(image.width(), image.height());
+        let estimate = match sky {
+            Some(sky) => disparity.to_estimate_with_sky(&sky, image.width(), image.height()),
+            None => disparity.to_estimate(image.width(), image.height()),
+        };
         progress.report(1.0, "depth (onnx)");
         Ok(estimate)
     }
@@ -250,6 +274,38 @@ impl DisparityMap {
         DepthEstimate {
             depth: normalized.map(depth_from_normalized_disparity),
             sky: normalized.map(sky_from_normalized_disparity),
+            confidence,
+        }
+    }
+}
+
+impl DisparityMap {
+    /// [`DisparityMap::to_estimate`] with the sky from a model's own sky output `sky`
+    /// (probability, any resolution; non-finite values count as 0): sky pixels blend in
+    /// disparity toward the far plane, `d' = (1 − s)·d`.
+    pub fn to_estimate_with_sky(
+        &self,
+        sky: &GrayRaster,
+        width: usize,
+        height: usize,
+    ) -> DepthEstimate {
+        let normalized = self.normalized.resized(width, height);
+        let confidence = self.valid.resized(width, height).map(|c| c.clamp(0.0, 1.0));
+        let sky = sky
+            .map(|s| {
+                if s.is_finite() {
+                    s.clamp(0.0, 1.0)
+                } else {
+                    0.0
+                }
+            })
+            .resized(width, height);
+        let depth = GrayRaster::from_fn(width, height, |x, y| {
+            depth_from_normalized_disparity((1.0 - sky.at(x, y)) * normalized.at(x, y))
+        });
+        DepthEstimate {
+            depth,
+            sky,
             confidence,
         }
     }
