@@ -143,6 +143,10 @@ struct InpaintArgs {
     /// Seed for the random search (same seed, same bytes).
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// A learned inpainting model instead of PatchMatch: a catalogue name (`lama`) or a
+    /// manifest file. An error, not a fallback, when it cannot run.
+    #[arg(long)]
+    model: Option<PathBuf>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -1435,6 +1439,31 @@ fn inpaint(args: InpaintArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
     let preset: InpaintPreset = args.preset.parse()?;
     let image = makeit4d::image_io::load_image(&args.image)?;
     let hole = command::read_hole_mask(&args.mask, image.rgb.size())?;
+    if let Some(model) = &args.model {
+        use makeit4d::stages::inpaint::{InpaintRequest, Inpainter, onnx::OnnxInpainter};
+        let inpainter = OnnxInpainter::from_manifest(model)?;
+        let (bar, progress) = progress_bar(cancel);
+        let start = std::time::Instant::now();
+        let request = InpaintRequest {
+            image: &image.rgb,
+            hole: &hole,
+            allowed_source: None,
+            guide: None,
+            seed: args.seed,
+        };
+        let filled = inpainter.inpaint(&request, &progress);
+        bar.finish_and_clear();
+        let filled = filled?;
+        makeit4d::image_io::save_rgb_png(&args.out, &filled.image, false)?;
+        let holes = hole.data().iter().filter(|&&h| h).count();
+        println!(
+            "filled {holes} pixels with {} in {:.2} s; wrote {}",
+            inpainter.name(),
+            start.elapsed().as_secs_f64(),
+            args.out.display()
+        );
+        return Ok(());
+    }
     let (bar, progress) = progress_bar(cancel);
     let start = std::time::Instant::now();
     let filled = command::inpaint_command(&image.rgb, &hole, preset, args.seed, &progress);

@@ -218,6 +218,49 @@ fn catalogue_models_install_check_and_run_by_name() {
         assert_eq!(filled.image.at(2, 2), image.at(2, 2));
     }
 
+    if ready {
+        // Every inpainting entry through the `inpaint` command by name (LaMa's two exports
+        // share the fixture: same names, shapes and ranges).
+        run(exe()
+            .args(["models", "install", "lama-opencv", "--file"])
+            .arg(fixture("catalogue_lama.onnx"))
+            .arg("--dir")
+            .arg(&models));
+        let photo = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/evening_glow_320.jpg");
+        let mask = dir.path().join("mask.png");
+        image::GrayImage::from_fn(320, 200, |x, y| {
+            image::Luma([if (100..140).contains(&x) && (80..120).contains(&y) {
+                255
+            } else {
+                0
+            }])
+        })
+        .save(&mask)
+        .unwrap();
+        for (name, grey) in [
+            ("lama", 0.5f32),
+            ("lama-opencv", 0.5),
+            ("migan", 128.0 / 255.0),
+        ] {
+            let out = dir.path().join(format!("{name}.png"));
+            let said = run(exe()
+                .env("MAKEIT4D_MODELS_DIR", &models)
+                .arg("inpaint")
+                .arg(&photo)
+                .arg("--mask")
+                .arg(&mask)
+                .arg("--out")
+                .arg(&out)
+                .args(["--model", name]));
+            assert!(String::from_utf8_lossy(&said.stdout).contains("filled 1600 pixels"));
+            let filled = image::open(&out).unwrap().to_rgb8();
+            let c = filled.get_pixel(120, 100);
+            for v in c.0 {
+                assert!((v as f32 / 255.0 - grey).abs() < 0.02, "{name}: {c:?}");
+            }
+        }
+    }
+
     // Not installed: the error names the install command.
     let out = exe()
         .env("MAKEIT4D_MODELS_DIR", dir.path().join("empty"))
