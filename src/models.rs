@@ -299,17 +299,12 @@ fn verify(
     check_graph(&manifest)
 }
 
-/// Writes `bytes` to `path` through a temporary file and a rename.
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    crate::image_io::write_atomic(path, bytes)
-}
-
 /// Moves the verified `file` into place as `entry`'s model and writes its manifest.
 fn finish(dir: &Path, entry: &'static CatalogueEntry, file: &Path) -> Result<InstalledModel> {
     let folder = entry_dir(dir, entry);
     let model_path = folder.join(entry.file);
     std::fs::rename(file, &model_path).map_err(|e| Error::file(&model_path, e))?;
-    write_atomic(&folder.join("manifest.json"), entry.manifest.as_bytes())?;
+    crate::image_io::write_atomic(&folder.join("manifest.json"), entry.manifest.as_bytes())?;
     installed(dir, entry).ok_or_else(|| Error::file(&folder, "the installed files vanished"))
 }
 
@@ -773,6 +768,11 @@ mod tests {
         Ok(())
     }
 
+    /// `install_from_url` of `entry` from `url` into `dir`, no progress, no graph check.
+    fn fetch(dir: &Path, entry: &'static CatalogueEntry, url: &str) -> Result<InstalledModel> {
+        install_from_url(dir, entry, Some(url), &|_, _| {}, &no_graph_check)
+    }
+
     fn files_in(dir: &Path) -> Vec<String> {
         let mut names: Vec<String> = walk(dir)
             .into_iter()
@@ -843,27 +843,14 @@ mod tests {
         });
         let (url, server) = serve(vec![broken, ranged(body.clone())]);
         let url = format!("{url}/test.onnx");
-        let err = install_from_url(
-            dir.path(),
-            &TEST_ENTRY,
-            Some(&url),
-            &|_, _| {},
-            &no_graph_check,
-        )
-        .unwrap_err()
-        .to_string();
+        let err = fetch(dir.path(), &TEST_ENTRY, &url)
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("broke off") && err.contains("resume"), "{err}");
         let part = dir.path().join("test-model/test.onnx.part");
         assert_eq!(std::fs::metadata(&part).unwrap().len(), half as u64);
         assert!(installed(dir.path(), &TEST_ENTRY).is_none());
-        let m = install_from_url(
-            dir.path(),
-            &TEST_ENTRY,
-            Some(&url),
-            &|_, _| {},
-            &no_graph_check,
-        )
-        .unwrap();
+        let m = fetch(dir.path(), &TEST_ENTRY, &url).unwrap();
         server.join().unwrap();
         assert_eq!(std::fs::read(&m.model_path).unwrap(), body);
         assert!(!part.exists());
@@ -894,15 +881,9 @@ mod tests {
         for (entry, reply, needle) in cases {
             let dir = tempfile::tempdir().unwrap();
             let (url, server) = serve(vec![reply]);
-            let err = install_from_url(
-                dir.path(),
-                entry,
-                Some(&format!("{url}/m.onnx")),
-                &|_, _| {},
-                &no_graph_check,
-            )
-            .unwrap_err()
-            .to_string();
+            let err = fetch(dir.path(), entry, &format!("{url}/m.onnx"))
+                .unwrap_err()
+                .to_string();
             server.join().unwrap();
             assert!(err.contains(needle), "{needle}: {err}");
             assert!(err.lines().count() == 1, "{err}");
@@ -917,15 +898,9 @@ mod tests {
         let closed = TcpListener::bind("127.0.0.1:0").unwrap();
         let url = format!("http://{}/m.onnx", closed.local_addr().unwrap());
         drop(closed);
-        let err = install_from_url(
-            dir.path(),
-            &TEST_ENTRY,
-            Some(&url),
-            &|_, _| {},
-            &no_graph_check,
-        )
-        .unwrap_err()
-        .to_string();
+        let err = fetch(dir.path(), &TEST_ENTRY, &url)
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("--file"), "{err}");
         assert!(files_in(dir.path()).is_empty());
     }

@@ -4,10 +4,6 @@
 //! names, shapes and value ranges (tests/fixtures/make_fixtures.py).
 
 use makeit4d::ml;
-use makeit4d::progress::Progress;
-use makeit4d::raster::{MaskRaster, Raster, RgbRaster};
-use makeit4d::stages::inpaint::onnx::OnnxInpainter;
-use makeit4d::stages::inpaint::{InpaintRequest, Inpainter};
 use std::io::{BufRead, BufReader, Write};
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
@@ -145,25 +141,6 @@ fn catalogue_models_install_check_and_run_by_name() {
         let said = depth_by_name(&models, "depth-anything-v2-small", &depth);
         assert!(said.contains("onnx Depth Anything V2 Small"), "{said}");
         assert!(depth.exists());
-
-        // LaMa through its manifest: a 0..255 output decoded to colours, not clamped to white.
-        let lama = OnnxInpainter::from_manifest(&models.join("lama/manifest.json")).unwrap();
-        let image: RgbRaster =
-            Raster::from_fn(96, 64, |x, y| [x as f32 / 96.0, y as f32 / 64.0, 0.2]);
-        let hole: MaskRaster = Raster::from_fn(96, 64, |x, y| {
-            (40..56).contains(&x) && (24..40).contains(&y)
-        });
-        let request = InpaintRequest {
-            image: &image,
-            hole: &hole,
-            allowed_source: None,
-            guide: None,
-            seed: 0,
-        };
-        let filled = lama.inpaint(&request, &Progress::none()).unwrap();
-        let c = filled.image.at(48, 32);
-        assert!(c.iter().all(|v| (v - 0.5).abs() < 0.02), "{c:?}");
-        assert_eq!(filled.image.at(5, 5), image.at(5, 5));
     }
 
     if ready {
@@ -197,25 +174,6 @@ fn catalogue_models_install_check_and_run_by_name() {
             .max()
             .unwrap();
         assert!(worst < 800, "fp16 vs fp32 differ by {worst} of 65535");
-
-        let migan = OnnxInpainter::from_manifest(&models.join("migan/manifest.json")).unwrap();
-        let image: RgbRaster =
-            Raster::from_fn(50, 30, |x, y| [x as f32 / 50.0, y as f32 / 30.0, 0.6]);
-        let hole: MaskRaster = Raster::from_fn(50, 30, |x, y| {
-            (20..30).contains(&x) && (10..20).contains(&y)
-        });
-        let request = InpaintRequest {
-            image: &image,
-            hole: &hole,
-            allowed_source: None,
-            guide: None,
-            seed: 0,
-        };
-        let filled = migan.inpaint(&request, &Progress::none()).unwrap();
-        // 128 of 255 in the hole; known pixels untouched.
-        let c = filled.image.at(25, 15);
-        assert!(c.iter().all(|v| (v - 128.0 / 255.0).abs() < 0.01), "{c:?}");
-        assert_eq!(filled.image.at(2, 2), image.at(2, 2));
     }
 
     if ready {
@@ -237,6 +195,9 @@ fn catalogue_models_install_check_and_run_by_name() {
         })
         .save(&mask)
         .unwrap();
+        // The hole comes back grey as each fixture defines (LaMa's 0..255 output decoded, not
+        // clamped to white; MI-GAN's uint8), known pixels as they were.
+        let known = image::open(&photo).unwrap().to_rgb8();
         for (name, grey) in [
             ("lama", 0.5f32),
             ("lama-opencv", 0.5),
@@ -258,6 +219,7 @@ fn catalogue_models_install_check_and_run_by_name() {
             for v in c.0 {
                 assert!((v as f32 / 255.0 - grey).abs() < 0.02, "{name}: {c:?}");
             }
+            assert_eq!(filled.get_pixel(10, 10), known.get_pixel(10, 10), "{name}");
         }
     }
 

@@ -151,23 +151,69 @@ pub enum Event {
     Error(String),
 }
 
-/// The depth of a build still running, for the depth view.
+/// What the depth view shows of one depth stage output.
 #[derive(Clone)]
-pub struct EarlyDepth {
-    /// The generation it belongs to.
-    pub generation: u64,
-    /// Depth through the turbo colour map.
+pub struct DepthImages {
+    /// Depth through the turbo colour map (sky dark blue).
     pub depth: ColorImage,
-    /// The sky mask overlay.
+    /// The sky mask as a translucent overlay.
     pub sky: ColorImage,
-    /// The colour map's disparity range.
+    /// The disparities at the depth colour map's two ends (`lo`: far, `hi`: near), for its
+    /// legend.
     pub depth_range: Option<(f32, f32)>,
-    /// The detected horizon.
+    /// Horizon detected from the sky or a reflection, fraction of the photo height from the
+    /// top.
     pub detected_horizon: Option<f32>,
     /// Which cue decided each region (classical estimator only).
     pub cues: Option<ColorImage>,
     /// The cues present, in legend order.
     pub cue_legend: Vec<crate::stages::depth::classical::DepthCue>,
+}
+
+/// Opacity of the depth-cue overlay.
+const CUE_OPACITY: f32 = 0.75;
+
+impl DepthImages {
+    /// The images of `depth`: the horizon is the classical estimator's (sky or reflection),
+    /// else the lower edge of the sky mask.
+    pub fn new(depth: &crate::stages::depth::DepthStageOutput) -> Self {
+        let e = &depth.estimate;
+        let detected_horizon = match &depth.cues {
+            Some(c) => c.detected_horizon,
+            None => crate::stages::depth::classical::horizon_from_sky(&e.sky),
+        };
+        let cue_legend = depth.cues.as_ref().map_or_else(Vec::new, |c| {
+            crate::stages::depth::classical::DepthCue::ALL
+                .into_iter()
+                .filter(|cue| c.map.data().contains(cue))
+                .collect()
+        });
+        Self {
+            depth: rgb_image(&depth_preview(&e.depth, Some(&e.sky)), DISPLAY_MAX_SIDE),
+            sky: mask_overlay(
+                &e.sky,
+                Color32::from_rgb(120, 200, 255),
+                0.5,
+                DISPLAY_MAX_SIDE,
+            ),
+            depth_range: crate::stages::depth::preview::disparity_range(&e.depth, Some(&e.sky)),
+            detected_horizon,
+            cues: depth
+                .cues
+                .as_ref()
+                .map(|c| cue_overlay(&c.map, CUE_OPACITY)),
+            cue_legend,
+        }
+    }
+}
+
+/// The depth of a build still running, for the depth view.
+#[derive(Clone)]
+pub struct EarlyDepth {
+    /// The generation it belongs to.
+    pub generation: u64,
+    /// What the depth view shows of it.
+    pub view: DepthImages,
     /// The depth strokes it includes.
     pub strokes: Vec<crate::stages::depth::paint::DepthStroke>,
 }
@@ -187,23 +233,9 @@ impl EarlyDepth {
         project: &Project,
         depth: &crate::stages::depth::DepthStageOutput,
     ) -> Self {
-        let e = &depth.estimate;
         Self {
             generation,
-            depth: rgb_image(&depth_preview(&e.depth, Some(&e.sky)), DISPLAY_MAX_SIDE),
-            sky: mask_overlay(
-                &e.sky,
-                Color32::from_rgb(120, 200, 255),
-                0.5,
-                DISPLAY_MAX_SIDE,
-            ),
-            depth_range: crate::stages::depth::preview::disparity_range(&e.depth, Some(&e.sky)),
-            detected_horizon: detected_horizon(depth),
-            cues: depth
-                .cues
-                .as_ref()
-                .map(|c| cue_overlay(&c.map, CUE_OPACITY)),
-            cue_legend: cue_legend(depth),
+            view: DepthImages::new(depth),
             strokes: project.depth.strokes.clone(),
         }
     }
@@ -242,20 +274,8 @@ pub struct DisplayImages {
     pub canvas: ColorImage,
     /// Synthesised canvas pixels as a translucent overlay.
     pub synthesised: ColorImage,
-    /// Depth of the photo through the turbo colour map (sky dark blue).
-    pub depth: ColorImage,
-    /// The photo's sky mask as a translucent overlay.
-    pub sky: ColorImage,
-    /// The disparities at the depth colour map's two ends (`lo`: far, `hi`: near), for its
-    /// legend.
-    pub depth_range: Option<(f32, f32)>,
-    /// Horizon detected from the sky or a reflection, fraction of the photo height from the
-    /// top.
-    pub detected_horizon: Option<f32>,
-    /// Which cue decided each region of the depth (classical estimator only).
-    pub cues: Option<ColorImage>,
-    /// The cues present, in legend order.
-    pub cue_legend: Vec<crate::stages::depth::classical::DepthCue>,
+    /// The photo's depth, sky, horizon and cues.
+    pub depth: DepthImages,
     /// Histogram of the canvas disparity `1/Z`: `[bin centre, fraction of pixels]`.
     pub histogram: Vec<[f64; 2]>,
     /// The layers, nearest first.
@@ -741,31 +761,6 @@ pub fn display_images(scene: &Scene) -> DisplayImages {
     display_images_reusing(scene, None)
 }
 
-/// Opacity of the depth-cue overlay.
-const CUE_OPACITY: f32 = 0.75;
-
-/// The horizon the depth stage found: the classical estimator's (sky or reflection), else the
-/// lower edge of the sky mask.
-fn detected_horizon(depth: &crate::stages::depth::DepthStageOutput) -> Option<f32> {
-    match &depth.cues {
-        Some(c) => c.detected_horizon,
-        None => crate::stages::depth::classical::horizon_from_sky(&depth.estimate.sky),
-    }
-}
-
-/// The cues present in the depth's cue map, in legend order.
-fn cue_legend(
-    depth: &crate::stages::depth::DepthStageOutput,
-) -> Vec<crate::stages::depth::classical::DepthCue> {
-    let Some(c) = &depth.cues else {
-        return Vec::new();
-    };
-    crate::stages::depth::classical::DepthCue::ALL
-        .into_iter()
-        .filter(|cue| c.map.data().contains(cue))
-        .collect()
-}
-
 /// [`display_images`], copying the images of `previous` whose stage output `scene` shares (a
 /// camera edit remakes none; a threshold drag only the layers').
 pub fn display_images_reusing(
@@ -774,42 +769,14 @@ pub fn display_images_reusing(
 ) -> DisplayImages {
     let reuse = |same: &dyn Fn(&Scene) -> bool| previous.filter(|(old, _)| same(old)).map(|p| p.1);
     let canvas = &scene.canvas;
-    let depth = &scene.depth.estimate;
     let input = match reuse(&|old| Arc::ptr_eq(&old.input, &scene.input)) {
         Some(d) => d.input.clone(),
         None => rgb_image(&scene.input.rgb, DISPLAY_MAX_SIDE),
     };
-    let (depth_image, sky, detected_horizon, depth_range, cues, cue_legend) =
-        match reuse(&|old| Arc::ptr_eq(&old.depth, &scene.depth)) {
-            Some(d) => (
-                d.depth.clone(),
-                d.sky.clone(),
-                d.detected_horizon,
-                d.depth_range,
-                d.cues.clone(),
-                d.cue_legend.clone(),
-            ),
-            None => (
-                rgb_image(
-                    &depth_preview(&depth.depth, Some(&depth.sky)),
-                    DISPLAY_MAX_SIDE,
-                ),
-                mask_overlay(
-                    &depth.sky,
-                    Color32::from_rgb(120, 200, 255),
-                    0.5,
-                    DISPLAY_MAX_SIDE,
-                ),
-                detected_horizon(&scene.depth),
-                crate::stages::depth::preview::disparity_range(&depth.depth, Some(&depth.sky)),
-                scene
-                    .depth
-                    .cues
-                    .as_ref()
-                    .map(|c| cue_overlay(&c.map, CUE_OPACITY)),
-                cue_legend(&scene.depth),
-            ),
-        };
+    let depth_images = match reuse(&|old| Arc::ptr_eq(&old.depth, &scene.depth)) {
+        Some(d) => d.depth.clone(),
+        None => DepthImages::new(&scene.depth),
+    };
     let (canvas_image, synthesised, histogram) =
         match reuse(&|old| Arc::ptr_eq(&old.canvas, &scene.canvas)) {
             Some(d) => (d.canvas.clone(), d.synthesised.clone(), d.histogram.clone()),
@@ -853,12 +820,7 @@ pub fn display_images_reusing(
         input,
         canvas: canvas_image,
         synthesised,
-        depth: depth_image,
-        sky,
-        depth_range,
-        detected_horizon,
-        cues,
-        cue_legend,
+        depth: depth_images,
         histogram,
         layers,
         motion_mask,

@@ -74,7 +74,9 @@ impl StagePanel for DepthPanel {
                 let (w, h) = snapshot.scene.input.rgb.size();
                 let texture = cx
                     .textures
-                    .get(ui.ctx(), "depth-early", e.generation, || e.depth.clone())
+                    .get(ui.ctx(), "depth-early", e.generation, || {
+                        e.view.depth.clone()
+                    })
                     .id();
                 let (response, view) = crate::app::viewport::image_view_ui(
                     ui,
@@ -96,7 +98,7 @@ impl StagePanel for DepthPanel {
                     let (w, h) = s.scene.input.rgb.size();
                     [w, h]
                 },
-                |s| &s.display.depth,
+                |s| &s.display.depth.depth,
             ),
         };
         let Some((response, view)) = shown else {
@@ -104,55 +106,34 @@ impl StagePanel for DepthPanel {
         };
         let Some(snapshot) = cx.snapshot else { return };
         let painter = ui.painter_at(response.rect);
-        let sky_texture = match early {
-            Some(e) => Some(
-                cx.textures
-                    .get(ui.ctx(), "sky-early", e.generation, || e.sky.clone())
-                    .id(),
-            ),
-            None => cx
-                .scene_texture(ui.ctx(), "sky", |s| &s.display.sky)
-                .map(|t| t.0),
+        // The early depth's images, else the scene's; textures keyed by their generation.
+        let (shown, suffix, generation) = match early {
+            Some(e) => (&e.view, "-early", e.generation),
+            None => (&snapshot.display.depth, "", snapshot.generation),
         };
-        if self.show_sky
-            && let Some(sky) = sky_texture
-        {
+        let overlays = [
+            (self.show_sky, "sky", Some(&shown.sky)),
+            (self.show_cues, "cues", shown.cues.as_ref()),
+        ];
+        for (on, name, image) in overlays {
+            let Some(image) = image.filter(|_| on) else {
+                continue;
+            };
+            let texture = cx
+                .textures
+                .get(ui.ctx(), &format!("{name}{suffix}"), generation, || {
+                    image.clone()
+                })
+                .id();
             painter.image(
-                sky,
-                view.rect,
-                Rect::from_min_max(pos2(0.0, 0.0), pos2(1.0, 1.0)),
-                Color32::WHITE,
-            );
-        }
-        let cue_texture = match early {
-            Some(e) => e.cues.as_ref().map(|c| {
-                cx.textures
-                    .get(ui.ctx(), "cues-early", e.generation, || c.clone())
-                    .id()
-            }),
-            None => match &snapshot.display.cues {
-                Some(c) => Some(
-                    cx.textures
-                        .get(ui.ctx(), "cues", snapshot.generation, || c.clone())
-                        .id(),
-                ),
-                None => None,
-            },
-        };
-        if self.show_cues
-            && let Some(cues) = cue_texture
-        {
-            painter.image(
-                cues,
+                texture,
                 view.rect,
                 Rect::from_min_max(pos2(0.0, 0.0), pos2(1.0, 1.0)),
                 Color32::WHITE,
             );
         }
         let classical = &cx.project.depth.classical;
-        let auto = early
-            .map_or(snapshot.display.detected_horizon, |e| e.detected_horizon)
-            .unwrap_or(classical.default_horizon);
+        let auto = shown.detected_horizon.unwrap_or(classical.default_horizon);
         let horizon = self.horizon_drag.or(classical.horizon).unwrap_or(auto);
         let y = horizon_y(&view, horizon);
         let primary = response.dragged_by(egui::PointerButton::Primary);
@@ -234,7 +215,7 @@ impl StagePanel for DepthPanel {
             }
         }
         // The colour legend: near (red) to far (dark blue), with the depths at both ends.
-        if let Some((lo, hi)) = early.map_or(snapshot.display.depth_range, |e| e.depth_range) {
+        if let Some((lo, hi)) = shown.depth_range {
             let bar = Rect::from_min_size(
                 pos2(view.rect.left() + 8.0, response.rect.bottom() - 30.0),
                 egui::vec2(180.0, 10.0),
@@ -334,8 +315,8 @@ impl StagePanel for DepthPanel {
         }
         ui.checkbox(&mut self.show_sky, "Show the sky mask");
         let legend = match (cx.early_depth, cx.snapshot) {
-            (Some(e), _) => e.cue_legend.clone(),
-            (None, Some(s)) => s.display.cue_legend.clone(),
+            (Some(e), _) => e.view.cue_legend.clone(),
+            (None, Some(s)) => s.display.depth.cue_legend.clone(),
             (None, None) => Vec::new(),
         };
         if legend.is_empty() {

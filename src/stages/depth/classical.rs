@@ -482,10 +482,18 @@ impl ClassicalDepth {
 
         // Haze and detail cues.
         let (haze_work, haziness) = haze_cue(&work, p);
-        let detail_work = if landscape || p.detail_weight == 0.0 {
-            Raster::new(ww, wh, 0.0)
+        // Detail is the fallback's figure/ground where the border is many things. Where the
+        // border is one background, figure/ground against it is the object cue's to find;
+        // when that finds only texture (a forest floor, a canopy), there is no figure there.
+        let wd = if landscape {
+            0.0
         } else {
+            p.detail_weight * (1.0 - coherent_border)
+        };
+        let detail_work = if wd > 0.0 {
             detail_cue(&texture, &work_luma, p.detail_scale)
+        } else {
+            Raster::new(ww, wh, 0.0)
         };
 
         let aerial_work = if landscape && p.aerial_weight > 0.0 {
@@ -503,14 +511,6 @@ impl ClassicalDepth {
         // too would flatten the ground-plane gradient of everything in front of the fog.
         let wo = p.object_weight * object_share * (1.0 - haziness);
         let wz = p.haze_weight * haziness;
-        // Detail is the fallback's figure/ground where the border is many things. Where the
-        // border is one background, figure/ground against it is the object cue's to find;
-        // when that finds only texture (a forest floor, a canopy), there is no figure there.
-        let wd = if landscape {
-            0.0
-        } else {
-            p.detail_weight * (1.0 - coherent_border)
-        };
         let total = (wg + wo + wz).max(1e-6);
 
         // Position prior and pop-up.
