@@ -326,33 +326,6 @@ impl std::fmt::Display for RenderSummary {
     }
 }
 
-/// Output size for a project and scene: the project's, else the input's.
-pub fn output_size(project: &Project, scene: &Scene) -> (usize, usize) {
-    match (project.output.width, project.output.height) {
-        (Some(w), Some(h)) => (w, h),
-        _ => scene.input.rgb.size(),
-    }
-}
-
-/// Every frame's view at the output size.
-pub fn output_views(project: &Project, scene: &Scene) -> Result<Vec<View>> {
-    let frames = project.output.frames;
-    let views = crate::scene::path_views(
-        project,
-        &scene.intrinsics,
-        scene.input.rgb.size(),
-        output_size(project, scene),
-        &scene.scale,
-    )?;
-    if views.len() != frames {
-        return Err(Error::invalid(format!(
-            "camera path produced {} views for {frames} frames",
-            views.len()
-        )));
-    }
-    Ok(views)
-}
-
 /// Removes temporary files a killed export left behind (`.NAME.PID.tmp`).
 fn remove_stale_temporaries(dir: &Path) {
     let Ok(entries) = std::fs::read_dir(dir) else {
@@ -530,8 +503,8 @@ pub fn render_sequence(
     progress: &Progress,
 ) -> Result<RenderSummary> {
     let start = Instant::now();
-    let (width, height) = output_size(project, scene);
-    let views = output_views(project, scene)?;
+    let (width, height) = scene.output_camera(project).size;
+    let views = scene.output_views(project)?;
     let (first, end) = options.range.unwrap_or((0, views.len()));
     if first >= end || end > views.len() {
         return Err(Error::invalid(format!(

@@ -95,6 +95,10 @@ struct ModelsInstallArgs {
     /// Download from this address instead of the catalogue's (a mirror).
     #[arg(long)]
     url: Option<String>,
+    /// Accept bytes that differ from the catalogue's size and SHA-256 (another revision of
+    /// the same export); the graph is still checked against the manifest.
+    #[arg(long)]
+    skip_checksum: bool,
     #[command(flatten)]
     dir: ModelsDirArgs,
 }
@@ -856,8 +860,8 @@ fn render_one(
         bar.suspend(|| eprintln!("warning: {w}"));
     }
     if args.diagnostics {
-        let (w, h) = makeit4d::export::output_size(&project, &scene);
-        let views = makeit4d::export::output_views(&project, &scene)?;
+        let (w, h) = scene.output_camera(&project).size;
+        let views = scene.output_views(&project)?;
         let d = makeit4d::path::path_diagnostics(
             &scene.cloud,
             &views,
@@ -1275,8 +1279,15 @@ fn models(command: ModelsCommand) -> anyhow::Result<()> {
                     entry.name, entry.licence
                 );
             }
+            let bytes = if args.skip_checksum {
+                models::ByteCheck::Skip
+            } else {
+                models::ByteCheck::Catalogue
+            };
             let installed = match &args.file {
-                Some(file) => models::install_from_file(&dir, entry, file, &check_model_graph)?,
+                Some(file) => {
+                    models::install_from_file(&dir, entry, file, bytes, &check_model_graph)?
+                }
                 None => {
                     let bar = ProgressBar::new(0);
                     bar.set_style(
@@ -1298,6 +1309,7 @@ fn models(command: ModelsCommand) -> anyhow::Result<()> {
                         entry,
                         args.url.as_deref(),
                         &progress,
+                        bytes,
                         &check_model_graph,
                     );
                     bar.finish_and_clear();

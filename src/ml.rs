@@ -580,8 +580,10 @@ pub struct DepthSpec {
     pub name: Option<String>,
     /// The `.onnx` file, relative to the manifest.
     pub file: PathBuf,
-    /// The image input's name (NCHW float, 3 channels).
-    pub input: String,
+    /// The image input's name (NCHW float, 3 channels); `None` when the model has exactly one
+    /// input (exports made without names, such as MiDaS's, call it whatever the exporter chose).
+    #[serde(default)]
+    pub input: Option<String>,
     /// The output's name; `None` when the model has exactly one output.
     #[serde(default)]
     pub output: Option<String>,
@@ -1062,6 +1064,20 @@ impl OnnxSession {
                 "the model has {} outputs ({}); the manifest must name one in \"output\"",
                 self.outputs.len(),
                 Self::names(&self.outputs)
+            ))),
+        }
+    }
+
+    /// The input called `name`, or with `None` the model's only input (an error when it has
+    /// several).
+    pub fn input_or_only(&self, name: Option<&str>) -> Result<&TensorInfo> {
+        match name {
+            Some(name) => self.input(name),
+            None if self.inputs.len() == 1 => Ok(&self.inputs[0]),
+            None => Err(self.error(format!(
+                "the model has {} inputs ({}); the manifest must name the image in \"input\"",
+                self.inputs.len(),
+                Self::names(&self.inputs)
             ))),
         }
     }

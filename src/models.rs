@@ -88,7 +88,7 @@ pub const CATALOGUE: &[CatalogueEntry] = &[
                       much better than the classical estimator on indoor scenes, objects and \
                       clutter",
         file: "model.onnx",
-        url: "https://huggingface.co/onnx-community/depth-anything-v2-small/resolve/main/onnx/model.onnx",
+        url: "https://huggingface.co/onnx-community/depth-anything-v2-small/resolve/34f40a4c93991327074907b51792dbc27e7d6f1c/onnx/model.onnx",
         published_size: "99.1 MB",
         size_bytes: None,
         sha256: None,
@@ -102,13 +102,54 @@ pub const CATALOGUE: &[CatalogueEntry] = &[
         description: "Depth Anything V2 Small, float16 (onnx-community export): the same depth \
                       at half the download",
         file: "model_fp16.onnx",
-        url: "https://huggingface.co/onnx-community/depth-anything-v2-small/resolve/main/onnx/model_fp16.onnx",
+        url: "https://huggingface.co/onnx-community/depth-anything-v2-small/resolve/34f40a4c93991327074907b51792dbc27e7d6f1c/onnx/model_fp16.onnx",
         published_size: "49.6 MB",
         size_bytes: None,
-        sha256: None,
+        // The Git LFS pointer of onnx/model_fp16.onnx as uploaded in commit f7421df, which
+        // revision 34f40a4 still serves.
+        sha256: Some("2df6223f206b5164e21f664ace61dabeb9bb6a49b8b5a3e00510b4807d0f5b04"),
         licence: "Apache-2.0",
         non_commercial: false,
         manifest: depth_anything_manifest!("Depth Anything V2 Small (fp16)", "model_fp16.onnx"),
+    },
+    CatalogueEntry {
+        name: "depth-anything-v2-base",
+        kind: ModelKind::Depth,
+        description: "Depth Anything V2 Base (onnx-community export): finer depth edges than \
+                      Small at four times the size and time; non-commercial licence",
+        file: "model.onnx",
+        url: "https://huggingface.co/onnx-community/depth-anything-v2-base/resolve/main/onnx/model.onnx",
+        published_size: "389 MB",
+        size_bytes: None,
+        sha256: None,
+        licence: "CC-BY-NC-4.0",
+        non_commercial: true,
+        manifest: depth_anything_manifest!("Depth Anything V2 Base", "model.onnx"),
+    },
+    CatalogueEntry {
+        name: "midas-v2.1-small",
+        kind: ModelKind::Depth,
+        description: "MiDaS v2.1 Small (Intel ISL's own ONNX release, 256×256): a small, fast \
+                      learned relative depth; coarser than Depth Anything",
+        file: "model-small.onnx",
+        url: "https://github.com/isl-org/MiDaS/releases/download/v2_1/model-small.onnx",
+        published_size: "about 80 MB",
+        size_bytes: None,
+        sha256: None,
+        licence: "MIT",
+        non_commercial: false,
+        // MiDaS's ONNX exporter (tf/make_onnx_model.py) builds the ImageNet normalisation into
+        // the graph (`MidasNet_preprocessing`) and names no inputs or outputs; its runner
+        // (tf/run_onnx.py) feeds RGB in 0..1 squashed to the square with bicubic resampling.
+        manifest: r#"{
+  "name": "MiDaS v2.1 Small",
+  "kind": "depth",
+  "file": "model-small.onnx",
+  "size": { "fixed": { "width": 256, "height": 256 } },
+  "resample": "bicubic",
+  "normalization": "unit",
+  "output_meaning": "relative_disparity"
+}"#,
     },
     CatalogueEntry {
         name: "lama",
@@ -116,10 +157,11 @@ pub const CATALOGUE: &[CatalogueEntry] = &[
         description: "LaMa (Carve's ONNX export, 512×512): learned inpainting of the hidden \
                       layers and the outpainted margin, tiled at full resolution",
         file: "lama_fp32.onnx",
-        url: "https://huggingface.co/Carve/LaMa-ONNX/resolve/main/lama_fp32.onnx",
+        url: "https://huggingface.co/Carve/LaMa-ONNX/resolve/a3ee2fca54baebec351b8fa7786154ffa7555aa6/lama_fp32.onnx",
         published_size: "208 MB",
-        size_bytes: None,
-        sha256: None,
+        // The Git LFS pointer of lama_fp32.onnx in commit a3ee2fc (the revision downloaded).
+        size_bytes: Some(208_044_816),
+        sha256: Some("1faef5301d78db7dda502fe59966957ec4b79dd64e16f03ed96913c7a4eb68d6"),
         licence: "Apache-2.0",
         non_commercial: false,
         manifest: lama_manifest!("LaMa", "lama_fp32.onnx"),
@@ -144,10 +186,12 @@ pub const CATALOGUE: &[CatalogueEntry] = &[
         description: "MI-GAN pipeline (Picsart): fast learned inpainting at any size, uint8 in \
                       and out",
         file: "migan_pipeline_v2.onnx",
-        url: "https://huggingface.co/andraniksargsyan/migan/resolve/main/migan_pipeline_v2.onnx",
-        published_size: "28 MB",
-        size_bytes: None,
-        sha256: None,
+        url: "https://huggingface.co/andraniksargsyan/migan/resolve/1538c135034b8cfe7a8472f34d09c8a5a45b17a7/migan_pipeline_v2.onnx",
+        published_size: "28.1 MB",
+        // The Git LFS pointer of two independent re-uploads of migan_pipeline_v2.onnx (the
+        // original's page shows the same 28.1 MB; its own pointer was not readable here).
+        size_bytes: Some(28_079_181),
+        sha256: Some("6f1f3530a1a2324b19752018ce756088b07973cda8d7d890034ace5c8a48c40b"),
         licence: "MIT",
         non_commercial: false,
         manifest: r#"{
@@ -171,10 +215,11 @@ pub fn find(name: &str) -> Option<&'static CatalogueEntry> {
     CATALOGUE.iter().find(|e| e.name == name)
 }
 
-/// Whether `text` could be a model name rather than a path (no separator, no extension).
+/// Whether `text` could be a model name rather than a path: a catalogue name, or anything
+/// without a separator or an extension.
 pub fn looks_like_name(text: &Path) -> bool {
     let s = text.to_string_lossy();
-    !s.is_empty() && !s.contains(['/', '\\', '.'])
+    !s.is_empty() && !s.contains(['/', '\\']) && (!s.contains('.') || find(&s).is_some())
 }
 
 /// The models folder (see the module documentation); `None` when no home is known.
@@ -263,32 +308,56 @@ pub fn sha256_file(path: &Path) -> Result<String> {
         .collect())
 }
 
-/// Checks a downloaded or copied model file against the catalogue (size, SHA-256) and, through
-/// `check_graph`, against the manifest. The message names what did not match.
+/// Which of the catalogue's checks of the file's bytes an install makes (the graph is always
+/// checked against the manifest).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ByteCheck {
+    /// The catalogue's exact size and SHA-256, where it knows them.
+    #[default]
+    Catalogue,
+    /// None: another revision of the same export, or a re-export with the same interface
+    /// (`models install NAME --skip-checksum`).
+    Skip,
+}
+
+/// Checks a downloaded or copied model file against the catalogue (size, SHA-256, unless
+/// `bytes` says not to) and, through `check_graph`, against the manifest. The message names
+/// what did not match.
 fn verify(
     entry: &CatalogueEntry,
     file: &Path,
     manifest_path: &Path,
+    bytes_check: ByteCheck,
     check_graph: &dyn Fn(&ModelManifest) -> Result<()>,
 ) -> Result<()> {
     let bytes = std::fs::metadata(file)
         .map_err(|e| Error::file(file, e))?
         .len();
-    if let Some(want) = entry.size_bytes
-        && bytes != want
-    {
-        return Err(Error::file(
-            file,
-            format!("is {bytes} bytes; {} is {want} bytes", entry.name),
-        ));
-    }
-    if let Some(want) = entry.sha256 {
-        let got = sha256_file(file)?;
-        if got != want {
+    let other_export = "if it is another revision of the same export, add --skip-checksum \
+                        (its graph is still checked)";
+    if bytes_check == ByteCheck::Catalogue {
+        if let Some(want) = entry.size_bytes
+            && bytes != want
+        {
             return Err(Error::file(
                 file,
-                format!("SHA-256 {got} does not match {}'s {want}", entry.name),
+                format!(
+                    "is {bytes} bytes; {} is {want} bytes; {other_export}",
+                    entry.name
+                ),
             ));
+        }
+        if let Some(want) = entry.sha256 {
+            let got = sha256_file(file)?;
+            if got != want {
+                return Err(Error::file(
+                    file,
+                    format!(
+                        "SHA-256 {got} does not match {}'s {want}; {other_export}",
+                        entry.name
+                    ),
+                ));
+            }
         }
     }
     let manifest = ModelManifest::parse(entry.manifest, manifest_path)?;
@@ -314,6 +383,7 @@ pub fn install_from_file(
     dir: &Path,
     entry: &'static CatalogueEntry,
     source: &Path,
+    bytes: ByteCheck,
     check_graph: &dyn Fn(&ModelManifest) -> Result<()>,
 ) -> Result<InstalledModel> {
     if !source.is_file() {
@@ -323,8 +393,15 @@ pub fn install_from_file(
     std::fs::create_dir_all(&folder).map_err(|e| Error::file(&folder, e))?;
     let part = folder.join(format!("{}.part", entry.file));
     let copied = std::fs::copy(source, &part).map_err(|e| Error::file(&part, e));
-    let result =
-        copied.and_then(|_| verify(entry, &part, &folder.join("manifest.json"), check_graph));
+    let result = copied.and_then(|_| {
+        verify(
+            entry,
+            &part,
+            &folder.join("manifest.json"),
+            bytes,
+            check_graph,
+        )
+    });
     match result {
         Ok(()) => finish(dir, entry, &part),
         Err(e) => {
@@ -353,9 +430,10 @@ pub fn install_from_url(
     entry: &'static CatalogueEntry,
     url: Option<&str>,
     progress: DownloadProgress<'_>,
+    bytes: ByteCheck,
     check_graph: &dyn Fn(&ModelManifest) -> Result<()>,
 ) -> Result<InstalledModel> {
-    let result = download_and_install(dir, entry, url, progress, check_graph);
+    let result = download_and_install(dir, entry, url, progress, bytes, check_graph);
     if result.is_err() {
         remove_if_empty(&entry_dir(dir, entry));
     }
@@ -367,6 +445,7 @@ fn download_and_install(
     entry: &'static CatalogueEntry,
     url: Option<&str>,
     progress: DownloadProgress<'_>,
+    bytes: ByteCheck,
     check_graph: &dyn Fn(&ModelManifest) -> Result<()>,
 ) -> Result<InstalledModel> {
     let url = url.unwrap_or(entry.url);
@@ -399,7 +478,13 @@ fn download_and_install(
         200 => false,
         416 if have > 0 => {
             // The part is already whole (or the server will not resume): check it as it is.
-            return match verify(entry, &part, &folder.join("manifest.json"), check_graph) {
+            return match verify(
+                entry,
+                &part,
+                &folder.join("manifest.json"),
+                bytes,
+                check_graph,
+            ) {
                 Ok(()) => finish(dir, entry, &part),
                 Err(e) => {
                     let _ = std::fs::remove_file(&part);
@@ -462,7 +547,13 @@ fn download_and_install(
              command again to resume it, or {by_hand}"
         )));
     }
-    match verify(entry, &part, &folder.join("manifest.json"), check_graph) {
+    match verify(
+        entry,
+        &part,
+        &folder.join("manifest.json"),
+        bytes,
+        check_graph,
+    ) {
         Ok(()) => finish(dir, entry, &part),
         Err(e) => {
             let _ = std::fs::remove_file(&part);
@@ -611,7 +702,14 @@ pub fn bench_download(megabytes: u64, runs: usize, scratch: &Path) -> Result<Dow
     for _ in 0..runs {
         let _ = remove(scratch, &BENCH);
         let start = std::time::Instant::now();
-        install_from_url(scratch, &BENCH, Some(&url), &|_, _| {}, &|_| Ok(()))?;
+        install_from_url(
+            scratch,
+            &BENCH,
+            Some(&url),
+            &|_, _| {},
+            ByteCheck::Catalogue,
+            &|_| Ok(()),
+        )?;
         ours.push(start.elapsed().as_secs_f64());
         let _ = remove(scratch, &BENCH);
         if curl {
@@ -662,6 +760,9 @@ mod tests {
         assert!(looks_like_name(Path::new("lama")));
         assert!(!looks_like_name(Path::new("models/lama.json")));
         assert!(!looks_like_name(Path::new("lama.json")));
+        // A catalogue name with a dot is still a name; another dotted word is a file.
+        assert!(looks_like_name(Path::new("midas-v2.1-small")));
+        assert!(!looks_like_name(Path::new("midas-v2.1-large")));
         // A path is passed through untouched, existing or not.
         assert_eq!(
             resolve(Path::new("x/y.json")).unwrap(),
@@ -770,7 +871,14 @@ mod tests {
 
     /// `install_from_url` of `entry` from `url` into `dir`, no progress, no graph check.
     fn fetch(dir: &Path, entry: &'static CatalogueEntry, url: &str) -> Result<InstalledModel> {
-        install_from_url(dir, entry, Some(url), &|_, _| {}, &no_graph_check)
+        install_from_url(
+            dir,
+            entry,
+            Some(url),
+            &|_, _| {},
+            ByteCheck::Catalogue,
+            &no_graph_check,
+        )
     }
 
     fn files_in(dir: &Path) -> Vec<String> {
@@ -810,6 +918,7 @@ mod tests {
             &TEST_ENTRY,
             Some(&format!("{url}/test.onnx")),
             &progress,
+            ByteCheck::Catalogue,
             &no_graph_check,
         )
         .unwrap();
@@ -913,18 +1022,54 @@ mod tests {
         let models = dir.path().join("models");
         // A graph that does not match the manifest is refused and leaves nothing.
         let refuse = |_: &ModelManifest| Err(Error::invalid("input 'image' is missing"));
-        let err = install_from_file(&models, &TEST_ENTRY, &src, &refuse)
+        let err = install_from_file(&models, &TEST_ENTRY, &src, ByteCheck::Catalogue, &refuse)
             .unwrap_err()
             .to_string();
         assert!(err.contains("input 'image'"), "{err}");
         assert!(files_in(&models).is_empty());
-        let m = install_from_file(&models, &TEST_ENTRY, &src, &no_graph_check).unwrap();
+        // Bytes that differ from the catalogue's checksum are refused, with the way out...
+        static CHECKED: CatalogueEntry = CatalogueEntry {
+            sha256: Some("0000000000000000000000000000000000000000000000000000000000000000"),
+            ..TEST_ENTRY
+        };
+        let err = install_from_file(
+            &models,
+            &CHECKED,
+            &src,
+            ByteCheck::Catalogue,
+            &no_graph_check,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("SHA-256") && err.contains("--skip-checksum"),
+            "{err}"
+        );
+        assert!(files_in(&models).is_empty());
+        // ... which still checks the graph,
+        let err = install_from_file(&models, &CHECKED, &src, ByteCheck::Skip, &refuse)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("input 'image'"), "{err}");
+        // and installs a file whose graph matches.
+        let m =
+            install_from_file(&models, &CHECKED, &src, ByteCheck::Skip, &no_graph_check).unwrap();
+        assert!(remove(&models, &CHECKED).unwrap(), "{m:?}");
+        let m = install_from_file(
+            &models,
+            &TEST_ENTRY,
+            &src,
+            ByteCheck::Catalogue,
+            &no_graph_check,
+        )
+        .unwrap();
         assert_eq!(std::fs::read(&m.model_path).unwrap(), payload());
         assert!(src.exists(), "the user's file is copied, not moved");
         let missing = install_from_file(
             &models,
             &TEST_ENTRY,
             &dir.path().join("nope"),
+            ByteCheck::Catalogue,
             &no_graph_check,
         );
         assert!(missing.unwrap_err().to_string().contains("no such file"));

@@ -535,18 +535,7 @@ impl SceneBuilder {
         // 3. Canvas: the layout the path needs, then a cached canvas that covers it, one grown
         // from a cached canvas, or a new one.
         let p = step(Stage::Canvas);
-        let output_size = match (project.output.width, project.output.height) {
-            (Some(ow), Some(oh)) => (ow, oh),
-            _ => (w, h),
-        };
-        let needed = canvas_layout(
-            project,
-            (w, h),
-            &intrinsics,
-            &depth.estimate.depth,
-            &scale,
-            output_size,
-        )?;
+        let needed = canvas_layout(project, (w, h), &intrinsics, &depth.estimate.depth, &scale)?;
         let base = key_of(key, &(&project.canvas, &project.inpaint, sketch));
         let exact_key = key_of(base, &(needed, 0u64));
         let reused = match self.canvas.get(exact_key) {
@@ -685,7 +674,7 @@ impl SceneBuilder {
         // them keeps the cloud.
         let p = step(Stage::Cloud);
         let mut strides = if project.layers.adaptive_density {
-            let views = path_views(project, &intrinsics, (w, h), output_size, &scale)?;
+            let views = OutputCamera::of(project, (w, h)).views(project, &scale)?;
             density_strides(&layered, &canvas.intrinsics, &views)
         } else {
             Vec::new()
@@ -867,22 +856,48 @@ fn apply_input_alpha(cloud: &mut PointCloud, alpha: &GrayRaster, layout: &Canvas
     // Fully transparent points make nothing: the renderer skips alpha 0.
 }
 
-/// Every frame's view of `project`'s camera path at the output size: the input camera
-/// (`intrinsics`, for an `input_size` photo) scaled to `output_size`. The canvas stage sizes the
-/// canvas from them, the cloud stage its density, and export renders them.
-pub fn path_views(
-    project: &Project,
-    intrinsics: &Intrinsics,
-    input_size: (usize, usize),
-    output_size: (usize, usize),
-    scale: &SceneScale,
-) -> Result<Vec<View>> {
-    let ((w, h), (ow, oh)) = (input_size, output_size);
-    let out_k = intrinsics.scaled(ow as f32 / w as f32, oh as f32 / h as f32);
-    project
-        .camera
-        .path
-        .views(&out_k, ow, scale, project.output.frames)
+/// How a project's frames are seen: the output size (the project's, else the photo's) and the
+/// input camera scaled to it. The one place that turns a project into per-frame views: the
+/// canvas stage sizes the canvas from them, the cloud stage its density, and export, the
+/// diagnostics, autocruise, the editor's camera plot and both previews render them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OutputCamera {
+    /// Output width and height in pixels.
+    pub size: (usize, usize),
+    /// The input camera at the output size.
+    pub intrinsics: Intrinsics,
+}
+
+impl OutputCamera {
+    /// `project`'s output camera for a photo of `input_size` (the input camera is
+    /// `project.camera.hfov_deg` across the photo, as the scene's is).
+    pub fn of(project: &Project, input_size: (usize, usize)) -> Self {
+        let (w, h) = input_size;
+        let size = match (project.output.width, project.output.height) {
+            (Some(ow), Some(oh)) => (ow, oh),
+            _ => (w, h),
+        };
+        let intrinsics = Intrinsics::from_hfov(w, h, project.camera.hfov_deg)
+            .scaled(size.0 as f32 / w as f32, size.1 as f32 / h as f32);
+        Self { size, intrinsics }
+    }
+
+    /// Every frame's view of `project`'s camera path (`project.output.frames` of them) over a
+    /// scene of `scale`.
+    pub fn views(&self, project: &Project, scale: &SceneScale) -> Result<Vec<View>> {
+        let frames = project.output.frames;
+        let views = project
+            .camera
+            .path
+            .views(&self.intrinsics, self.size.0, scale, frames)?;
+        if views.len() != frames {
+            return Err(Error::invalid(format!(
+                "camera path produced {} views for {frames} frames",
+                views.len()
+            )));
+        }
+        Ok(views)
+    }
 }
 
 /// Flies autocruise (`project.camera.autocruise`, `project.output.frames` frames) over
@@ -893,14 +908,11 @@ pub fn autocruise(
     scene: &Scene,
     progress: &Progress,
 ) -> Result<crate::path::AutocruiseResult> {
-    let (w, h) = crate::export::output_size(project, scene);
-    let (iw, ih) = scene.input.rgb.size();
-    let k = scene
-        .intrinsics
-        .scaled(w as f32 / iw as f32, h as f32 / ih as f32);
+    let camera = scene.output_camera(project);
+    let (w, h) = camera.size;
     crate::path::autocruise(
         &scene.cloud,
-        &k,
+        &camera.intrinsics,
         w,
         h,
         &scene.scale,
@@ -918,7 +930,6 @@ pub fn canvas_layout(
     intrinsics: &Intrinsics,
     depth: &GrayRaster,
     scale: &SceneScale,
-    output_size: (usize, usize),
 ) -> Result<CanvasLayout> {
     if !project.canvas.enabled {
         return Ok(CanvasLayout::identity(input_size));
@@ -928,12 +939,13 @@ pub fn canvas_layout(
             CanvasLayout::fixed(input_size, factor, placement)
         }
         CanvasSizing::FromPath(options) => {
-            let views = path_views(project, intrinsics, input_size, output_size, scale)?;
+            let camera = OutputCamera::of(project, input_size);
+            let views = camera.views(project, scale)?;
             canvas_from_views(
                 input_size,
                 intrinsics,
                 &views,
-                output_size,
+                camera.size,
                 DepthRange::from_depth(depth)?,
                 &options,
             )
@@ -1131,6 +1143,16 @@ fn grow_canvas(
 }
 
 impl Scene {
+    /// `project`'s output camera for this scene's photo ([`OutputCamera::of`]).
+    pub fn output_camera(&self, project: &Project) -> OutputCamera {
+        OutputCamera::of(project, self.input.rgb.size())
+    }
+
+    /// Every output frame's view of `project`'s camera path over this scene.
+    pub fn output_views(&self, project: &Project) -> Result<Vec<View>> {
+        self.output_camera(project).views(project, &self.scale)
+    }
+
     /// Renders output frame `frame_index` seen from `view`: the still cloud, or — when the
     /// scene moves — the forward cloud at `F_m(M)` and the backward cloud at `F_{N−m}(−M)`
     /// (`m = frame_index mod N`) blended by time, coverage and disparity (3D symmetric

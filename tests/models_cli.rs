@@ -88,10 +88,27 @@ fn catalogue_models_install_check_and_run_by_name() {
     let models = dir.path().join("models");
     let ready = runtime_ready();
 
-    // LaMa from the loopback server.
+    // LaMa from the loopback server: the catalogue knows the real file's size and SHA-256, so
+    // the fixture is refused (nothing left behind) unless the checksum is skipped.
+    let (url, server) = serve(std::fs::read(fixture("catalogue_lama.onnx")).unwrap(), 1);
+    let out = exe()
+        .args(["models", "install", "lama", "--url"])
+        .arg(format!("{url}/lama_fp32.onnx"))
+        .arg("--dir")
+        .arg(&models)
+        .output()
+        .unwrap();
+    server.join().unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("208044816") && err.contains("--skip-checksum"),
+        "{err}"
+    );
+    assert!(!models.join("lama").exists());
     let (url, server) = serve(std::fs::read(fixture("catalogue_lama.onnx")).unwrap(), 1);
     let out = run(exe()
-        .args(["models", "install", "lama", "--url"])
+        .args(["models", "install", "lama", "--skip-checksum", "--url"])
         .arg(format!("{url}/lama_fp32.onnx"))
         .arg("--dir")
         .arg(&models));
@@ -103,9 +120,20 @@ fn catalogue_models_install_check_and_run_by_name() {
         .arg(fixture("catalogue_depth_anything_v2_small.onnx"))
         .arg("--dir")
         .arg(&models));
+    // Depth Anything V2 Base shares Small's interface; its licence is said at install.
+    let base = run(exe()
+        .args(["models", "install", "depth-anything-v2-base", "--file"])
+        .arg(fixture("catalogue_depth_anything_v2_small.onnx"))
+        .arg("--dir")
+        .arg(&models));
+    let said = String::from_utf8_lossy(&base.stderr);
+    assert!(
+        said.contains("CC-BY-NC-4.0") && said.contains("not for commercial use"),
+        "{said}"
+    );
     let list = run(exe().args(["models", "list", "--dir"]).arg(&models));
     let list = String::from_utf8_lossy(&list.stdout);
-    for name in ["lama", "depth-anything-v2-small"] {
+    for name in ["lama", "depth-anything-v2-small", "depth-anything-v2-base"] {
         let line = list
             .lines()
             .find(|l| l.starts_with(&format!("| {name} |")))
@@ -151,9 +179,10 @@ fn catalogue_models_install_check_and_run_by_name() {
                 "catalogue_depth_anything_v2_small_fp16.onnx",
             ),
             ("migan", "catalogue_migan.onnx"),
+            ("midas-v2.1-small", "catalogue_midas_v2_1_small.onnx"),
         ] {
             run(exe()
-                .args(["models", "install", name, "--file"])
+                .args(["models", "install", name, "--skip-checksum", "--file"])
                 .arg(fixture(file))
                 .arg("--dir")
                 .arg(&models));
@@ -174,6 +203,24 @@ fn catalogue_models_install_check_and_run_by_name() {
             .max()
             .unwrap();
         assert!(worst < 800, "fp16 vs fp32 differ by {worst} of 65535");
+
+        // MiDaS's release names neither its input nor its output: the manifest takes the
+        // graph's only ones, at the fixed 256×256, and the depth comes back at the photo's size.
+        let midas = dir.path().join("midas.png");
+        let said = depth_by_name(&models, "midas-v2.1-small", &midas);
+        assert!(said.contains("onnx MiDaS v2.1 Small"), "{said}");
+        let d = image::open(&midas).unwrap().to_luma16();
+        assert_eq!(d.dimensions(), (320, 200));
+        // The fixture's disparity is a linear map of the colour: the same map as Depth
+        // Anything's fixture (also linear, other normalisation), so the two orderings agree on
+        // most pixels.
+        let agree = a
+            .pixels()
+            .zip(d.pixels())
+            .zip(a.pixels().skip(37).zip(d.pixels().skip(37)))
+            .filter(|((p, q), (p2, q2))| (p[0] > p2[0]) == (q[0] > q2[0]))
+            .count();
+        assert!(agree * 10 > a.len() * 7, "{agree} of {}", a.len());
     }
 
     if ready {

@@ -28,7 +28,7 @@ fn project(name: &str, preset: PresetKind, frames: usize) -> Project {
 }
 
 fn views(p: &Project, scene: &Scene) -> Vec<View> {
-    makeit4d::export::output_views(p, scene).expect("views")
+    scene.output_views(p).expect("views")
 }
 
 #[test]

@@ -386,8 +386,8 @@ pub fn sketch_trade(project: &Project) -> anyhow::Result<SketchTrade> {
         let started = Instant::now();
         let full = SceneBuilder::new().build(project, &Progress::none())?;
         let final_s = started.elapsed().as_secs_f64();
-        let views = crate::export::output_views(project, &full)?;
-        let (w, h) = crate::export::output_size(project, &full);
+        let views = full.output_views(project)?;
+        let (w, h) = full.output_camera(project).size;
         let last = views.len().saturating_sub(1);
         let (pw, ph) = super::images::fit_size(w, h, 360);
         let mut psnr_db = [0.0; 3];

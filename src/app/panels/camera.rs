@@ -3,7 +3,7 @@
 //! keyframes in the inspector.
 
 use super::{PanelContext, Request, StagePanel, Tab, committed, placeholder_ui};
-use crate::geometry::{Intrinsics, View};
+use crate::geometry::View;
 use crate::path::{
     AutocruiseParams, CameraPath, CruiseDirection, Ease, Interpolation, Preset, PresetKind,
 };
@@ -19,18 +19,8 @@ const GRAB_RADIUS: f32 = 10.0;
 /// The camera path's view of every output frame of `project` over `scene` (at the output
 /// size), and the output size.
 pub fn path_views(project: &Project, scene: &Scene) -> (crate::Result<Vec<View>>, (usize, usize)) {
-    let (iw, ih) = scene.input.rgb.size();
-    let (ow, oh) = match (project.output.width, project.output.height) {
-        (Some(w), Some(h)) => (w, h),
-        _ => (iw, ih),
-    };
-    let k = Intrinsics::from_hfov(iw, ih, project.camera.hfov_deg)
-        .scaled(ow as f32 / iw as f32, oh as f32 / ih as f32);
-    let views = project
-        .camera
-        .path
-        .views(&k, ow, &scene.scale, project.output.frames);
-    (views, (ow, oh))
+    let camera = scene.output_camera(project);
+    (camera.views(project, &scene.scale), camera.size)
 }
 
 /// The autocruise button and its main settings: the flight replaces the path with its

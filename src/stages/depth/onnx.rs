@@ -38,6 +38,7 @@ pub struct OnnxDepth {
     manifest: ModelManifest,
     spec: DepthSpec,
     session: OnnxSession,
+    input: String,
     output: String,
     name: String,
 }
@@ -62,8 +63,8 @@ impl OnnxDepth {
         let mismatch =
             |message: String| session.error(format!("{message} (manifest {manifest_name})"));
 
-        session.expect_inputs(&[spec.input.as_str()])?;
-        let input = session.input(&spec.input)?;
+        let input = session.input_or_only(spec.input.as_deref())?;
+        session.expect_inputs(&[input.name.as_str()])?;
         if input.kind == crate::ml::TensorKind::U8 {
             return Err(mismatch(format!(
                 "input '{}' is uint8; a depth model's normalised input needs float32 or float16",
@@ -101,6 +102,7 @@ impl OnnxDepth {
         let output = session.output(spec.output.as_deref())?;
         image_like(output).map_err(&mismatch)?;
         let output_name = output.name.clone();
+        let input_name = input.name.clone();
         if let Some(sky) = &spec.sky_output {
             image_like(session.output(Some(sky))?).map_err(&mismatch)?;
         }
@@ -110,6 +112,7 @@ impl OnnxDepth {
             spec,
             session,
             output: output_name,
+            input: input_name,
             name,
         })
     }
@@ -143,7 +146,7 @@ impl OnnxDepth {
         }
         let outputs = self.session.run_many(
             &[InputTensor {
-                name: &self.spec.input,
+                name: &self.input,
                 shape: &[1, 3, in_h, in_w],
                 data: &data,
             }],
