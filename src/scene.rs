@@ -151,6 +151,9 @@ pub struct Scene {
     pub layers: Arc<LayeredScene>,
     /// The point cloud.
     pub cloud: Arc<PointCloud>,
+    /// The cloud's density stride of each layer (one point per `s × s` block; 1 = every
+    /// pixel).
+    pub cloud_strides: Vec<usize>,
     /// Motion, when the project paints any.
     pub motion: Option<Arc<PreparedMotion>>,
     /// Which depth estimator ran.
@@ -161,8 +164,10 @@ pub struct Scene {
     pub warnings: Vec<String>,
 }
 
-/// The smallest density stride of a sketch's cloud ([`SceneBuilder::build_sketch`]).
-pub const SKETCH_STRIDE: usize = 2;
+/// The density stride of a sketch's cloud ([`SceneBuilder::build_sketch`]): the largest any
+/// view asks for, since a sketch is only ever seen in the editor's preview, which can then
+/// render it as it is instead of thinning it first.
+pub const SKETCH_STRIDE: usize = crate::stages::layers::MAX_DENSITY_STRIDE;
 
 /// How many outputs each stage keeps, keyed by the stage's inputs: returning to an earlier state
 /// (undo, redo, deleting the key just added, switching a count back) finds every stage cached.
@@ -263,6 +268,9 @@ fn cached<T>(
 pub struct SceneBuilder {
     load: StageCache<LoadedImage>,
     depth: StageCache<DepthStageOutput>,
+    /// The depth stage's estimates before the painted strokes (a stroke re-applies the strokes
+    /// only), part of the depth stage.
+    unpainted: StageCache<DepthStageOutput>,
     canvas: StageCache<Canvas>,
     layers: StageCache<crate::stages::layers::LayerPlan>,
     inpaint: StageCache<LayeredScene>,
@@ -471,7 +479,13 @@ impl SceneBuilder {
         p_load.check()?;
         let (w, h) = input.rgb.size();
         let intrinsics = Intrinsics::from_hfov(w, h, project.camera.hfov_deg);
+        let unpainted_settings = crate::stages::depth::DepthSettings {
+            strokes: Vec::new(),
+            ..project.depth.clone()
+        };
+        let unpainted_key = key_of(key, &(&unpainted_settings, project.camera.hfov_deg));
         let key = key_of(key, &(&project.depth, project.camera.hfov_deg));
+        let unpainted = &mut self.unpainted;
         let depth = match cached(
             &mut self.depth,
             stats,
@@ -479,7 +493,29 @@ impl SceneBuilder {
             key,
             dry,
             p_depth,
-            |p| run_depth_stage(&project.depth, &input.rgb, &intrinsics, p),
+            |p| {
+                let estimate = match unpainted.get(unpainted_key) {
+                    Some(v) => v,
+                    None => {
+                        let v = Arc::new(run_depth_stage(
+                            &unpainted_settings,
+                            &input.rgb,
+                            &intrinsics,
+                            p,
+                        )?);
+                        unpainted.put(unpainted_key, 0, v.clone());
+                        v
+                    }
+                };
+                let mut out = (*estimate).clone();
+                if !project.depth.strokes.is_empty() {
+                    out.estimate.depth = crate::stages::depth::paint::apply_strokes(
+                        &out.estimate.depth,
+                        &project.depth.strokes,
+                    )?;
+                }
+                Ok(out)
+            },
         )? {
             Ok(v) => v,
             Err(stage) => return Ok(Err(stage)),
@@ -597,7 +633,7 @@ impl SceneBuilder {
 
         // 4. Layers.
         let p = step(Stage::Layers);
-        let params = if project.layers.enabled {
+        let mut params = if project.layers.enabled {
             project.layers.params.clone()
         } else {
             crate::stages::layers::LayerParams {
@@ -605,6 +641,11 @@ impl SceneBuilder {
                 ..project.layers.params.clone()
             }
         };
+        if sketch {
+            // The few-pixel refinement of the layers' depth edges cannot be seen at the
+            // sketch's density (one point per 4 × 4 block) and costs half the stage.
+            params.edge_window_px = 1;
+        }
         let key = key_of(canvas_key, &(&params, project.layers.enabled));
         let plan = stage!(cached(
             &mut self.layers,
@@ -680,13 +721,15 @@ impl SceneBuilder {
             Vec::new()
         };
         if sketch {
-            // A sketch is seen in the preview, a fraction of the output size: a quarter of
-            // the points is plenty (and the cloud is four times quicker to make).
+            // A sketch is seen in the preview, a fraction of the output size: one point per
+            // 4 × 4 block is plenty there (and the cloud is quick to make).
             strides.resize(layered.layers.len(), 1);
             for s in &mut strides {
                 *s = (*s).max(SKETCH_STRIDE);
             }
         }
+        let mut cloud_strides = strides.clone();
+        cloud_strides.resize(layered.layers.len(), 1);
         let key = key_of(key, &(project.layers.adaptive_density, &strides));
         let cloud = stage!(cached(
             &mut self.cloud,
@@ -733,6 +776,7 @@ impl SceneBuilder {
             canvas,
             layers: layered,
             cloud,
+            cloud_strides,
             motion,
             inpainter: inpainter_name,
             warnings,

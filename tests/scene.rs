@@ -305,3 +305,37 @@ fn returning_to_an_earlier_state_finds_every_stage_cached() {
     builder.build(&q, &Progress::none()).expect("three again");
     assert_eq!(builder.runs(), &runs);
 }
+
+#[test]
+fn a_depth_stroke_paints_over_the_cached_estimate() {
+    use makeit4d::geometry::Intrinsics;
+    use makeit4d::stages::depth::paint::{DepthStroke, DepthStrokeKind};
+    use makeit4d::stages::depth::run_depth_stage;
+    let mut p = project("evening_glow_320.jpg", PresetKind::FlyIn, 4);
+    let mut builder = SceneBuilder::new();
+    let bare = builder.depth_output(&p, &Progress::none()).expect("depth");
+    p.depth.strokes.push(DepthStroke {
+        kind: DepthStrokeKind::Pull,
+        points: vec![[100.0, 150.0], [160.0, 150.0]],
+        radius_px: 20.0,
+        strength: 0.5,
+    });
+    let stroked = builder.depth_output(&p, &Progress::none()).expect("stroke");
+    // The same depth as the whole stage run with the stroke...
+    let rgb = makeit4d::image_io::load_image(&photo("evening_glow_320.jpg"))
+        .expect("photo")
+        .rgb;
+    let (w, h) = rgb.size();
+    let k = Intrinsics::from_hfov(w, h, p.camera.hfov_deg);
+    let direct = run_depth_stage(&p.depth, &rgb, &k, &Progress::none()).expect("direct");
+    assert_eq!(stroked.estimate.depth, direct.estimate.depth);
+    // ... which differs from the bare estimate's (the stroke painted over it, nothing else).
+    assert_ne!(stroked.estimate.depth, bare.estimate.depth);
+    assert_eq!(stroked.estimate.sky, bare.estimate.sky);
+    assert_eq!(stroked.estimate.confidence, bare.estimate.confidence);
+    // Undoing the stroke finds the bare depth cached.
+    p.depth.strokes.clear();
+    let again = builder.depth_output(&p, &Progress::none()).expect("undo");
+    assert_eq!(again.estimate.depth, bare.estimate.depth);
+    assert_eq!(builder.runs()[&Stage::Depth], 2);
+}

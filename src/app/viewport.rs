@@ -50,14 +50,23 @@ const THINNED_CLOUDS: usize = 6;
 
 impl CpuPreview {
     /// The cloud to render `view` of `scene` with: the scene's own when the view needs every
-    /// point, else a thinned one (made once per scene and strides).
+    /// point or it is already as thin as the view allows, else a thinned one (made once per
+    /// scene and strides).
     fn cloud_for(&mut self, scene: &Scene, view: &View) -> crate::Result<Arc<PointCloud>> {
         let strides = crate::stages::layers::density_strides(
             &scene.layers,
             &scene.canvas.intrinsics,
             std::slice::from_ref(view),
         );
-        if strides.iter().all(|&s| s <= 1) {
+        // The scene's own cloud when the view needs every point, or when it is already as
+        // thin as the view allows (a sketch's).
+        let thin_enough = scene.cloud_strides.len() == strides.len()
+            && scene
+                .cloud_strides
+                .iter()
+                .zip(&strides)
+                .all(|(have, want)| have >= want);
+        if strides.iter().all(|&s| s <= 1) || thin_enough {
             return Ok(scene.cloud.clone());
         }
         if let Some(i) = self
@@ -256,6 +265,40 @@ pub fn image_layout_ui(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_preview_renders_a_sketch_cloud_as_it_is_and_thins_a_final_one() {
+        use crate::path::{CameraPath, Preset, PresetKind};
+        use crate::progress::Progress;
+        use crate::project::Project;
+        use crate::scene::{SKETCH_STRIDE, SceneBuilder};
+        let photo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data/evening_glow_320.jpg");
+        let mut project = Project::new(photo);
+        project.output.frames = 4;
+        project.camera.path = CameraPath::Preset(Preset::new(PresetKind::FlyIn));
+        project.inpaint.preset = crate::stages::inpaint::InpaintPreset::Draft;
+        let mut builder = SceneBuilder::new();
+        let sketch = builder.build_sketch(&project, &Progress::none()).unwrap();
+        let last = builder.build(&project, &Progress::none()).unwrap();
+        assert!(sketch.cloud_strides.iter().all(|&s| s == SKETCH_STRIDE));
+        assert!(sketch.cloud.len() < last.cloud.len());
+        // A preview a quarter of the output's width wants one point per 4 × 4 block at most.
+        let camera = last.output_camera(&project);
+        let view = View {
+            intrinsics: camera.intrinsics.scaled(0.25, 0.25),
+            world_from_camera: crate::geometry::Pose::IDENTITY,
+        };
+        let mut preview = CpuPreview::default();
+        let for_sketch = preview.cloud_for(&sketch, &view).unwrap();
+        assert!(
+            Arc::ptr_eq(&for_sketch, &sketch.cloud),
+            "no thinning of a sketch"
+        );
+        let for_final = preview.cloud_for(&last, &view).unwrap();
+        assert!(!Arc::ptr_eq(&for_final, &last.cloud));
+        assert!(for_final.len() < last.cloud.len());
+    }
 
     #[test]
     fn image_view_round_trips() {

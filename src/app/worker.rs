@@ -12,7 +12,8 @@
 //!   through exactly the command line's [`render_sequence`], on the exact canvas.
 //! - The **preview thread** (`makeit4d-preview`) renders the newest [`PreviewRequest`] (a
 //!   request replaces any pending one) with the last good scene, so the preview stays live
-//!   while a stage recomputes.
+//!   while a stage recomputes. It renders on every core: the preview is what the artist
+//!   watches, and a build in the background only slows down.
 //!
 //! Progress and one-off results come back as [`Event`]s on a second bounded channel, drained
 //! once per frame; each message is followed by a repaint request.
@@ -466,6 +467,17 @@ fn stage_pool(name: &'static str) -> Option<rayon::ThreadPool> {
         .ok()
 }
 
+/// A pool with every core, for the first answer to an edit (the new depth, the sketch): the
+/// artist is waiting for it, and the preview has nothing new to draw until it exists.
+fn first_answer_pool() -> Option<rayon::ThreadPool> {
+    let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(cores)
+        .thread_name(|i| format!("makeit4d-sketch-{i}"))
+        .build()
+        .ok()
+}
+
 /// Runs `work` on `pool` (or here, without one).
 fn on_pool<T: Send>(pool: Option<&rayon::ThreadPool>, work: impl FnOnce() -> T + Send) -> T {
     match pool {
@@ -527,6 +539,8 @@ fn scene_thread(
     let mut builder = SceneBuilder::growing();
     let pool = stage_pool("makeit4d-stage");
     let pool = pool.as_ref();
+    let sketch_pool = first_answer_pool();
+    let sketch_pool = sketch_pool.as_ref();
     let mut queue: std::collections::VecDeque<Command> = Default::default();
     let send = |event: Event| -> bool {
         let ok = events.send(event).is_ok();
@@ -564,7 +578,7 @@ fn scene_thread(
                 &mut builder,
                 &shared,
                 &ctx,
-                pool,
+                [pool, sketch_pool],
                 generation,
                 *project,
                 &send,
@@ -654,12 +668,13 @@ fn scene_thread(
 /// Builds the scene, publishes it with its display images, and reports. When the build has to
 /// inpaint (the canvas, the layers), a sketch comes first ([`SceneBuilder::build_sketch`]: the
 /// harmonic fill, published with [`SceneSnapshot::draft`] set) and the project's inpainter
-/// refines it in the same job; a newer edit cancels both.
+/// refines it in the same job; a newer edit cancels both. The new depth and the sketch run on
+/// `sketch_pool` (every core), the project's quality on `pool` (one core left to the UI).
 fn run_build(
     builder: &mut SceneBuilder,
     shared: &Arc<Shared>,
     ctx: &egui::Context,
-    pool: Option<&rayon::ThreadPool>,
+    [pool, sketch_pool]: [Option<&rayon::ThreadPool>; 2],
     generation: u64,
     project: Project,
     send: &(impl Fn(Event) -> bool + Sync),
@@ -672,20 +687,50 @@ fn run_build(
     let result = job(shared, ctx, JobKind::Build, pool, |progress| {
         let mut final_part = progress.sub(0.0, 1.0);
         let mut before = builder.runs().clone();
-        if stale.is_some_and(|stage| stage <= Stage::Depth) {
-            // A depth edit: show the new depth as soon as it exists.
-            let depth = builder.depth_output(&project, &progress.sub(0.0, 0.05))?;
-            send(Event::DepthReady(Box::new(EarlyDepth::new(
-                generation, &project, &depth,
-            ))));
-        }
-        if refine {
-            let scene = builder.build_sketch(&project, &progress.sub(0.0, 0.2))?;
-            publish(
-                shared, builder, &before, generation, &project, scene, true, start, send,
-            );
-            before = builder.runs().clone();
-            final_part = progress.sub(0.2, 1.0);
+        let depth_edit = stale.is_some_and(|stage| stage <= Stage::Depth);
+        if depth_edit || refine {
+            // The first answer, on every core: a depth edit's new depth as soon as it exists
+            // (its display images made while the sketch builds), then the sketch.
+            let sketch = on_pool(sketch_pool, || {
+                let depth = if depth_edit {
+                    Some(builder.depth_output(&project, &progress.sub(0.0, 0.05))?)
+                } else {
+                    None
+                };
+                let mut sketch = None;
+                rayon::scope(|s| {
+                    if let Some(depth) = &depth {
+                        let project = &project;
+                        s.spawn(move |_| {
+                            send(Event::DepthReady(Box::new(EarlyDepth::new(
+                                generation, project, depth,
+                            ))));
+                        });
+                    }
+                    if refine {
+                        sketch = Some(builder.build_sketch(&project, &progress.sub(0.0, 0.2)));
+                    }
+                });
+                sketch.transpose()
+            })?;
+            if let Some(scene) = sketch {
+                let builder_now = &*builder;
+                on_pool(sketch_pool, || {
+                    publish(
+                        shared,
+                        builder_now,
+                        &before,
+                        generation,
+                        &project,
+                        scene,
+                        true,
+                        start,
+                        send,
+                    )
+                });
+                before = builder.runs().clone();
+                final_part = progress.sub(0.2, 1.0);
+            }
         }
         let scene = builder.build(&project, &final_part)?;
         Ok::<_, crate::Error>(publish(
@@ -1037,7 +1082,7 @@ fn preview_thread(
     mut renderer: Box<dyn PreviewRenderer>,
     ctx: egui::Context,
 ) {
-    let pool = stage_pool("makeit4d-preview-worker");
+    let pool = first_answer_pool();
     loop {
         let request = {
             let mut slot = lock(&shared.request);

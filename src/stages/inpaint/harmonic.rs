@@ -30,14 +30,18 @@ impl Inpainter for HarmonicInpainter {
     }
 
     fn inpaint(&self, request: &InpaintRequest<'_>, progress: &Progress) -> Result<InpaintResult> {
-        fill_request(request, SWEEPS_PER_LEVEL, "harmonic fill", progress)
+        fill_request(request, Sweeps::FULL, "harmonic fill", progress)
+    }
+
+    fn runs_several_at_once(&self) -> bool {
+        true
     }
 }
 
-/// Fills `request` with the membrane, `finest_sweeps` SOR sweeps at full resolution.
+/// Fills `request` with the membrane: `sweeps` SOR sweeps on each level finer than the coarsest.
 fn fill_request(
     request: &InpaintRequest<'_>,
-    finest_sweeps: usize,
+    sweeps: Sweeps,
     label: &str,
     progress: &Progress,
 ) -> Result<InpaintResult> {
@@ -49,20 +53,37 @@ fn fill_request(
     let (mut pixels, scale) = common::work_pixels(request.image, request.guide, &source, 1.0);
     let unknown: Vec<bool> = source.iter().map(|&s| !s).collect();
     progress.report(0.0, label);
-    membrane_fill_with(&mut pixels, w, h, &unknown, finest_sweeps, progress)?;
+    membrane_fill_with(&mut pixels, w, h, &unknown, sweeps, progress)?;
     progress.report(1.0, label);
     Ok(common::finish(request, &pixels, scale))
 }
 
-/// SOR sweeps of [`SketchInpainter`] at full resolution (the half-resolution solution,
-/// prolonged, is already within a few percent of the harmonic one; a few sweeps smooth the
-/// prolongation's seams).
-const SKETCH_FINEST_SWEEPS: usize = 4;
+/// SOR sweeps on the levels finer than the coarsest: at full resolution, and on each coarser
+/// one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Sweeps {
+    finest: usize,
+    coarser: usize,
+}
 
-/// The membrane fill solved at half resolution and prolonged to full resolution with only
-/// [`SKETCH_FINEST_SWEEPS`] sweeps there: the editor's first answer to an edit
-/// ([`crate::scene::SceneBuilder::build_sketch`]), about twice as fast as
-/// [`HarmonicInpainter`] and as smooth.
+impl Sweeps {
+    /// The harmonic fill: [`SWEEPS_PER_LEVEL`] everywhere.
+    const FULL: Sweeps = Sweeps {
+        finest: SWEEPS_PER_LEVEL,
+        coarser: SWEEPS_PER_LEVEL,
+    };
+    /// [`SketchInpainter`]'s: the coarse solution, prolonged, is already within a few percent
+    /// of the harmonic one, so the levels between only smooth the prolongation's seams (12
+    /// sweeps each) and the full resolution is the bilinear prolongation of the half one.
+    const SKETCH: Sweeps = Sweeps {
+        finest: 0,
+        coarser: 12,
+    };
+}
+
+/// The membrane fill with few sweeps on the fine levels ([`Sweeps::SKETCH`]): the editor's
+/// first answer to an edit ([`crate::scene::SceneBuilder::build_sketch`]), several times as
+/// fast as [`HarmonicInpainter`] and as smooth.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct SketchInpainter;
 
@@ -72,7 +93,11 @@ impl Inpainter for SketchInpainter {
     }
 
     fn inpaint(&self, request: &InpaintRequest<'_>, progress: &Progress) -> Result<InpaintResult> {
-        fill_request(request, SKETCH_FINEST_SWEEPS, "harmonic sketch", progress)
+        fill_request(request, Sweeps::SKETCH, "harmonic sketch", progress)
+    }
+
+    fn runs_several_at_once(&self) -> bool {
+        true
     }
 }
 
@@ -85,30 +110,41 @@ pub(crate) fn membrane_fill<const N: usize>(
     unknown: &[bool],
     progress: &Progress,
 ) -> Result<()> {
-    membrane_fill_with(pixels, w, h, unknown, SWEEPS_PER_LEVEL, progress)
+    membrane_fill_with(pixels, w, h, unknown, Sweeps::FULL, progress)
 }
 
-/// [`membrane_fill`] with `finest_sweeps` SOR sweeps at full resolution.
+/// [`membrane_fill`] with `sweeps`.
 fn membrane_fill_with<const N: usize>(
     pixels: &mut [[f32; N]],
     w: usize,
     h: usize,
     unknown: &[bool],
-    finest_sweeps: usize,
+    sweeps: Sweeps,
     progress: &Progress,
 ) -> Result<()> {
     if unknown.iter().all(|&u| u) || !unknown.iter().any(|&u| u) {
         return Ok(());
     }
-    solve_level(pixels, w, h, unknown, finest_sweeps, progress)
+    solve_level(
+        pixels,
+        w,
+        h,
+        unknown,
+        sweeps.finest,
+        sweeps.coarser,
+        progress,
+    )
 }
 
+/// One level of the cascade: `level_sweeps` here, `coarser_sweeps` on every coarser level
+/// (but the coarsest).
 fn solve_level<const N: usize>(
     pixels: &mut [[f32; N]],
     w: usize,
     h: usize,
     unknown: &[bool],
     level_sweeps: usize,
+    coarser_sweeps: usize,
     progress: &Progress,
 ) -> Result<()> {
     progress.check()?;
@@ -168,7 +204,8 @@ fn solve_level<const N: usize>(
             cw,
             ch,
             &coarse_unknown,
-            SWEEPS_PER_LEVEL,
+            coarser_sweeps,
+            coarser_sweeps,
             progress,
         )?;
         // Prolong: bilinear from the coarse solution, pixel-centre aligned.
@@ -216,6 +253,9 @@ fn sor<const N: usize>(
     progress: &Progress,
 ) -> Result<()> {
     const OMEGA: f32 = 1.7;
+    if sweeps == 0 {
+        return Ok(());
+    }
     // Each unknown pixel with its in-image neighbours, split by colour.
     let mut colours: [Vec<(u32, [u32; 4], u8)>; 2] = [Vec::new(), Vec::new()];
     for y in 0..h {

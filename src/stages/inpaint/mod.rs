@@ -54,6 +54,13 @@ pub trait Inpainter: Send + Sync {
 
     /// Fills `request.hole`. Deterministic for a given seed.
     fn inpaint(&self, request: &InpaintRequest<'_>, progress: &Progress) -> Result<InpaintResult>;
+
+    /// Whether several requests should run at once, one per core: true for a fill that runs
+    /// on one thread and needs little memory (the harmonic fills); false for one that is
+    /// parallel inside already, or large (PatchMatch, a network).
+    fn runs_several_at_once(&self) -> bool {
+        false
+    }
 }
 
 /// The project's inpainting settings (canvas and layers share one inpainter).

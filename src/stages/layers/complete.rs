@@ -56,8 +56,7 @@ pub fn inpaint_layers(
         )));
     }
     let count = plan.regions.len();
-    let mut layers = Vec::with_capacity(count);
-    for (k, region) in plan.regions.iter().enumerate() {
+    let complete = |(k, region): (usize, &super::LayerRegion)| -> Result<Layer> {
         progress.check()?;
         let sub = progress.sub(k as f32 / count as f32, (k + 1) as f32 / count as f32);
         let has_hole = region.hole.data().iter().any(|&v| v);
@@ -105,16 +104,32 @@ pub fn inpaint_layers(
                 depth.data_mut()[i] = hidden_depth(z, region.interval);
             }
         }
-        layers.push(Layer {
+        sub.report(1.0, "layer inpainting");
+        Ok(Layer {
             interval: region.interval,
             image,
             depth,
             mask: region.mask.clone(),
             inpainted: region.hidden.clone(),
             hole: region.hole.clone(),
-        });
-        sub.report(1.0, "layer inpainting");
-    }
+        })
+    };
+    // Each layer's job depends only on its own region and seed, so running them at once gives
+    // the same layers.
+    let layers = if inpainter.runs_several_at_once() {
+        use rayon::prelude::*;
+        plan.regions
+            .par_iter()
+            .enumerate()
+            .map(complete)
+            .collect::<Result<Vec<Layer>>>()?
+    } else {
+        plan.regions
+            .iter()
+            .enumerate()
+            .map(complete)
+            .collect::<Result<Vec<Layer>>>()?
+    };
     Ok(LayeredScene {
         thresholds: plan.thresholds.clone(),
         layers,

@@ -34,6 +34,7 @@ use crate::raster::{GrayRaster, MaskRaster, Raster, RgbRaster};
 use cluster::{
     OptimalPartitions, WardTree, disparity_atoms, thresholds_from_boundaries, thresholds_from_tree,
 };
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// The most layers any mode produces (layer ids are `u16`; beyond this the hidden regions get
@@ -537,36 +538,43 @@ pub fn plan_layers_with_sky(
 
     let t_at = |i: usize| thresholds.get(i).copied().unwrap_or(f32::NAN);
     let count = groups.len();
-    let mut regions = Vec::with_capacity(count);
-    for (k, (g, context)) in groups.iter().zip(contexts).enumerate() {
-        progress.check()?;
-        let mask = labels.map(|l| usize::from(l) == k);
-        let rect = morph::bounding_box(&context).map(|[x0, y0, x1, y1]| {
-            let b = params.border_px;
-            [
-                x0.saturating_sub(b),
-                y0.saturating_sub(b),
-                (x1 + b).min(w - 1),
-                (y1 + b).min(h - 1),
-            ]
-        });
-        let hole = Raster::from_fn(w, h, |x, y| {
-            rect.is_some_and(|[x0, y0, x1, y1]| {
-                !context.at(x, y) && (x0..=x1).contains(&x) && (y0..=y1).contains(&y)
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    // Each layer's region depends only on its own group and context: made at once.
+    let regions = groups
+        .par_iter()
+        .zip(contexts)
+        .enumerate()
+        .map(|(k, (g, context))| {
+            progress.check()?;
+            let mask = labels.map(|l| usize::from(l) == k);
+            let rect = morph::bounding_box(&context).map(|[x0, y0, x1, y1]| {
+                let b = params.border_px;
+                [
+                    x0.saturating_sub(b),
+                    y0.saturating_sub(b),
+                    (x1 + b).min(w - 1),
+                    (y1 + b).min(h - 1),
+                ]
+            });
+            let hole = Raster::from_fn(w, h, |x, y| {
+                rect.is_some_and(|[x0, y0, x1, y1]| {
+                    !context.at(x, y) && (x0..=x1).contains(&x) && (y0..=y1).contains(&y)
+                })
+            });
+            let hidden = Raster::from_fn(w, h, |x, y| {
+                hole.at(x, y) && usize::from(labels.at(x, y)) < k
+            });
+            let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            progress.report(0.6 + 0.4 * n as f32 / count as f32, "layers");
+            Ok(LayerRegion {
+                interval: [t_at(g.first), t_at(g.last + 1)],
+                mask,
+                context,
+                hole,
+                hidden,
             })
-        });
-        let hidden = Raster::from_fn(w, h, |x, y| {
-            hole.at(x, y) && usize::from(labels.at(x, y)) < k
-        });
-        regions.push(LayerRegion {
-            interval: [t_at(g.first), t_at(g.last + 1)],
-            mask,
-            context,
-            hole,
-            hidden,
-        });
-        progress.report(0.6 + 0.4 * (k + 1) as f32 / count as f32, "layers");
-    }
+        })
+        .collect::<Result<Vec<_>>>()?;
     Ok(LayerPlan {
         thresholds,
         depth: refined,

@@ -971,3 +971,49 @@ fn density_strides_known_answers() {
     assert_eq!(strides(&[view(0.25, 2.0 * BG)]), vec![1, 1]);
     assert_eq!(strides(&[]), vec![1, 1]);
 }
+
+/// The harmonic fill, reporting that it must run one request at a time.
+struct OneAtATime;
+
+impl crate::stages::inpaint::Inpainter for OneAtATime {
+    fn name(&self) -> &str {
+        "harmonic, one at a time"
+    }
+
+    fn inpaint(
+        &self,
+        request: &crate::stages::inpaint::InpaintRequest<'_>,
+        progress: &Progress,
+    ) -> Result<crate::stages::inpaint::InpaintResult> {
+        crate::stages::inpaint::SketchInpainter.inpaint(request, progress)
+    }
+}
+
+#[test]
+fn layers_filled_at_once_equal_layers_filled_in_turn() {
+    use crate::stages::inpaint::{Inpainter, SketchInpainter};
+    // Three depths (a near square, a middle band, the wall) and a textured canvas: two layers
+    // with holes, filled at once by the sketch fill and one by one by the same fill.
+    let canvas = Raster::from_fn(W, H, |x, y| {
+        let t = (x * 7 + y * 3) as f32 / (W * 7 + H * 3) as f32;
+        [t, 1.0 - t, (x % 5) as f32 / 5.0]
+    });
+    let depth = Raster::from_fn(W, H, |x, y| {
+        if in_square(x, y) {
+            FG
+        } else if (8..14).contains(&y) {
+            6.0
+        } else {
+            BG
+        }
+    });
+    let plan = plan_layers(&depth, &count_params(3), &Progress::none()).expect("plan");
+    assert!(SketchInpainter.runs_several_at_once() && !OneAtATime.runs_several_at_once());
+    let at_once =
+        inpaint_layers(&canvas, &plan, &SketchInpainter, 5, &Progress::none()).expect("at once");
+    let in_turn =
+        inpaint_layers(&canvas, &plan, &OneAtATime, 5, &Progress::none()).expect("in turn");
+    assert!(at_once.layers.iter().filter(|l| count(&l.hole) > 0).count() >= 2);
+    assert_eq!(at_once, in_turn);
+    check_scene(&at_once, &canvas, &plan.depth);
+}
