@@ -28,7 +28,6 @@ use crate::progress::Progress;
 use crate::project::Project;
 use crate::raster::{GrayRaster, MaskRaster, Raster, RgbRaster, quantile};
 pub use crate::render::FramePositions;
-use crate::render::blend::{DEFAULT_SHARPNESS, symmetric_blend};
 use crate::render::{Frame, FrameRenderer};
 use crate::stages::depth::{DepthEstimator, DepthStageOutput, run_depth_stage};
 use crate::stages::inpaint::{InpaintRequest, Inpainter};
@@ -1221,23 +1220,9 @@ impl Scene {
     pub fn render_frame_with(
         &self,
         frame_index: usize,
-        mut render: impl FnMut(Option<&[glam::Vec3]>) -> Result<Frame>,
+        render: impl FnMut(Option<&[glam::Vec3]>) -> Result<Frame>,
     ) -> Result<Frame> {
-        let positions = self.frame_positions(frame_index)?;
-        let forward = match &positions.forward {
-            Some(p) => Some(render(Some(p))?),
-            None => None,
-        };
-        let backward = match &positions.backward {
-            Some(p) => Some(render(Some(p))?),
-            None => None,
-        };
-        match (forward, backward) {
-            (Some(a), Some(b)) => symmetric_blend(&a, &b, positions.t, DEFAULT_SHARPNESS),
-            (Some(a), None) => Ok(a),
-            (None, Some(b)) => Ok(b),
-            (None, None) => render(None),
-        }
+        self.frame_positions(frame_index)?.render_with(render)
     }
 
     /// The cloud positions output frame `frame_index` renders (what [`Scene::render_frame`]

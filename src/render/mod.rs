@@ -177,6 +177,25 @@ impl FramePositions {
     pub fn still() -> Self {
         Self::default()
     }
+
+    /// The output frame these positions make, with `render` drawing one cloud (`None`: the
+    /// cloud's own positions): the blend of the forward and backward renders when both
+    /// contribute, else the one that does. The one place that picks the clouds of a frame and
+    /// blends them on the CPU.
+    pub fn render_with(
+        &self,
+        mut render: impl FnMut(Option<&[Vec3]>) -> Result<Frame>,
+    ) -> Result<Frame> {
+        match (&self.forward, &self.backward) {
+            (Some(f), Some(b)) => {
+                let forward = render(Some(f))?;
+                let backward = render(Some(b))?;
+                blend::symmetric_blend(&forward, &backward, self.t, blend::DEFAULT_SHARPNESS)
+            }
+            (Some(p), None) | (None, Some(p)) => render(Some(p)),
+            (None, None) => render(None),
+        }
+    }
 }
 
 /// A renderer of point clouds: the CPU reference or the GPU splat pass.
@@ -209,14 +228,6 @@ pub trait FrameRenderer {
         height: usize,
         positions: &FramePositions,
     ) -> Result<Frame> {
-        match (&positions.forward, &positions.backward) {
-            (Some(f), Some(b)) => {
-                let forward = self.render(view, width, height, Some(f))?;
-                let backward = self.render(view, width, height, Some(b))?;
-                blend::symmetric_blend(&forward, &backward, positions.t, blend::DEFAULT_SHARPNESS)
-            }
-            (Some(p), None) | (None, Some(p)) => self.render(view, width, height, Some(p)),
-            (None, None) => self.render(view, width, height, None),
-        }
+        positions.render_with(|p| self.render(view, width, height, p))
     }
 }
