@@ -169,6 +169,14 @@ fn catalogue_models_install_check_and_run_by_name() {
         let said = depth_by_name(&models, "depth-anything-v2-small", &depth);
         assert!(said.contains("onnx Depth Anything V2 Small"), "{said}");
         assert!(depth.exists());
+        // Base runs through its own manifest (the same interface): the same depth.
+        let base = dir.path().join("base.png");
+        let said = depth_by_name(&models, "depth-anything-v2-base", &base);
+        assert!(said.contains("onnx Depth Anything V2 Base"), "{said}");
+        assert_eq!(
+            image::open(&base).unwrap().to_luma16(),
+            image::open(&depth).unwrap().to_luma16()
+        );
     }
 
     if ready {
