@@ -1233,6 +1233,33 @@ impl Scene {
         self.frame_positions_of(&self.cloud, frame_index)
     }
 
+    /// The positions output frame `frame_index` renders ([`Scene::frame_positions`]) one loop
+    /// step later, for the same clouds: forward `F_{m+1}(M)`, backward `F_{N−m−1}(−M)` (what
+    /// the motion pass's flow goes to); a still scene's are the cloud's own.
+    pub fn next_frame_positions(&self, frame_index: usize) -> Result<FramePositions> {
+        let Some(motion) = self.motion.as_ref().filter(|m| !m.motion_loop.is_still()) else {
+            return Ok(FramePositions::still());
+        };
+        let f = motion.motion_loop.frame(frame_index)?;
+        let g = motion.motion_loop.frame_at_phase(f.phase + 1)?;
+        let k = self.canvas.intrinsics;
+        let forward = if f.needs_forward() {
+            Some(displaced_positions(&self.cloud, &g.forward, &k)?)
+        } else {
+            None
+        };
+        let backward = if f.needs_backward() {
+            Some(displaced_positions(&self.cloud, &g.backward, &k)?)
+        } else {
+            None
+        };
+        Ok(FramePositions {
+            forward,
+            backward,
+            t: g.t,
+        })
+    }
+
     /// The cloud of this scene's layers at `strides` per layer (one point per `s × s` block,
     /// as [`crate::stages::layers::density_strides`] picks for a set of views): for renders
     /// that never need full density, such as the editor's preview at a fraction of the output

@@ -35,7 +35,6 @@ use crate::raster::{Raster, RgbRaster};
 use crate::render::cpu::{PointOverrides, render_cpu_with};
 use crate::render::{Frame, SplatSettings};
 use crate::scene::Scene;
-use crate::stages::motion::displaced_positions;
 use crate::stages::points::PointCloud;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -259,39 +258,18 @@ pub fn render_flow(
             settings,
         )
     };
-    let Some(motion) = scene.motion.as_ref().filter(|m| !m.motion_loop.is_still()) else {
-        return render(&cloud.positions, &cloud.positions);
-    };
-    // As `Scene::render_frame`, with each cloud's positions one loop step later beside them:
-    // forward `F_m → F_{m+1}` of `M`, backward `F_{N−m} → F_{N−m−1}` of `−M`.
-    let f = motion.motion_loop.frame(frame_index)?;
-    let g = motion.motion_loop.frame_at_phase(f.phase + 1)?;
-    let k = scene.canvas.intrinsics;
-    let forward = if f.needs_forward() {
-        let now = displaced_positions(cloud, &f.forward, &k)?;
-        let then = displaced_positions(cloud, &g.forward, &k)?;
-        Some(render(&now, &then)?)
-    } else {
-        None
-    };
-    let backward = if f.needs_backward() {
-        let now = displaced_positions(cloud, &f.backward, &k)?;
-        let then = displaced_positions(cloud, &g.backward, &k)?;
-        Some(render(&now, &then)?)
-    } else {
-        None
-    };
-    match (forward, backward) {
-        (Some(a), Some(b)) => crate::render::blend::symmetric_blend(
-            &a,
-            &b,
-            f.t,
-            crate::render::blend::DEFAULT_SHARPNESS,
-        ),
-        (Some(a), None) => Ok(a),
-        (None, Some(b)) => Ok(b),
-        (None, None) => render(&cloud.positions, &cloud.positions),
-    }
+    // The colour's clouds and blend, each cloud's positions one loop step later beside them.
+    let now = scene.frame_positions(frame_index)?;
+    let next = scene.next_frame_positions(frame_index)?;
+    now.render_each(|which| match which {
+        Some(c) => match (now.positions(c), next.positions(c)) {
+            (Some(a), Some(b)) => render(a, b),
+            _ => Err(crate::Error::invalid(
+                "internal: the next frame lacks a cloud this frame renders",
+            )),
+        },
+        None => render(&cloud.positions, &cloud.positions),
+    })
 }
 
 /// One pixel of a [`render_flow`] frame: the flow in pixels and the coverage of surfaces with a

@@ -178,24 +178,51 @@ impl FramePositions {
         Self::default()
     }
 
-    /// The output frame these positions make, with `render` drawing one cloud (`None`: the
-    /// cloud's own positions): the blend of the forward and backward renders when both
+    /// The positions of `cloud`, when it contributes to this frame.
+    pub fn positions(&self, cloud: AnimatedCloud) -> Option<&[Vec3]> {
+        match cloud {
+            AnimatedCloud::Forward => self.forward.as_deref(),
+            AnimatedCloud::Backward => self.backward.as_deref(),
+        }
+    }
+
+    /// The output frame these positions make, with `render` drawing one animated cloud
+    /// (`None`: the still cloud): the blend of the forward and backward renders when both
     /// contribute, else the one that does. The one place that picks the clouds of a frame and
     /// blends them on the CPU.
+    pub fn render_each(
+        &self,
+        mut render: impl FnMut(Option<AnimatedCloud>) -> Result<Frame>,
+    ) -> Result<Frame> {
+        match (&self.forward, &self.backward) {
+            (Some(_), Some(_)) => {
+                let forward = render(Some(AnimatedCloud::Forward))?;
+                let backward = render(Some(AnimatedCloud::Backward))?;
+                blend::symmetric_blend(&forward, &backward, self.t, blend::DEFAULT_SHARPNESS)
+            }
+            (Some(_), None) => render(Some(AnimatedCloud::Forward)),
+            (None, Some(_)) => render(Some(AnimatedCloud::Backward)),
+            (None, None) => render(None),
+        }
+    }
+
+    /// [`FramePositions::render_each`] with `render` given each cloud's positions (`None`:
+    /// the cloud's own).
     pub fn render_with(
         &self,
         mut render: impl FnMut(Option<&[Vec3]>) -> Result<Frame>,
     ) -> Result<Frame> {
-        match (&self.forward, &self.backward) {
-            (Some(f), Some(b)) => {
-                let forward = render(Some(f))?;
-                let backward = render(Some(b))?;
-                blend::symmetric_blend(&forward, &backward, self.t, blend::DEFAULT_SHARPNESS)
-            }
-            (Some(p), None) | (None, Some(p)) => render(Some(p)),
-            (None, None) => render(None),
-        }
+        self.render_each(|cloud| render(cloud.and_then(|c| self.positions(c))))
     }
+}
+
+/// One of the two animated clouds of a moving scene's frame (3D symmetric animation).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AnimatedCloud {
+    /// The cloud displaced forward by `F_m(M)`.
+    Forward,
+    /// The cloud displaced backward by `F_{N−m}(−M)`.
+    Backward,
 }
 
 /// A renderer of point clouds: the CPU reference or the GPU splat pass.
