@@ -322,10 +322,11 @@ pub enum ByteCheck {
 
 /// Checks a downloaded or copied model file against the catalogue (size, SHA-256, unless
 /// `bytes` says not to) and, through `check_graph`, against the manifest. The message names
-/// what did not match.
+/// what did not match and `source`, where the file came from (the user's file or the address).
 fn verify(
     entry: &CatalogueEntry,
     file: &Path,
+    source: &str,
     manifest_path: &Path,
     bytes_check: ByteCheck,
     check_graph: &dyn Fn(&ModelManifest) -> Result<()>,
@@ -339,24 +340,18 @@ fn verify(
         if let Some(want) = entry.size_bytes
             && bytes != want
         {
-            return Err(Error::file(
-                file,
-                format!(
-                    "is {bytes} bytes; {} is {want} bytes; {other_export}",
-                    entry.name
-                ),
-            ));
+            return Err(Error::invalid(format!(
+                "{source} is {bytes} bytes; {} is {want} bytes; {other_export}",
+                entry.name
+            )));
         }
         if let Some(want) = entry.sha256 {
             let got = sha256_file(file)?;
             if got != want {
-                return Err(Error::file(
-                    file,
-                    format!(
-                        "SHA-256 {got} does not match {}'s {want}; {other_export}",
-                        entry.name
-                    ),
-                ));
+                return Err(Error::invalid(format!(
+                    "{source} has SHA-256 {got}, not {}'s {want}; {other_export}",
+                    entry.name
+                )));
             }
         }
     }
@@ -397,6 +392,7 @@ pub fn install_from_file(
         verify(
             entry,
             &part,
+            &source.display().to_string(),
             &folder.join("manifest.json"),
             bytes,
             check_graph,
@@ -481,6 +477,7 @@ fn download_and_install(
             return match verify(
                 entry,
                 &part,
+                url,
                 &folder.join("manifest.json"),
                 bytes,
                 check_graph,
@@ -550,6 +547,7 @@ fn download_and_install(
     match verify(
         entry,
         &part,
+        url,
         &folder.join("manifest.json"),
         bytes,
         check_graph,
