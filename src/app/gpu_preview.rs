@@ -619,7 +619,6 @@ mod tests {
     use super::*;
     use crate::geometry::Pose;
     use crate::raster::{Raster, RgbRaster};
-    use crate::render::bench::psnr_rgb;
     use crate::render::blend::symmetric_blend;
     use crate::render::cpu::render_cpu;
     use glam::{Quat, Vec3};
@@ -703,7 +702,7 @@ mod tests {
             let pixels = render_to_rgba(context.clone(), &frame).expect("GPU preview");
             assert_eq!(pixels.len(), vw * vh);
             let gpu = to_raster(&pixels, vw, vh);
-            let psnr = psnr_rgb(&gpu, &clamped(&cpu.colour));
+            let psnr = crate::metrics::psnr(&gpu, &clamped(&cpu.colour)).expect("same size");
             eprintln!("GPU preview vs CPU renderer, {what}: PSNR {psnr:.1} dB");
             assert!(psnr >= 40.0, "{what}: PSNR {psnr:.1} dB");
             // Coverage goes into alpha.

@@ -295,29 +295,6 @@ pub fn bandwidth_floor_secs(cloud: &PointCloud, width: usize, height: usize) -> 
     best
 }
 
-/// PSNR between two colour rasters with peak 1, dB (infinite when identical).
-pub fn psnr_rgb(a: &RgbRaster, b: &RgbRaster) -> f64 {
-    let n = (a.len() * 3).max(1) as f64;
-    let sse: f64 = a
-        .data()
-        .iter()
-        .zip(b.data())
-        .map(|(p, q)| {
-            (0..3)
-                .map(|c| {
-                    let d = (p[c] - q[c]) as f64;
-                    d * d
-                })
-                .sum::<f64>()
-        })
-        .sum();
-    if sse == 0.0 {
-        f64::INFINITY
-    } else {
-        10.0 * (n / sse).log10()
-    }
-}
-
 /// Fraction of pixels where any channel differs by more than 1/255.
 fn differing_fraction(a: &RgbRaster, b: &RgbRaster) -> f64 {
     let bad = a
@@ -465,7 +442,7 @@ fn time_gpu(
         with_readback,
         render_only,
         upload_positions_secs: upload.frame_secs,
-        psnr_db: psnr_rgb(&reference.colour, &first.colour),
+        psnr_db: crate::metrics::psnr(&reference.colour, &first.colour).unwrap_or(f64::NAN),
         differing_fraction: differing_fraction(&reference.colour, &first.colour),
     })
 }

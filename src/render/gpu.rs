@@ -1365,7 +1365,6 @@ pub(crate) mod tests {
     use super::*;
     use crate::geometry::{Intrinsics, Pose};
     use crate::image_io::load_image;
-    use crate::render::bench::psnr_rgb;
     use crate::render::cpu::render_cpu;
     use crate::stages::points::LiftOptions;
     use glam::Quat;
@@ -1472,7 +1471,7 @@ pub(crate) mod tests {
     }
 
     fn assert_agrees(cpu: &Frame, gpu: &Frame, what: &str) {
-        let psnr = psnr_rgb(&cpu.colour, &gpu.colour);
+        let psnr = crate::metrics::psnr(&cpu.colour, &gpu.colour).expect("same size");
         let n = cpu.coverage.len() as f64;
         let coverage_mad: f64 = cpu
             .coverage
