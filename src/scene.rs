@@ -408,11 +408,13 @@ impl SceneBuilder {
 
     /// A sketch of `project`'s scene: every stage as [`SceneBuilder::build`] runs it, except
     /// that the canvas margin and the layers' hidden regions are filled by the harmonic
-    /// (membrane) fill solved at half resolution ([`crate::stages::inpaint::SketchInpainter`])
-    /// instead of the project's inpainter: blurred where the inpainter would synthesise
-    /// texture, but several times faster; its cloud keeps at most one point per 2 × 2 block
-    /// ([`SKETCH_STRIDE`]). The editor shows it first while the project's inpainter refines
-    /// the scene. Sketch outputs are cached apart from the others.
+    /// (membrane) fill solved down to half resolution and prolonged
+    /// ([`crate::stages::inpaint::SketchInpainter`], every layer at once) instead of the
+    /// project's inpainter: blurred where the inpainter would synthesise texture, but many
+    /// times faster; the layers skip the few-pixel refinement of their depth edges, and the
+    /// cloud keeps one point per 4 × 4 block ([`SKETCH_STRIDE`]). The editor shows it first
+    /// while the project's inpainter refines the scene. Sketch outputs are cached apart from
+    /// the others.
     pub fn build_sketch(&mut self, project: &Project, progress: &Progress) -> Result<Scene> {
         let grow = self.grow_canvas;
         built(self.build_inner(project, progress, grow, false, true)?)
