@@ -277,6 +277,8 @@ pub struct SceneBuilder {
     cloud: StageCache<PointCloud>,
     motion: StageCache<Option<Arc<PreparedMotion>>>,
     stats: Stats,
+    /// The scene scale and depth range of the depth of this key (the last depth built).
+    depth_stats: Option<(u64, SceneScale, DepthRange)>,
     grow_canvas: bool,
     /// The inpainter of the last build with its name, by the settings it was made for (an
     /// ONNX model's session loads once, not on every build and dry run).
@@ -558,7 +560,16 @@ impl SceneBuilder {
             };
         let (w, h) = input.rgb.size();
         warnings.extend(depth.warnings.iter().cloned());
-        let scale = scene_scale(&depth.estimate.depth, &depth.estimate.sky)?;
+        // The depth's statistics, once per depth (every build and dry run needs them).
+        let (scale, depth_range) = match self.depth_stats {
+            Some((k, scale, range)) if k == key => (scale, range),
+            _ => {
+                let scale = scene_scale(&depth.estimate.depth, &depth.estimate.sky)?;
+                let range = DepthRange::from_depth(&depth.estimate.depth)?;
+                self.depth_stats = Some((key, scale, range));
+                (scale, range)
+            }
+        };
 
         // The inpainter serves the canvas and the layers.
         let (inpainter, inpainter_name) = if sketch {
@@ -572,7 +583,7 @@ impl SceneBuilder {
         // 3. Canvas: the layout the path needs, then a cached canvas that covers it, one grown
         // from a cached canvas, or a new one.
         let p = step(Stage::Canvas);
-        let needed = canvas_layout(project, (w, h), &intrinsics, &depth.estimate.depth, &scale)?;
+        let needed = canvas_layout(project, (w, h), &intrinsics, depth_range, &scale)?;
         let base = key_of(key, &(&project.canvas, &project.inpaint, sketch));
         let exact_key = key_of(base, &(needed, 0u64));
         let reused = match self.canvas.get(exact_key) {
@@ -973,7 +984,7 @@ pub fn canvas_layout(
     project: &Project,
     input_size: (usize, usize),
     intrinsics: &Intrinsics,
-    depth: &GrayRaster,
+    depth_range: DepthRange,
     scale: &SceneScale,
 ) -> Result<CanvasLayout> {
     if !project.canvas.enabled {
@@ -991,7 +1002,7 @@ pub fn canvas_layout(
                 intrinsics,
                 &views,
                 camera.size,
-                DepthRange::from_depth(depth)?,
+                depth_range,
                 &options,
             )
         }
