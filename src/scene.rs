@@ -267,9 +267,6 @@ fn cached<T>(
 pub struct SceneBuilder {
     load: StageCache<LoadedImage>,
     depth: StageCache<DepthStageOutput>,
-    /// The depth stage's estimates before the painted strokes (a stroke re-applies the strokes
-    /// only), part of the depth stage.
-    unpainted: StageCache<DepthStageOutput>,
     canvas: StageCache<Canvas>,
     layers: StageCache<crate::stages::layers::LayerPlan>,
     inpaint: StageCache<LayeredScene>,
@@ -482,13 +479,22 @@ impl SceneBuilder {
         p_load.check()?;
         let (w, h) = input.rgb.size();
         let intrinsics = Intrinsics::from_hfov(w, h, project.camera.hfov_deg);
+        // A stroke paints over the estimate without strokes, which is the depth stage's own
+        // output for the same settings without strokes: found cached under that key, or
+        // estimated once and cached there too.
         let unpainted_settings = crate::stages::depth::DepthSettings {
             strokes: Vec::new(),
             ..project.depth.clone()
         };
         let unpainted_key = key_of(key, &(&unpainted_settings, project.camera.hfov_deg));
         let key = key_of(key, &(&project.depth, project.camera.hfov_deg));
-        let unpainted = &mut self.unpainted;
+        let strokes = &project.depth.strokes;
+        let unpainted = if strokes.is_empty() {
+            None
+        } else {
+            self.depth.get(unpainted_key)
+        };
+        let mut estimated = None;
         let depth = match cached(
             &mut self.depth,
             stats,
@@ -497,7 +503,10 @@ impl SceneBuilder {
             dry,
             p_depth,
             |p| {
-                let estimate = match unpainted.get(unpainted_key) {
+                if strokes.is_empty() {
+                    return run_depth_stage(&project.depth, &input.rgb, &intrinsics, p);
+                }
+                let bare = match unpainted {
                     Some(v) => v,
                     None => {
                         let v = Arc::new(run_depth_stage(
@@ -506,23 +515,22 @@ impl SceneBuilder {
                             &intrinsics,
                             p,
                         )?);
-                        unpainted.put(unpainted_key, 0, v.clone());
+                        estimated = Some(v.clone());
                         v
                     }
                 };
-                let mut out = (*estimate).clone();
-                if !project.depth.strokes.is_empty() {
-                    out.estimate.depth = crate::stages::depth::paint::apply_strokes(
-                        &out.estimate.depth,
-                        &project.depth.strokes,
-                    )?;
-                }
+                let mut out = (*bare).clone();
+                out.estimate.depth =
+                    crate::stages::depth::paint::apply_strokes(&out.estimate.depth, strokes)?;
                 Ok(out)
             },
         )? {
             Ok(v) => v,
             Err(stage) => return Ok(Err(stage)),
         };
+        if let Some(bare) = estimated {
+            self.depth.put(unpainted_key, 0, bare);
+        }
         Ok(Ok((key, input, intrinsics, depth)))
     }
 

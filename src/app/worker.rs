@@ -456,24 +456,17 @@ impl Drop for SceneWorker {
     }
 }
 
-/// A thread pool for the stages that leaves one core to the UI (the library's loops use
-/// rayon; on the global pool a build would take every core and the window would stutter).
-fn stage_pool(name: &'static str) -> Option<rayon::ThreadPool> {
+/// A thread pool named `name` with every core, or — `leave_one` — every core but one, which it
+/// leaves to the UI (the library's loops use rayon; on the global pool a build would take
+/// every core and the window would stutter). The project's quality builds on the latter; the
+/// first answer to an edit (the new depth, the sketch) and the preview, which the artist is
+/// waiting for or watching, on the former.
+fn pool(name: &'static str, leave_one: bool) -> Option<rayon::ThreadPool> {
     let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
+    let threads = if leave_one { cores - 1 } else { cores };
     rayon::ThreadPoolBuilder::new()
-        .num_threads(cores.saturating_sub(1).max(1))
+        .num_threads(threads.max(1))
         .thread_name(move |i| format!("{name}-{i}"))
-        .build()
-        .ok()
-}
-
-/// A pool with every core, for the first answer to an edit (the new depth, the sketch): the
-/// artist is waiting for it, and the preview has nothing new to draw until it exists.
-fn first_answer_pool() -> Option<rayon::ThreadPool> {
-    let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(cores)
-        .thread_name(|i| format!("makeit4d-sketch-{i}"))
         .build()
         .ok()
 }
@@ -537,10 +530,9 @@ fn scene_thread(
 ) {
     // The canvas only grows while editing: camera edits within it rebuild nothing.
     let mut builder = SceneBuilder::growing();
-    let pool = stage_pool("makeit4d-stage");
-    let pool = pool.as_ref();
-    let sketch_pool = first_answer_pool();
-    let sketch_pool = sketch_pool.as_ref();
+    let stage_pool = pool("makeit4d-stage", true);
+    let sketch_pool = pool("makeit4d-sketch", false);
+    let (pool, sketch_pool) = (stage_pool.as_ref(), sketch_pool.as_ref());
     let mut queue: std::collections::VecDeque<Command> = Default::default();
     let send = |event: Event| -> bool {
         let ok = events.send(event).is_ok();
@@ -1082,7 +1074,7 @@ fn preview_thread(
     mut renderer: Box<dyn PreviewRenderer>,
     ctx: egui::Context,
 ) {
-    let pool = first_answer_pool();
+    let pool = pool("makeit4d-preview-worker", false);
     loop {
         let request = {
             let mut slot = lock(&shared.request);
