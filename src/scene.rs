@@ -32,8 +32,8 @@ use crate::render::{Frame, FrameRenderer};
 use crate::stages::depth::{DepthEstimator, DepthStageOutput, run_depth_stage};
 use crate::stages::inpaint::{InpaintRequest, Inpainter};
 use crate::stages::layers::{
-    CloudOptions, Layer, LayerDepthParams, LayeredScene, density_strides, inpaint_layers,
-    layer_based_depth, plan_layers_with_sky,
+    CloudOptions, GrownFrom, Layer, LayerDepthParams, LayeredScene, density_strides,
+    inpaint_grown_layers, inpaint_layers, layer_based_depth, plan_canvas_layers,
 };
 use crate::stages::motion::displaced_positions;
 use crate::stages::motion::{FlowField, MotionLoop, prepare_motion};
@@ -176,7 +176,8 @@ pub const CACHE_ENTRIES: usize = 4;
 
 struct Slot<T> {
     key: u64,
-    /// The canvas stage's inputs other than the layout (0 for the other stages).
+    /// The canvas stage's inputs other than the layout; the layer inpainting's inputs other than
+    /// the earlier layers it kept (0 for the other stages).
     base: u64,
     value: Arc<T>,
 }
@@ -202,6 +203,14 @@ impl<T> StageCache<T> {
         let value = slot.value.clone();
         self.entries.push(slot);
         Some(value)
+    }
+
+    /// The output for `key`, leaving the order as it is.
+    fn peek(&self, key: u64) -> Option<Arc<T>> {
+        self.entries
+            .iter()
+            .find(|s| s.key == key)
+            .map(|s| s.value.clone())
     }
 
     /// The most recently used entry that `keep` accepts: `(key, value)`.
@@ -237,13 +246,13 @@ impl Stats {
     }
 }
 
-/// `cache`'s output for `key`, or — unless `dry` — `run`'s, stored. `Err(stage)` only when
-/// `dry` and the stage would have to run.
+/// `cache`'s output for `key`, or — unless `dry` — `run`'s, stored (with `base`, the slot's
+/// [`Slot::base`]). `Err(stage)` only when `dry` and the stage would have to run.
 fn cached<T>(
     cache: &mut StageCache<T>,
     stats: &mut Stats,
     stage: Stage,
-    key: u64,
+    (key, base): (u64, u64),
     dry: bool,
     progress: &Progress,
     run: impl FnOnce(&Progress) -> Result<T>,
@@ -258,7 +267,7 @@ fn cached<T>(
     progress.report(0.0, stage.name());
     let v = Arc::new(run(progress)?);
     stats.ran(stage, started);
-    cache.put(key, 0, v.clone());
+    cache.put(key, base, v.clone());
     Ok(Ok(v))
 }
 
@@ -277,6 +286,10 @@ pub struct SceneBuilder {
     /// The scene scale and depth range of the depth of this key (the last depth built).
     depth_stats: Option<(u64, SceneScale, DepthRange)>,
     grow_canvas: bool,
+    /// Grown canvases, newest last: `(canvas key, the key of the canvas it grew from, where that
+    /// one's top-left pixel sits on it)`; the layer inpainting keeps what it can of the smaller
+    /// canvas's layers ([`crate::stages::layers::inpaint_grown_layers`]).
+    grown_from: Vec<(u64, u64, (usize, usize))>,
     /// The inpainter of the last build with its name, by the settings it was made for (an
     /// ONNX model's session loads once, not on every build and dry run).
     inpainter: Option<(
@@ -470,9 +483,15 @@ impl SceneBuilder {
     > {
         let stats = &mut self.stats;
         let key = key_of(0, &project.input);
-        let input = match cached(&mut self.load, stats, Stage::Load, key, dry, p_load, |_| {
-            load_image(&project.input)
-        })? {
+        let input = match cached(
+            &mut self.load,
+            stats,
+            Stage::Load,
+            (key, 0),
+            dry,
+            p_load,
+            |_| load_image(&project.input),
+        )? {
             Ok(v) => v,
             Err(stage) => return Ok(Err(stage)),
         };
@@ -499,7 +518,7 @@ impl SceneBuilder {
             &mut self.depth,
             stats,
             Stage::Depth,
-            key,
+            (key, 0),
             dry,
             p_depth,
             |p| {
@@ -628,7 +647,17 @@ impl SceneBuilder {
                             project.inpaint.seed,
                             &p,
                         )?;
-                        (key_of(base, &(layout, parent_key)), v)
+                        let k = key_of(base, &(layout, parent_key));
+                        let offset = (
+                            layout.left_pad - parent.layout.left_pad,
+                            layout.top_pad - parent.layout.top_pad,
+                        );
+                        self.grown_from.retain(|e| e.0 != k);
+                        self.grown_from.push((k, parent_key, offset));
+                        if self.grown_from.len() > 4 * CACHE_ENTRIES {
+                            self.grown_from.remove(0);
+                        }
+                        (k, v)
                     }
                     None => (
                         exact_key,
@@ -671,33 +700,66 @@ impl SceneBuilder {
             &mut self.layers,
             stats,
             Stage::Layers,
-            key,
+            (key, 0),
             dry,
             &p,
-            |p| { plan_layers_with_sky(&canvas.depth, Some(&canvas.sky), &params, p) }
+            |p| {
+                let photo = [canvas.layout.left_pad, canvas.layout.top_pad, w, h];
+                plan_canvas_layers(&canvas.depth, Some(&canvas.sky), Some(photo), &params, p)
+            }
         ));
 
-        // 5. Layer inpainting.
+        // 5. Layer inpainting: on a grown canvas, the smaller canvas's layers (when still
+        // cached) keep their fill away from the new margin. The key says which layers were kept,
+        // so a state rebuilt without them is not mistaken for one built with them.
         let p = step(Stage::Inpaint);
-        let key = key_of(key, &(project.layers.inpaint, &project.inpaint, sketch));
+        let plan_key = key;
+        let settings = (project.layers.inpaint, &project.inpaint, sketch);
+        let inpaint_base = key_of(plan_key, &settings);
+        let grown = self
+            .grown_from
+            .iter()
+            .rev()
+            .find(|e| e.0 == canvas_key)
+            .and_then(|&(_, parent_canvas, offset)| {
+                let parent_plan = key_of(parent_canvas, &(&params, project.layers.enabled));
+                let plan = self.layers.peek(parent_plan)?;
+                let parent_base = key_of(parent_plan, &settings);
+                let (kept_key, layers) = self.inpaint.newest(|s| s.base == parent_base)?;
+                Some((kept_key, plan, layers, offset))
+            });
+        let key = key_of(inpaint_base, &grown.as_ref().map_or(0, |g| g.0));
         let inpainted = stage!(cached(
             &mut self.inpaint,
             stats,
             Stage::Inpaint,
-            key,
+            (key, inpaint_base),
             dry,
             &p,
             |p| {
-                if project.layers.inpaint && plan.regions.len() > 1 {
-                    inpaint_layers(
+                if !(project.layers.inpaint && plan.regions.len() > 1) {
+                    return Ok(uninpainted_layers(&canvas.image, &plan));
+                }
+                match &grown {
+                    Some((_, parent_plan, parent_layers, offset)) => inpaint_grown_layers(
+                        &canvas.image,
+                        &plan,
+                        &GrownFrom {
+                            plan: parent_plan,
+                            layers: parent_layers,
+                            offset: *offset,
+                        },
+                        inpainter.as_ref(),
+                        project.inpaint.seed,
+                        p,
+                    ),
+                    None => inpaint_layers(
                         &canvas.image,
                         &plan,
                         inpainter.as_ref(),
                         project.inpaint.seed,
                         p,
-                    )
-                } else {
-                    Ok(uninpainted_layers(&canvas.image, &plan))
+                    ),
                 }
             }
         ));
@@ -712,7 +774,7 @@ impl SceneBuilder {
                 &mut self.layer_depth,
                 stats,
                 Stage::LayerDepth,
-                key,
+                (key, 0),
                 dry,
                 &p,
                 |p| {
@@ -755,7 +817,7 @@ impl SceneBuilder {
             &mut self.cloud,
             stats,
             Stage::Cloud,
-            key,
+            (key, 0),
             dry,
             &p,
             |_| { make_cloud(&layered, &canvas, input.alpha.as_ref(), strides) }
@@ -768,7 +830,7 @@ impl SceneBuilder {
             &mut self.motion,
             stats,
             Stage::Motion,
-            key,
+            (key, 0),
             dry,
             &p,
             |p| {

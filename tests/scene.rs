@@ -259,6 +259,32 @@ fn a_growing_canvas_keeps_its_pixels_and_serves_every_path_inside_it() {
             .iter()
             .all(|z| z.is_finite() && *z > 0.0)
     );
+    // The layers keep their cuts (they come from the photo, not the margin) and, away from
+    // the new margin, their fill: thousands of hidden pixels there are exactly as they were
+    // (on this 320-pixel photo most of the rest lie within the 32-pixel band of hole pixels the
+    // first canvas did not fill, and are filled again).
+    let interior = |t: &[f32]| t[1..t.len().saturating_sub(1)].to_vec();
+    assert_eq!(
+        interior(&first.layers.thresholds),
+        interior(&grown.layers.thresholds)
+    );
+    assert!(first.layers.layers.len() > 1, "the test photo has layers");
+    let band = makeit4d::stages::layers::GROWN_BAND_PX;
+    let (mut both, mut same) = (0, 0);
+    for (a, b) in first.layers.layers.iter().zip(&grown.layers.layers) {
+        for y in band..a.image.height().saturating_sub(band) {
+            for x in band..a.image.width().saturating_sub(band) {
+                if a.inpainted.at(x, y) && b.inpainted.at(x + dx, y + dy) {
+                    both += 1;
+                    same += usize::from(a.image.at(x, y) == b.image.at(x + dx, y + dy));
+                }
+            }
+        }
+    }
+    assert!(
+        same > 1000 && same < both,
+        "{same} of {both} hidden pixels away from the margin kept"
+    );
     let canvas_runs = builder.runs()[&Stage::Canvas];
     // A smaller orbit and the fly-in again: inside the canvas, nothing runs.
     let mut small = orbit.clone();

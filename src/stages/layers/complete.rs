@@ -46,6 +46,163 @@ pub fn inpaint_layers(
     seed: u64,
     progress: &Progress,
 ) -> Result<LayeredScene> {
+    complete_layers(canvas, plan, None, inpainter, seed, progress)
+}
+
+/// The layers of a smaller canvas that a grown canvas contains ([`inpaint_grown_layers`]).
+#[derive(Clone, Copy, Debug)]
+pub struct GrownFrom<'a> {
+    /// The smaller canvas's layer plan.
+    pub plan: &'a LayerPlan,
+    /// Its completed layers.
+    pub layers: &'a LayeredScene,
+    /// Where its top-left pixel sits on the grown canvas.
+    pub offset: (usize, usize),
+}
+
+/// How far from an edge the canvas grew past the smaller canvas's fill is redone, pixels: the
+/// new fill and the kept one then meet inside a band that both fills saw, and the layering's
+/// few-pixel operations near that edge (the context's erosion, the depth-edge refinement, both
+/// about 5 px from the edge) cannot reach the kept part.
+pub const GROWN_BAND_PX: usize = 32;
+
+/// [`inpaint_layers`] for a canvas grown around a smaller one whose layers are already
+/// complete (the editor's canvas only grows): a hole pixel of layer `k` that was a hole of the
+/// smaller canvas's layer `k` too, with the same hidden state, and lies more than
+/// [`GROWN_BAND_PX`] from every edge the canvas grew past and from every hole pixel the
+/// smaller canvas did not fill keeps its earlier colour and depth;
+/// only the rest of the hole (the new margin and the band) is inpainted, with the kept pixels
+/// as known surroundings. Layers are matched by index and only when both plans have the same
+/// count and the same interior thresholds; any other layer is inpainted in full, as
+/// [`inpaint_layers`] would.
+pub fn inpaint_grown_layers(
+    canvas: &RgbRaster,
+    plan: &LayerPlan,
+    from: &GrownFrom<'_>,
+    inpainter: &dyn Inpainter,
+    seed: u64,
+    progress: &Progress,
+) -> Result<LayeredScene> {
+    complete_layers(canvas, plan, Some(from), inpainter, seed, progress)
+}
+
+/// The interior thresholds `d_2 … d_L` (the layer cuts; the ends span the depth range).
+fn interior(thresholds: &[f32]) -> &[f32] {
+    match thresholds.len() {
+        0..=2 => &[],
+        n => &thresholds[1..n - 1],
+    }
+}
+
+/// Layer `k`'s kept pixels on the grown canvas (see [`inpaint_grown_layers`]), or `None` when
+/// none is kept.
+fn kept_pixels(
+    (w, h): (usize, usize),
+    region: &super::LayerRegion,
+    k: usize,
+    from: &GrownFrom<'_>,
+) -> Option<crate::raster::MaskRaster> {
+    let old = from.plan.regions.get(k)?;
+    let layer = from.layers.layers.get(k)?;
+    let (pw, ph) = old.hole.size();
+    let (ox, oy) = from.offset;
+    if ox + pw > w || oy + ph > h || layer.image.size() != (pw, ph) {
+        return None;
+    }
+    let band = GROWN_BAND_PX;
+    // The kept rectangle: the smaller canvas less the band along every edge the canvas grew past.
+    let x0 = if ox > 0 { band } else { 0 };
+    let y0 = if oy > 0 { band } else { 0 };
+    let x1 = if ox + pw < w {
+        pw.saturating_sub(band)
+    } else {
+        pw
+    };
+    let y1 = if oy + ph < h {
+        ph.saturating_sub(band)
+    } else {
+        ph
+    };
+    let was_hole = |x: usize, y: usize| {
+        let (Some(qx), Some(qy)) = (x.checked_sub(ox), y.checked_sub(oy)) else {
+            return None;
+        };
+        (qx < pw && qy < ph).then_some((qx, qy))
+    };
+    // Hole pixels the smaller canvas did not fill (the new margin, and whatever its layer's
+    // hole now reaches beyond the old one's bounding box): the kept fill stays a band away from
+    // them too, so the new fill never abuts an edge the old one stopped at.
+    let new_only = crate::raster::Raster::from_fn(w, h, |x, y| {
+        region.hole.at(x, y) && was_hole(x, y).is_none_or(|(qx, qy)| !old.hole.at(qx, qy))
+    });
+    let near_new = super::morph::dilate(&new_only, 2 * band + 1);
+    let mut any = false;
+    let kept = crate::raster::Raster::from_fn(w, h, |x, y| {
+        let Some((qx, qy)) = was_hole(x, y) else {
+            return false;
+        };
+        let keep = (x0..x1).contains(&qx)
+            && (y0..y1).contains(&qy)
+            && region.hole.at(x, y)
+            && old.hole.at(qx, qy)
+            && !near_new.at(x, y)
+            && region.hidden.at(x, y) == old.hidden.at(qx, qy);
+        any |= keep;
+        keep
+    });
+    any.then_some(kept)
+}
+
+/// Cross-fades the new fill of layer `k` into the kept one across the band around the kept
+/// pixels: a hole pixel the smaller canvas had filled too, at distance `d < GROWN_BAND_PX` from
+/// the nearest kept pixel, becomes `(1 − t)·old + t·new` with `t = d / GROWN_BAND_PX` (colour and
+/// depth), so two fills that continue the hole differently meet without a line.
+fn feather_into_kept(
+    image: &mut RgbRaster,
+    depth: &mut crate::raster::GrayRaster,
+    kept: &crate::raster::MaskRaster,
+    region: &super::LayerRegion,
+    k: usize,
+    from: &GrownFrom<'_>,
+) {
+    let (Some(old), Some(layer)) = (from.plan.regions.get(k), from.layers.layers.get(k)) else {
+        return;
+    };
+    let (w, _) = image.size();
+    let (pw, ph) = layer.image.size();
+    let (ox, oy) = from.offset;
+    let band = GROWN_BAND_PX as f32;
+    let distance = super::morph::chamfer_distance(kept);
+    for (i, &d) in distance.data().iter().enumerate() {
+        if !(d > 0.0 && d < band && region.hole.data()[i]) {
+            continue;
+        }
+        let (x, y) = (i % w, i / w);
+        let (Some(qx), Some(qy)) = (x.checked_sub(ox), y.checked_sub(oy)) else {
+            continue;
+        };
+        if qx >= pw || qy >= ph || !old.hole.at(qx, qy) {
+            continue;
+        }
+        let t = d / band;
+        let j = qy * pw + qx;
+        let (before, now) = (layer.image.data()[j], &mut image.data_mut()[i]);
+        for (c, b) in now.iter_mut().zip(before) {
+            *c = (1.0 - t) * b + t * *c;
+        }
+        let z = &mut depth.data_mut()[i];
+        *z = (1.0 - t) * layer.depth.data()[j] + t * *z;
+    }
+}
+
+fn complete_layers(
+    canvas: &RgbRaster,
+    plan: &LayerPlan,
+    grown: Option<&GrownFrom<'_>>,
+    inpainter: &dyn Inpainter,
+    seed: u64,
+    progress: &Progress,
+) -> Result<LayeredScene> {
     if !canvas.same_size(&plan.depth) {
         return Err(Error::invalid(format!(
             "layers: canvas is {}×{} but the layer plan is {}×{}",
@@ -56,16 +213,43 @@ pub fn inpaint_layers(
         )));
     }
     let count = plan.regions.len();
+    let grown = grown.filter(|g| {
+        g.plan.regions.len() == count
+            && g.layers.layers.len() == count
+            && interior(&g.plan.thresholds) == interior(&plan.thresholds)
+    });
+    let (w, h) = canvas.size();
     let complete = |(k, region): (usize, &super::LayerRegion)| -> Result<Layer> {
         progress.check()?;
         let sub = progress.sub(k as f32 / count as f32, (k + 1) as f32 / count as f32);
-        let has_hole = region.hole.data().iter().any(|&v| v);
+        // The earlier fill this layer keeps, placed on the grown canvas.
+        let kept = grown.and_then(|g| {
+            let kept = kept_pixels((w, h), region, k, g)?;
+            let layer = &g.layers.layers[k];
+            let (ox, oy) = g.offset;
+            let mut image = canvas.clone();
+            let mut depth = plan.depth.clone();
+            for (i, _) in kept.data().iter().enumerate().filter(|(_, v)| **v) {
+                let (x, y) = (i % w, i / w);
+                let j = (y - oy) * layer.image.width() + (x - ox);
+                image.data_mut()[i] = layer.image.data()[j];
+                depth.data_mut()[i] = layer.depth.data()[j];
+            }
+            let hole =
+                crate::raster::Raster::from_fn(w, h, |x, y| region.hole.at(x, y) && !kept.at(x, y));
+            Some((image, depth, hole, kept))
+        });
+        let (known_image, known_depth, hole) = match &kept {
+            Some((image, depth, hole, _)) => (image, depth, hole),
+            None => (canvas, &plan.depth, &region.hole),
+        };
+        let has_hole = hole.data().iter().any(|&v| v);
         let (completed_image, completed_depth) = if has_hole {
             let request = InpaintRequest {
-                image: canvas,
-                hole: &region.hole,
+                image: known_image,
+                hole,
                 allowed_source: Some(&region.context),
-                guide: Some(&plan.depth),
+                guide: Some(known_depth),
                 seed: layer_seed(seed, k),
             };
             let result = inpainter.inpaint(&request, &sub)?;
@@ -83,10 +267,13 @@ pub fn inpaint_layers(
             }
             (result.image, guide)
         } else {
-            (canvas.clone(), plan.depth.clone())
+            (known_image.clone(), known_depth.clone())
         };
         let mut image = completed_image;
         let mut depth = completed_depth;
+        if let (Some(g), Some((_, _, _, kept))) = (grown, &kept) {
+            feather_into_kept(&mut image, &mut depth, kept, region, k, g);
+        }
         for i in 0..canvas.len() {
             if region.mask.data()[i] {
                 image.data_mut()[i] = canvas.data()[i];

@@ -26,7 +26,10 @@ pub mod edges;
 pub mod morph;
 
 pub use cloud::{CloudOptions, MAX_DENSITY_STRIDE, density_strides};
-pub use complete::{LayerDepthParams, inpaint_layers, layer_based_depth, remap_to_interval};
+pub use complete::{
+    GROWN_BAND_PX, GrownFrom, LayerDepthParams, inpaint_grown_layers, inpaint_layers,
+    layer_based_depth, remap_to_interval,
+};
 
 use crate::error::{Error, Result};
 use crate::progress::Progress;
@@ -277,11 +280,61 @@ pub fn sky_thresholds(
     params: &LayerParams,
 ) -> Result<Vec<f32>> {
     params.validate()?;
+    apply_overrides(
+        &clustered_sky_thresholds(depth, sky, params)?,
+        &params.overrides,
+    )
+}
+
+/// [`sky_thresholds`] with the cuts taken from the photo's pixels alone: `photo` is the
+/// rectangle `[x, y, width, height]` the photo covers on the canvas. The margin around it is
+/// extrapolated from the photo and adds no depth structure of its own, so its pixels do not move
+/// the cuts (and a canvas grown by a wider margin keeps its layers); the two ends still span the
+/// whole canvas (`d_1` its nearest depth, `d_{L+1}` its farthest), so the margin falls into the
+/// first and last intervals' ranges. Overrides apply last. A rectangle that is the whole canvas
+/// (or does not fit it) is [`sky_thresholds`].
+pub fn photo_thresholds(
+    depth: &GrayRaster,
+    sky: Option<&GrayRaster>,
+    photo: [usize; 4],
+    params: &LayerParams,
+) -> Result<Vec<f32>> {
+    params.validate()?;
+    let (w, h) = depth.size();
+    let [x0, y0, pw, ph] = photo;
+    if pw == 0 || ph == 0 || x0 + pw > w || y0 + ph > h || (pw, ph) == (w, h) {
+        return sky_thresholds(depth, sky, params);
+    }
+    let crop = |r: &GrayRaster| Raster::from_fn(pw, ph, |x, y| r.at(x0 + x, y0 + y));
+    let photo_sky = sky.filter(|s| s.size() == depth.size()).map(crop);
+    let mut t = clustered_sky_thresholds(&crop(depth), photo_sky.as_ref(), params)?;
+    let (near, far) = depth
+        .data()
+        .iter()
+        .filter(|z| z.is_finite() && **z > 0.0)
+        .fold((f32::INFINITY, 0.0f32), |(n, f), &z| (n.min(z), f.max(z)));
+    if let (Some(first), true) = (t.first_mut(), near.is_finite()) {
+        *first = first.min(near);
+    }
+    if let Some(last) = t.last_mut() {
+        *last = last.max(far);
+    }
+    apply_overrides(&t, &params.overrides)
+}
+
+/// [`sky_thresholds`] before the overrides.
+fn clustered_sky_thresholds(
+    depth: &GrayRaster,
+    sky: Option<&GrayRaster>,
+    params: &LayerParams,
+) -> Result<Vec<f32>> {
     let Some(sky) = sky.filter(|s| params.sky_layer && s.size() == depth.size()) else {
-        return layer_thresholds(depth, params);
+        return cluster_thresholds(depth, params.mode, params.method, params.histogram_bins);
     };
     let mode = match params.mode {
-        LayerCount::Count(1) => return layer_thresholds(depth, params),
+        LayerCount::Count(1) => {
+            return cluster_thresholds(depth, params.mode, params.method, params.histogram_bins);
+        }
         LayerCount::Count(n) => LayerCount::Count(n - 1),
         LayerCount::Auto {
             relative_cost,
@@ -309,7 +362,7 @@ pub fn sky_thresholds(
         .collect();
     let has_ground = ground.iter().any(|z| z.is_finite() && *z > 0.0);
     if sky_px < params.min_layer_px.max(1) || !has_ground {
-        return layer_thresholds(depth, params);
+        return cluster_thresholds(depth, params.mode, params.method, params.histogram_bins);
     }
     let (w, h) = depth.size();
     let ground = Raster::from_vec(w, h, ground)
@@ -325,7 +378,7 @@ pub fn sky_thresholds(
     let cut = t.last().map_or(cut, |&prev| cut.max(prev));
     t.push(cut);
     t.push(sky_max.max(cut));
-    apply_overrides(&t, &params.overrides)
+    Ok(t)
 }
 
 /// The interval index of depth `z` under `thresholds`: the number of interior thresholds
@@ -441,6 +494,19 @@ pub fn plan_layers_with_sky(
     params: &LayerParams,
     progress: &Progress,
 ) -> Result<LayerPlan> {
+    plan_canvas_layers(depth, sky, None, params, progress)
+}
+
+/// [`plan_layers_with_sky`] for an outpainted canvas: with `photo` (the rectangle
+/// `[x, y, width, height]` the photo covers), the cuts between layers come from the photo's
+/// pixels alone ([`photo_thresholds`]).
+pub fn plan_canvas_layers(
+    depth: &GrayRaster,
+    sky: Option<&GrayRaster>,
+    photo: Option<[usize; 4]>,
+    params: &LayerParams,
+    progress: &Progress,
+) -> Result<LayerPlan> {
     params.validate()?;
     let (w, h) = depth.size();
     if depth.is_empty() {
@@ -449,7 +515,10 @@ pub fn plan_layers_with_sky(
     progress.report(0.0, "layers");
     let (filled, invalid_depth_px) = edges::fill_invalid_depth(depth)
         .ok_or_else(|| Error::invalid("layers: the depth has no finite value > 0"))?;
-    let thresholds = sky_thresholds(&filled, sky, params)?;
+    let thresholds = match photo {
+        Some(rect) => photo_thresholds(&filled, sky, rect, params)?,
+        None => sky_thresholds(&filled, sky, params)?,
+    };
     let intervals = thresholds.len().saturating_sub(1).max(1);
     let raw_labels = filled.map(|z| interval_of(z, &thresholds) as u16);
     progress.check()?;

@@ -197,6 +197,47 @@ pub fn count(mask: &MaskRaster) -> usize {
     mask.data().iter().filter(|&&v| v).count()
 }
 
+/// Distance in pixels from every pixel to the nearest set pixel of `mask` (0 on set pixels,
+/// `f32::INFINITY` everywhere when none is set), by the two-pass 3×3 chamfer: steps of 1 along
+/// the axes and √2 diagonally, so axis and diagonal distances are exact and the rest within
+/// about 8 % above the Euclidean distance.
+pub fn chamfer_distance(mask: &MaskRaster) -> Raster<f32> {
+    let (w, h) = mask.size();
+    let mut d = mask.map(|v| if v { 0.0 } else { f32::INFINITY });
+    let diagonal = std::f32::consts::SQRT_2;
+    let forward = [
+        (-1, -1, diagonal),
+        (0, -1, 1.0),
+        (1, -1, diagonal),
+        (-1, 0, 1.0),
+    ];
+    for y in 0..h {
+        for x in 0..w {
+            let mut best = d.at(x, y);
+            for &(dx, dy, cost) in &forward {
+                let (nx, ny) = (x as isize + dx, y as isize + dy);
+                if nx >= 0 && ny >= 0 && (nx as usize) < w {
+                    best = best.min(d.at(nx as usize, ny as usize) + cost);
+                }
+            }
+            d.set(x, y, best);
+        }
+    }
+    for y in (0..h).rev() {
+        for x in (0..w).rev() {
+            let mut best = d.at(x, y);
+            for &(dx, dy, cost) in &forward {
+                let (nx, ny) = (x as isize - dx, y as isize - dy);
+                if nx >= 0 && (nx as usize) < w && (ny as usize) < h {
+                    best = best.min(d.at(nx as usize, ny as usize) + cost);
+                }
+            }
+            d.set(x, y, best);
+        }
+    }
+    d
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -296,5 +337,21 @@ mod tests {
         assert_eq!(erode(&one, 10), one);
         assert_eq!(bounding_box(&one), Some([0, 0, 0, 0]));
         assert_eq!(bounding_box(&Raster::new(3, 3, false)), None);
+    }
+
+    #[test]
+    fn chamfer_distance_known_answers() {
+        let one = Raster::from_fn(9, 7, |x, y| (x, y) == (4, 3));
+        let d = chamfer_distance(&one);
+        assert_eq!(d.at(4, 3), 0.0);
+        assert_eq!(d.at(0, 3), 4.0);
+        assert_eq!(d.at(4, 0), 3.0);
+        assert!((d.at(1, 0) - 3.0 * std::f32::consts::SQRT_2).abs() < 1e-5);
+        // A knight's step is one diagonal and one axis step: 1 + √2 (the Euclidean √5 ≈ 2.236).
+        assert!((d.at(6, 4) - (1.0 + std::f32::consts::SQRT_2)).abs() < 1e-5);
+        // Nothing set: infinitely far; a 1×1 raster works.
+        let none = chamfer_distance(&Raster::new(3, 2, false));
+        assert!(none.data().iter().all(|v| v.is_infinite()));
+        assert_eq!(chamfer_distance(&Raster::new(1, 1, true)).at(0, 0), 0.0);
     }
 }

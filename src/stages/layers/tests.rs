@@ -1017,3 +1017,169 @@ fn layers_filled_at_once_equal_layers_filled_in_turn() {
     assert_eq!(at_once, in_turn);
     check_scene(&at_once, &canvas, &plan.depth);
 }
+
+/// A 40×40 wall (Z = 20) with a 10×10 square (Z = 2) at (15, 15), placed at `(dx, dy)` on a
+/// `w × h` canvas whose margin is `margin_depth`.
+fn photo_on_canvas(
+    (w, h): (usize, usize),
+    (dx, dy): (usize, usize),
+    margin_depth: f32,
+) -> GrayRaster {
+    Raster::from_fn(w, h, |x, y| {
+        let inside = (dx..dx + 40).contains(&x) && (dy..dy + 40).contains(&y);
+        if !inside {
+            margin_depth
+        } else if (dx + 15..dx + 25).contains(&x) && (dy + 15..dy + 25).contains(&y) {
+            2.0
+        } else {
+            20.0
+        }
+    })
+}
+
+#[test]
+fn cuts_come_from_the_photo_and_the_ends_span_the_canvas() {
+    // The margin holds a depth (Z = 6) the photo never shows: clustered over the whole canvas
+    // it takes a cut of its own; clustered over the photo it does not.
+    let depth = photo_on_canvas((80, 60), (20, 10), 6.0);
+    let photo = [20, 10, 40, 40];
+    let params = count_params(2);
+    let cut_by_photo =
+        plan_canvas_layers(&depth, None, Some(photo), &params, &Progress::none()).expect("plan");
+    let alone = plan_layers(
+        &Raster::from_fn(40, 40, |x, y| depth.at(20 + x, 10 + y)),
+        &params,
+        &Progress::none(),
+    )
+    .expect("plan");
+    assert_eq!(
+        normalised_interior(&cut_by_photo.thresholds),
+        normalised_interior(&alone.thresholds)
+    );
+    let t = &cut_by_photo.thresholds;
+    assert_eq!(t.len(), 3, "{t:?}");
+    assert!(
+        t[1] > 2.0 && t[1] <= 20.0,
+        "the cut lies between 2 and 20: {t:?}"
+    );
+    assert!(
+        t[0] <= 2.0 && t[2] >= 20.0,
+        "the ends span the canvas: {t:?}"
+    );
+    // The margin (Z = 6) falls on the near side of the photo's cut or the far side, as its
+    // depth says, and the whole canvas is covered.
+    let whole = plan_layers(&depth, &params, &Progress::none()).expect("plan");
+    assert_ne!(
+        whole.thresholds, cut_by_photo.thresholds,
+        "the margin moves the cut when it is clustered too"
+    );
+    // A margin nearer than anything in the photo widens the first interval.
+    let near = photo_on_canvas((80, 60), (20, 10), 0.5);
+    let plan =
+        plan_canvas_layers(&near, None, Some(photo), &params, &Progress::none()).expect("plan");
+    assert_eq!(plan.thresholds[0], 0.5);
+    assert_eq!(plan.thresholds[1..2], alone.thresholds[1..2]);
+    // A rectangle that is the whole canvas, or one that does not fit, is the plain plan.
+    for rect in [[0, 0, 80, 60], [50, 50, 40, 40], [0, 0, 0, 10]] {
+        assert_eq!(
+            plan_canvas_layers(&depth, None, Some(rect), &params, &Progress::none()).expect("plan"),
+            whole,
+            "{rect:?}"
+        );
+    }
+    // Overrides still win over the photo's cut.
+    let overridden = LayerParams {
+        overrides: vec![None, Some(10.0)],
+        ..count_params(2)
+    };
+    let plan = plan_canvas_layers(&depth, None, Some(photo), &overridden, &Progress::none())
+        .expect("plan");
+    assert_eq!(plan.thresholds[1], 10.0);
+}
+
+#[test]
+fn a_grown_canvas_keeps_the_earlier_fill_away_from_the_new_margin() {
+    // The smaller canvas: 120×100, a wall (Z = 20) with two near squares (Z = 2), one deep
+    // inside at (60..80, 50..70) and one by the left edge at (8..18, 40..50), inside the band
+    // along the edge the canvas grows past.
+    let square = |x: usize, y: usize| {
+        ((60..80).contains(&x) && (50..70).contains(&y))
+            || ((8..18).contains(&x) && (40..50).contains(&y))
+    };
+    let small_depth = Raster::from_fn(120, 100, |x, y| if square(x, y) { 2.0 } else { 20.0 });
+    let small_image = small_depth.map(|z| [z / 20.0, 0.5, 0.0]);
+    let params = count_params(2);
+    let small_plan = plan_layers(&small_depth, &params, &Progress::none()).expect("plan");
+    let earlier = MeanInpainter {
+        forced_colour: Some([1.0, 0.0, 0.0]),
+        ..MeanInpainter::default()
+    };
+    let small =
+        inpaint_layers(&small_image, &small_plan, &earlier, 3, &Progress::none()).expect("ok");
+    // Grown by 50 px on the left and 30 at the top, the margin a wall too.
+    let (ox, oy) = (50, 30);
+    let (w, h) = (170, 130);
+    let inside = |x: usize, y: usize| x >= ox && y >= oy;
+    let depth = Raster::from_fn(w, h, |x, y| {
+        if inside(x, y) {
+            small_depth.at(x - ox, y - oy)
+        } else {
+            20.0
+        }
+    });
+    let image = depth.map(|z| [z / 20.0, 0.5, 0.0]);
+    let plan = plan_layers(&depth, &params, &Progress::none()).expect("plan");
+    let later = MeanInpainter {
+        forced_colour: Some([0.0, 0.0, 1.0]),
+        ..MeanInpainter::default()
+    };
+    let from = GrownFrom {
+        plan: &small_plan,
+        layers: &small,
+        offset: (ox, oy),
+    };
+    let grown =
+        inpaint_grown_layers(&image, &plan, &from, &later, 3, &Progress::none()).expect("ok");
+    check_scene(&grown, &image, &plan.depth);
+    let wall = &grown.layers[1];
+    // Behind the inner square: the earlier fill, untouched (the inpainter never saw it).
+    assert_eq!(wall.image.at(ox + 70, oy + 60), [1.0, 0.0, 0.0]);
+    assert!(wall.inpainted.at(ox + 70, oy + 60));
+    // Behind the square by the old edge (within the band): filled again.
+    assert_eq!(wall.image.at(ox + 12, oy + 45), [0.0, 0.0, 1.0]);
+    assert!(wall.inpainted.at(ox + 12, oy + 45));
+    let requests = later.requests.lock().expect("requests");
+    assert_eq!(requests.len(), 1, "one layer has a hole");
+    let asked = count(&requests[0].hole);
+    let whole = count(&plan.regions[1].hole);
+    assert!(
+        asked > 0 && asked < whole,
+        "only the band's part of the hole is inpainted: {asked} of {whole}"
+    );
+    assert!(!requests[0].hole.at(ox + 70, oy + 60));
+    assert!(requests[0].hole.at(ox + 12, oy + 45));
+    drop(requests);
+    // Without the earlier layers the same canvas is filled in full.
+    let full = inpaint_layers(&image, &plan, &later, 3, &Progress::none()).expect("ok");
+    assert_eq!(full.layers[1].image.at(ox + 70, oy + 60), [0.0, 0.0, 1.0]);
+    // Layers that do not match (another cut) are filled in full, not mixed.
+    let moved = LayerParams {
+        overrides: vec![None, Some(small_plan.thresholds[1] * 1.5)],
+        ..count_params(2)
+    };
+    let moved_plan = plan_layers(&depth, &moved, &Progress::none()).expect("plan");
+    assert_eq!(moved_plan.regions.len(), 2);
+    let other = MeanInpainter::default();
+    let mixed =
+        inpaint_grown_layers(&image, &moved_plan, &from, &other, 3, &Progress::none()).expect("ok");
+    check_scene(&mixed, &image, &moved_plan.depth);
+    let asked: usize = other
+        .requests
+        .lock()
+        .expect("requests")
+        .iter()
+        .map(|r| count(&r.hole))
+        .sum();
+    let holes: usize = moved_plan.regions.iter().map(|r| count(&r.hole)).sum();
+    assert_eq!(asked, holes);
+}
