@@ -283,8 +283,11 @@ pub struct SceneBuilder {
     cloud: StageCache<PointCloud>,
     motion: StageCache<Option<Arc<PreparedMotion>>>,
     stats: Stats,
-    /// The scene scale and depth range of the depth of this key (the last depth built).
-    depth_stats: Option<(u64, SceneScale, DepthRange)>,
+    /// The scene scale and depth range of the depths of these keys (as many as the depth
+    /// stage keeps, least recently used first: undoing a stroke finds them too).
+    depth_stats: Vec<(u64, SceneScale, DepthRange)>,
+    /// The cloud's density strides by layers and camera path, least recently used first.
+    strides: Vec<(u64, Vec<usize>)>,
     grow_canvas: bool,
     /// Grown canvases, newest last: `(canvas key, the key of the canvas it grew from, where that
     /// one's top-left pixel sits on it)`; the layer inpainting keeps what it can of the smaller
@@ -588,15 +591,19 @@ impl SceneBuilder {
         let (w, h) = input.rgb.size();
         warnings.extend(depth.warnings.iter().cloned());
         // The depth's statistics, once per depth (every build and dry run needs them).
-        let (scale, depth_range) = match self.depth_stats {
-            Some((k, scale, range)) if k == key => (scale, range),
-            _ => {
-                let scale = scene_scale(&depth.estimate.depth, &depth.estimate.sky)?;
-                let range = DepthRange::from_depth(&depth.estimate.depth)?;
-                self.depth_stats = Some((key, scale, range));
-                (scale, range)
-            }
+        let known = self.depth_stats.iter().position(|e| e.0 == key);
+        let (_, scale, depth_range) = match known {
+            Some(i) => self.depth_stats.remove(i),
+            None => (
+                key,
+                scene_scale(&depth.estimate.depth, &depth.estimate.sky)?,
+                DepthRange::from_depth(&depth.estimate.depth)?,
+            ),
         };
+        self.depth_stats.push((key, scale, depth_range));
+        if self.depth_stats.len() > CACHE_ENTRIES {
+            self.depth_stats.remove(0);
+        }
 
         // The inpainter serves the canvas and the layers.
         let (inpainter, inpainter_name) = if sketch {
@@ -797,8 +804,30 @@ impl SceneBuilder {
         // them keeps the cloud.
         let p = step(Stage::Cloud);
         let mut strides = if project.layers.adaptive_density {
-            let views = OutputCamera::of(project, (w, h)).views(project, &scale)?;
-            density_strides(&layered, &canvas.intrinsics, &views)
+            // Every build and dry run needs them, and they cost a pass over the layers per
+            // view: once per layers and path.
+            let output = &project.output;
+            let memo_key = key_of(
+                key,
+                &(&project.camera, output.width, output.height, output.frames),
+            );
+            match self.strides.iter().position(|e| e.0 == memo_key) {
+                Some(i) => {
+                    let entry = self.strides.remove(i);
+                    let strides = entry.1.clone();
+                    self.strides.push(entry);
+                    strides
+                }
+                None => {
+                    let views = OutputCamera::of(project, (w, h)).views(project, &scale)?;
+                    let strides = density_strides(&layered, &canvas.intrinsics, &views);
+                    self.strides.push((memo_key, strides.clone()));
+                    if self.strides.len() > 4 * CACHE_ENTRIES {
+                        self.strides.remove(0);
+                    }
+                    strides
+                }
+            }
         } else {
             Vec::new()
         };

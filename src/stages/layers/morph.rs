@@ -180,16 +180,23 @@ pub fn dilate(mask: &MaskRaster, size: usize) -> MaskRaster {
 
 /// Inclusive bounding box `[x0, y0, x1, y1]` of the set pixels; `None` for an empty mask.
 pub fn bounding_box(mask: &MaskRaster) -> Option<[usize; 4]> {
-    let (w, _) = mask.size();
-    let mut bbox: Option<[usize; 4]> = None;
-    for (i, _) in mask.data().iter().enumerate().filter(|(_, v)| **v) {
-        let (x, y) = (i % w, i / w);
-        bbox = Some(match bbox {
-            None => [x, y, x, y],
-            Some([x0, y0, x1, y1]) => [x0.min(x), y0.min(y), x1.max(x), y1.max(y)],
-        });
+    let (w, h) = mask.size();
+    // Row scans only: the first and last rows with a set pixel, then each row in between
+    // only where it could widen the box (cheap enough to run on every preview frame).
+    let set = |y: usize| mask.row(y).contains(&true);
+    let y0 = (0..h).find(|&y| set(y))?;
+    let y1 = (y0..h).rev().find(|&y| set(y))?;
+    let (mut x0, mut x1) = (w, 0);
+    for y in y0..=y1 {
+        let row = mask.row(y);
+        if let Some(x) = row[..x0].iter().position(|&v| v) {
+            x0 = x;
+        }
+        if let Some(x) = row[x1..].iter().rposition(|&v| v) {
+            x1 += x;
+        }
     }
-    bbox
+    Some([x0, y0, x1, y1])
 }
 
 /// Number of set pixels.
@@ -353,5 +360,29 @@ mod tests {
         let none = chamfer_distance(&Raster::new(3, 2, false));
         assert!(none.data().iter().all(|v| v.is_infinite()));
         assert_eq!(chamfer_distance(&Raster::new(1, 1, true)).at(0, 0), 0.0);
+    }
+
+    #[test]
+    fn bounding_box_matches_a_plain_scan() {
+        let mut seed = 7u64;
+        for case in 0..200 {
+            let (w, h) = (1 + case % 13, 1 + case % 7);
+            let mask = Raster::from_fn(w, h, |_, _| {
+                seed = seed
+                    .wrapping_mul(6_364_136_223_846_793_005)
+                    .wrapping_add(1_442_695_040_888_963_407);
+                (seed >> 33).is_multiple_of(9)
+            });
+            let mut plain: Option<[usize; 4]> = None;
+            for y in 0..h {
+                for x in (0..w).filter(|&x| mask.at(x, y)) {
+                    plain = Some(match plain {
+                        None => [x, y, x, y],
+                        Some([a, b, c, d]) => [a.min(x), b.min(y), c.max(x), d.max(y)],
+                    });
+                }
+            }
+            assert_eq!(bounding_box(&mask), plain, "case {case}");
+        }
     }
 }
