@@ -164,14 +164,34 @@ pub fn run(
         let runs_before = d.app.stage_runs();
         let since = Instant::now();
         edit(&mut d.app);
-        let depth_view = if answer == Answer::Depth {
-            d.until(since, limit, |a| a.depth_generation() == a.generation())
-        } else {
-            None
-        };
-        let picture = d.until(since, limit, |a| first_picture(a, answer, since));
-        let scene = d.until(since, limit, first_scene);
-        let last = d.until(since, limit, |a| is_final(a, since));
+        // Every answer is timed in the same loop, each when it first holds.
+        let (mut depth_view, mut picture, mut scene) = (None, None, None);
+        let last = d.until(since, limit, |a| {
+            let now = Some(since.elapsed().as_secs_f64());
+            if answer == Answer::Depth && depth_view.is_none() {
+                depth_view = (a.depth_generation() == a.generation())
+                    .then_some(now)
+                    .flatten();
+            }
+            if picture.is_none() && first_picture(a, answer, since) {
+                picture = now;
+            }
+            if scene.is_none() && first_scene(a) {
+                scene = now;
+            }
+            is_final(a, since)
+        });
+        // An answer first seen with the final one.
+        let at_last = |t: Option<f64>| t.or(last);
+        let (depth_view, picture, scene) = (
+            if answer == Answer::Depth {
+                at_last(depth_view)
+            } else {
+                None
+            },
+            at_last(picture),
+            at_last(scene),
+        );
         let runs_after = d.app.stage_runs();
         let stages_run = Stage::ALL
             .iter()
