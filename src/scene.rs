@@ -271,6 +271,30 @@ fn cached<T>(
     Ok(Ok(v))
 }
 
+/// Where a grown canvas came from: the key of the canvas it grew from, and where that one's
+/// top-left pixel sits on it.
+type GrownCanvas = (u64, (usize, usize));
+
+/// `list`'s value for `key`, now the most recently used, or `make`'s, remembered; `list` keeps
+/// at most `limit` entries, least recently used first.
+fn remembered<T: Clone>(
+    list: &mut Vec<(u64, T)>,
+    key: u64,
+    limit: usize,
+    make: impl FnOnce() -> Result<T>,
+) -> Result<T> {
+    let entry = match list.iter().position(|e| e.0 == key) {
+        Some(i) => list.remove(i),
+        None => (key, make()?),
+    };
+    let value = entry.1.clone();
+    list.push(entry);
+    if list.len() > limit {
+        list.remove(0);
+    }
+    Ok(value)
+}
+
 /// Builds scenes and keeps each stage's recent outputs for reuse ([`CACHE_ENTRIES`] per stage).
 #[derive(Default)]
 pub struct SceneBuilder {
@@ -285,14 +309,13 @@ pub struct SceneBuilder {
     stats: Stats,
     /// The scene scale and depth range of the depths of these keys (as many as the depth
     /// stage keeps, least recently used first: undoing a stroke finds them too).
-    depth_stats: Vec<(u64, SceneScale, DepthRange)>,
+    depth_stats: Vec<(u64, (SceneScale, DepthRange))>,
     /// The cloud's density strides by layers and camera path, least recently used first.
     strides: Vec<(u64, Vec<usize>)>,
     grow_canvas: bool,
-    /// Grown canvases, newest last: `(canvas key, the key of the canvas it grew from, where that
-    /// one's top-left pixel sits on it)`; the layer inpainting keeps what it can of the smaller
+    /// Grown canvases by key, newest last; the layer inpainting keeps what it can of the smaller
     /// canvas's layers ([`crate::stages::layers::inpaint_grown_layers`]).
-    grown_from: Vec<(u64, u64, (usize, usize))>,
+    grown_from: Vec<(u64, GrownCanvas)>,
     /// The inpainter of the last build with its name, by the settings it was made for (an
     /// ONNX model's session loads once, not on every build and dry run).
     inpainter: Option<(
@@ -591,19 +614,12 @@ impl SceneBuilder {
         let (w, h) = input.rgb.size();
         warnings.extend(depth.warnings.iter().cloned());
         // The depth's statistics, once per depth (every build and dry run needs them).
-        let known = self.depth_stats.iter().position(|e| e.0 == key);
-        let (_, scale, depth_range) = match known {
-            Some(i) => self.depth_stats.remove(i),
-            None => (
-                key,
+        let (scale, depth_range) = remembered(&mut self.depth_stats, key, CACHE_ENTRIES, || {
+            Ok((
                 scene_scale(&depth.estimate.depth, &depth.estimate.sky)?,
                 DepthRange::from_depth(&depth.estimate.depth)?,
-            ),
-        };
-        self.depth_stats.push((key, scale, depth_range));
-        if self.depth_stats.len() > CACHE_ENTRIES {
-            self.depth_stats.remove(0);
-        }
+            ))
+        })?;
 
         // The inpainter serves the canvas and the layers.
         let (inpainter, inpainter_name) = if sketch {
@@ -659,11 +675,9 @@ impl SceneBuilder {
                             layout.left_pad - parent.layout.left_pad,
                             layout.top_pad - parent.layout.top_pad,
                         );
-                        self.grown_from.retain(|e| e.0 != k);
-                        self.grown_from.push((k, parent_key, offset));
-                        if self.grown_from.len() > 4 * CACHE_ENTRIES {
-                            self.grown_from.remove(0);
-                        }
+                        remembered(&mut self.grown_from, k, 4 * CACHE_ENTRIES, || {
+                            Ok((parent_key, offset))
+                        })?;
                         (k, v)
                     }
                     None => (
@@ -728,7 +742,7 @@ impl SceneBuilder {
             .iter()
             .rev()
             .find(|e| e.0 == canvas_key)
-            .and_then(|&(_, parent_canvas, offset)| {
+            .and_then(|&(_, (parent_canvas, offset))| {
                 let parent_plan = key_of(parent_canvas, &(&params, project.layers.enabled));
                 let plan = self.layers.peek(parent_plan)?;
                 let parent_base = key_of(parent_plan, &settings);
@@ -811,23 +825,10 @@ impl SceneBuilder {
                 key,
                 &(&project.camera, output.width, output.height, output.frames),
             );
-            match self.strides.iter().position(|e| e.0 == memo_key) {
-                Some(i) => {
-                    let entry = self.strides.remove(i);
-                    let strides = entry.1.clone();
-                    self.strides.push(entry);
-                    strides
-                }
-                None => {
-                    let views = OutputCamera::of(project, (w, h)).views(project, &scale)?;
-                    let strides = density_strides(&layered, &canvas.intrinsics, &views);
-                    self.strides.push((memo_key, strides.clone()));
-                    if self.strides.len() > 4 * CACHE_ENTRIES {
-                        self.strides.remove(0);
-                    }
-                    strides
-                }
-            }
+            remembered(&mut self.strides, memo_key, 4 * CACHE_ENTRIES, || {
+                let views = OutputCamera::of(project, (w, h)).views(project, &scale)?;
+                Ok(density_strides(&layered, &canvas.intrinsics, &views))
+            })?
         } else {
             Vec::new()
         };

@@ -1,7 +1,7 @@
 //! Completing the layers: inpainting each layer's hidden region (colour and depth), and the
 //! layer-based depth of Make-It-4D (eq. 4–5).
 
-use super::{Layer, LayerPlan, LayeredScene};
+use super::{Layer, LayerPlan, LayeredScene, interior_thresholds};
 use crate::error::{Error, Result};
 use crate::geometry::Intrinsics;
 use crate::progress::Progress;
@@ -60,6 +60,15 @@ pub struct GrownFrom<'a> {
     pub offset: (usize, usize),
 }
 
+impl GrownFrom<'_> {
+    /// The smaller canvas's pixel under grown-canvas pixel `(x, y)`, if any.
+    fn smaller_pixel(&self, x: usize, y: usize) -> Option<(usize, usize)> {
+        let (pw, ph) = self.plan.depth.size();
+        let (qx, qy) = (x.checked_sub(self.offset.0)?, y.checked_sub(self.offset.1)?);
+        (qx < pw && qy < ph).then_some((qx, qy))
+    }
+}
+
 /// How far from an edge the canvas grew past the smaller canvas's fill is redone, pixels: the
 /// new fill and the kept one then meet inside a band that both fills saw, and the layering's
 /// few-pixel operations near that edge (the context's erosion, the depth-edge refinement, both
@@ -86,14 +95,6 @@ pub fn inpaint_grown_layers(
     complete_layers(canvas, plan, Some(from), inpainter, seed, progress)
 }
 
-/// The interior thresholds `d_2 … d_L` (the layer cuts; the ends span the depth range).
-fn interior(thresholds: &[f32]) -> &[f32] {
-    match thresholds.len() {
-        0..=2 => &[],
-        n => &thresholds[1..n - 1],
-    }
-}
-
 /// Layer `k`'s kept pixels on the grown canvas (see [`inpaint_grown_layers`]), or `None` when
 /// none is kept.
 fn kept_pixels(
@@ -104,9 +105,9 @@ fn kept_pixels(
 ) -> Option<crate::raster::MaskRaster> {
     let old = from.plan.regions.get(k)?;
     let layer = from.layers.layers.get(k)?;
-    let (pw, ph) = old.hole.size();
+    let (pw, ph) = from.plan.depth.size();
     let (ox, oy) = from.offset;
-    if ox + pw > w || oy + ph > h || layer.image.size() != (pw, ph) {
+    if ox + pw > w || oy + ph > h || layer.image.size() != (pw, ph) || old.hole.size() != (pw, ph) {
         return None;
     }
     let band = GROWN_BAND_PX;
@@ -123,22 +124,19 @@ fn kept_pixels(
     } else {
         ph
     };
-    let was_hole = |x: usize, y: usize| {
-        let (Some(qx), Some(qy)) = (x.checked_sub(ox), y.checked_sub(oy)) else {
-            return None;
-        };
-        (qx < pw && qy < ph).then_some((qx, qy))
-    };
     // Hole pixels the smaller canvas did not fill (the new margin, and whatever its layer's
     // hole now reaches beyond the old one's bounding box): the kept fill stays a band away from
     // them too, so the new fill never abuts an edge the old one stopped at.
     let new_only = crate::raster::Raster::from_fn(w, h, |x, y| {
-        region.hole.at(x, y) && was_hole(x, y).is_none_or(|(qx, qy)| !old.hole.at(qx, qy))
+        region.hole.at(x, y)
+            && from
+                .smaller_pixel(x, y)
+                .is_none_or(|(qx, qy)| !old.hole.at(qx, qy))
     });
     let near_new = super::morph::dilate(&new_only, 2 * band + 1);
     let mut any = false;
     let kept = crate::raster::Raster::from_fn(w, h, |x, y| {
-        let Some((qx, qy)) = was_hole(x, y) else {
+        let Some((qx, qy)) = from.smaller_pixel(x, y) else {
             return false;
         };
         let keep = (x0..x1).contains(&qx)
@@ -169,19 +167,17 @@ fn feather_into_kept(
         return;
     };
     let (w, _) = image.size();
-    let (pw, ph) = layer.image.size();
-    let (ox, oy) = from.offset;
+    let pw = layer.image.width();
     let band = GROWN_BAND_PX as f32;
     let distance = super::morph::chamfer_distance(kept);
     for (i, &d) in distance.data().iter().enumerate() {
         if !(d > 0.0 && d < band && region.hole.data()[i]) {
             continue;
         }
-        let (x, y) = (i % w, i / w);
-        let (Some(qx), Some(qy)) = (x.checked_sub(ox), y.checked_sub(oy)) else {
+        let Some((qx, qy)) = from.smaller_pixel(i % w, i / w) else {
             continue;
         };
-        if qx >= pw || qy >= ph || !old.hole.at(qx, qy) {
+        if !old.hole.at(qx, qy) {
             continue;
         }
         let t = d / band;
@@ -216,7 +212,7 @@ fn complete_layers(
     let grown = grown.filter(|g| {
         g.plan.regions.len() == count
             && g.layers.layers.len() == count
-            && interior(&g.plan.thresholds) == interior(&plan.thresholds)
+            && interior_thresholds(&g.plan.thresholds) == interior_thresholds(&plan.thresholds)
     });
     let (w, h) = canvas.size();
     let complete = |(k, region): (usize, &super::LayerRegion)| -> Result<Layer> {
@@ -226,12 +222,11 @@ fn complete_layers(
         let kept = grown.and_then(|g| {
             let kept = kept_pixels((w, h), region, k, g)?;
             let layer = &g.layers.layers[k];
-            let (ox, oy) = g.offset;
             let mut image = canvas.clone();
             let mut depth = plan.depth.clone();
             for (i, _) in kept.data().iter().enumerate().filter(|(_, v)| **v) {
-                let (x, y) = (i % w, i / w);
-                let j = (y - oy) * layer.image.width() + (x - ox);
+                let (qx, qy) = g.smaller_pixel(i % w, i / w)?;
+                let j = qy * layer.image.width() + qx;
                 image.data_mut()[i] = layer.image.data()[j];
                 depth.data_mut()[i] = layer.depth.data()[j];
             }

@@ -385,11 +385,16 @@ fn clustered_sky_thresholds(
 /// `d_2 … d_L` that are `≤ z` (so `d_i ≤ z < d_{i+1}`; depths beyond the ends fall into the
 /// first or last interval).
 pub fn interval_of(z: f32, thresholds: &[f32]) -> usize {
-    let interior = match thresholds.len() {
-        0..=2 => &[][..],
+    interior_thresholds(thresholds).partition_point(|&t| t <= z)
+}
+
+/// The interior thresholds `d_2 … d_L`: the cuts between layers (the ends only span the depth
+/// range).
+pub fn interior_thresholds(thresholds: &[f32]) -> &[f32] {
+    match thresholds.len() {
+        0..=2 => &[],
         n => &thresholds[1..n - 1],
-    };
-    interior.partition_point(|&t| t <= z)
+    }
 }
 
 /// One layer's pixel sets, before inpainting. Every mask has the canvas size.
