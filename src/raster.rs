@@ -287,6 +287,34 @@ pub fn for_each_neighbour4(i: usize, w: usize, h: usize, mut f: impl FnMut(usize
     }
 }
 
+/// The 4-connected parts of the `true` pixels of `mask`, as pixel indices, each part in the
+/// order a depth-first walk meets it, the parts in scan order of their first pixel.
+pub fn connected_components(mask: &MaskRaster) -> Vec<Vec<usize>> {
+    let (w, h) = mask.size();
+    let mut parts = Vec::new();
+    let mut seen = vec![false; w * h];
+    let mut stack = Vec::new();
+    for start in 0..w * h {
+        if !mask.data()[start] || seen[start] {
+            continue;
+        }
+        let mut part = Vec::new();
+        seen[start] = true;
+        stack.push(start);
+        while let Some(i) = stack.pop() {
+            part.push(i);
+            for_each_neighbour4(i, w, h, |j| {
+                if mask.data()[j] && !seen[j] {
+                    seen[j] = true;
+                    stack.push(j);
+                }
+            });
+        }
+        parts.push(part);
+    }
+    parts
+}
+
 /// Rec. 709 luma of an sRGB-encoded colour.
 #[inline]
 pub fn luma(c: Rgb) -> f32 {

@@ -19,7 +19,7 @@ use crate::error::{Error, Result};
 use crate::geometry::{Intrinsics, View};
 use crate::progress::Progress;
 use crate::raster::{GrayRaster, MaskRaster, RgbRaster, quantile};
-use crate::stages::inpaint::{InpaintRequest, Inpainter};
+use crate::stages::inpaint::{InpaintRequest, Inpainter, unique_objects};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
@@ -511,10 +511,17 @@ pub fn outpaint(
         let dst = (y + layout.top_pad) * layout.width + layout.left_pad;
         canvas.data_mut()[dst..dst + w].copy_from_slice(image.row(y));
     }
+    // The photo's unique objects (a kite, a boat) are left out of the sources, so the margin
+    // never shows them a second time.
+    let photo_region = mask.map(|m| !m);
+    let objects = unique_objects(&canvas, Some(&photo_region));
+    let allowed = MaskRaster::from_fn(layout.width, layout.height, |x, y| {
+        photo_region.at(x, y) && !objects.at(x, y)
+    });
     let request = InpaintRequest {
         image: &canvas,
         hole: &mask,
-        allowed_source: None,
+        allowed_source: Some(&allowed),
         guide: None,
         seed,
     };
@@ -838,6 +845,46 @@ mod tests {
             height: 12,
         };
         assert!(outpaint(&img, &bad, &HarmonicInpainter, 1, &Progress::none()).is_err());
+    }
+
+    #[test]
+    fn a_unique_object_never_shows_twice_in_the_margin() {
+        use crate::stages::inpaint::{InpaintPreset, PatchMatchInpainter};
+        let red = |c: [f32; 3]| c[0] > 0.6 && c[1] < 0.3 && c[2] < 0.3;
+        let disc = |x: usize, y: usize| (x as f32 - 30.0).hypot(y as f32 - 14.0) <= 5.0;
+        // A kite (a red disc) near the top of a textured photo, and the same kite in a flat
+        // sky (nothing else to copy but sky).
+        let textured = RgbRaster::from_fn(96, 72, |x, y| {
+            if disc(x, y) {
+                return [0.95, 0.05, 0.05];
+            }
+            let ridge = if x % 8 < 2 || y % 8 == 4 { 0.15 } else { 0.0 };
+            [0.35 + ridge, 0.45 + ridge, 0.3 + 0.5 * ridge]
+        });
+        let flat = RgbRaster::from_fn(96, 72, |x, y| {
+            if disc(x, y) {
+                [0.95, 0.05, 0.05]
+            } else {
+                [0.4, 0.6, 0.9]
+            }
+        });
+        let layout = CanvasLayout::fixed((96, 72), 1.5, Placement::BottomCentre).unwrap();
+        for (name, photo) in [("textured", &textured), ("flat", &flat)] {
+            for preset in [InpaintPreset::Preview, InpaintPreset::Final] {
+                let inpainter = PatchMatchInpainter::preset(preset);
+                let (canvas, mask) =
+                    outpaint(photo, &layout, &inpainter, 3, &Progress::none()).unwrap();
+                let copies = (0..canvas.len())
+                    .filter(|&i| mask.data()[i] && red(canvas.data()[i]))
+                    .count();
+                assert_eq!(
+                    copies, 0,
+                    "{name} {preset}: {copies} red pixels in the margin"
+                );
+                // The photo itself, kite included, is unchanged.
+                assert!(red(canvas.at(30 + layout.left_pad, 14 + layout.top_pad)));
+            }
+        }
     }
 
     #[test]

@@ -231,6 +231,10 @@ pub struct BenchRow {
     pub ssim: f64,
     /// Median wall-clock time of the fill, seconds.
     pub seconds: f64,
+    /// The duplication statistic of the fill ([`super::CopyMap::duplication`]); `None` for a
+    /// method that does not copy (the membrane).
+    #[serde(default)]
+    pub duplication: Option<f64>,
 }
 
 /// The photos the benchmark uses by default: every `*.jpg` of `../shared/data/photos` (next
@@ -294,7 +298,6 @@ pub fn bench_inpaint(
                 let stage = format!("bench {name} {} {}", kind.name(), method.name());
                 progress.report(job as f32 / jobs as f32, &stage);
                 let sub = progress.sub(job as f32 / jobs as f32, (job + 1) as f32 / jobs as f32);
-                let inpainter = method.inpainter();
                 let request = InpaintRequest {
                     image: &damaged,
                     hole: &hole,
@@ -304,9 +307,18 @@ pub fn bench_inpaint(
                 };
                 let mut times = Vec::with_capacity(repeats);
                 let mut filled = None;
+                let mut duplication = None;
                 for _ in 0..repeats {
                     let start = Instant::now();
-                    let result = inpainter.inpaint(&request, &sub)?;
+                    let result = match method {
+                        BenchMethod::Harmonic => HarmonicInpainter.inpaint(&request, &sub)?,
+                        BenchMethod::PatchMatch(preset) => {
+                            let (result, copies) = PatchMatchInpainter::preset(preset)
+                                .inpaint_traced(&request, &sub)?;
+                            duplication = Some(copies.duplication() as f64);
+                            result
+                        }
+                    };
                     times.push(start.elapsed().as_secs_f64());
                     filled = Some(result.image);
                 }
@@ -324,6 +336,7 @@ pub fn bench_inpaint(
                     ssim: ssim_masked(&filled, &photo, &hole, SsimChannels::Luma)
                         .unwrap_or(f64::NAN),
                     seconds: times[times.len() / 2],
+                    duplication,
                 });
             }
         }
@@ -349,13 +362,14 @@ pub fn format_bench_table(rows: &[BenchRow]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "| photo | size | hole | hole % | method | PSNR dB | SSIM | seconds |"
+        "| photo | size | hole | hole % | method | PSNR dB | SSIM | duplication | seconds |"
     );
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|");
+    let dup = |d: Option<f64>| d.map_or_else(|| "–".to_string(), |d| format!("{d:.2}"));
     for r in rows {
         let _ = writeln!(
             s,
-            "| {} | {}×{} | {} | {:.1} | {} | {:.2} | {:.4} | {:.3} |",
+            "| {} | {}×{} | {} | {:.1} | {} | {:.2} | {:.4} | {} | {:.3} |",
             r.photo,
             r.size.0,
             r.size.1,
@@ -364,6 +378,7 @@ pub fn format_bench_table(rows: &[BenchRow]) -> String {
             r.method,
             r.psnr_db,
             r.ssim,
+            dup(r.duplication),
             r.seconds
         );
     }
@@ -380,11 +395,11 @@ pub fn format_bench_table(rows: &[BenchRow]) -> String {
     let _ = writeln!(s);
     let _ = writeln!(
         s,
-        "| hole | method | photos | mean PSNR dB | Δ vs harmonic dB | mean SSIM | mean seconds |"
+        "| hole | method | photos | mean PSNR dB | Δ vs harmonic dB | mean SSIM | mean duplication | mean seconds |"
     );
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|");
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
     for &kind in &kinds {
-        let mean_of = |method: &str| -> Option<(usize, f64, f64, f64)> {
+        let mean_of = |method: &str| -> Option<(usize, f64, f64, Option<f64>, f64)> {
             let sel: Vec<&BenchRow> = rows
                 .iter()
                 .filter(|r| r.hole == kind && r.method == method)
@@ -397,12 +412,16 @@ pub fn format_bench_table(rows: &[BenchRow]) -> String {
                 sel.len(),
                 sel.iter().map(|r| r.psnr_db).sum::<f64>() / n,
                 sel.iter().map(|r| r.ssim).sum::<f64>() / n,
+                sel.iter()
+                    .map(|r| r.duplication)
+                    .sum::<Option<f64>>()
+                    .map(|d| d / n),
                 sel.iter().map(|r| r.seconds).sum::<f64>() / n,
             ))
         };
         let baseline = mean_of(&BenchMethod::Harmonic.name()).map(|m| m.1);
         for method in &methods {
-            let Some((n, psnr, ssim, secs)) = mean_of(method) else {
+            let Some((n, psnr, ssim, duplication, secs)) = mean_of(method) else {
                 continue;
             };
             let delta = baseline
@@ -410,8 +429,9 @@ pub fn format_bench_table(rows: &[BenchRow]) -> String {
                 .unwrap_or_else(|| "–".to_string());
             let _ = writeln!(
                 s,
-                "| {} | {method} | {n} | {psnr:.2} | {delta} | {ssim:.4} | {secs:.3} |",
-                kind.name()
+                "| {} | {method} | {n} | {psnr:.2} | {delta} | {ssim:.4} | {} | {secs:.3} |",
+                kind.name(),
+                dup(duplication)
             );
         }
     }

@@ -4,6 +4,8 @@
 //!   `preview`, `final`; honours `allowed_source` and completes a guide channel.
 //! - [`HarmonicInpainter`] (`harmonic`): the membrane fill, the smooth baseline.
 //! - `command`: the `makeit4d inpaint` command as functions (mask decoding, checks).
+//! - `salient`: the unique objects of a region, which outpainting and layer inpainting leave
+//!   out of their sources so that they are never pasted twice.
 //! - `bench`: holes cut out of real photos, scored against them (PSNR, SSIM) and timed.
 
 pub mod bench;
@@ -12,11 +14,15 @@ mod common;
 pub mod harmonic;
 pub mod onnx;
 pub mod patchmatch;
+pub mod salient;
 
 pub use bench::{BenchOptions, BenchRow, bench_inpaint, format_bench_table};
 pub use command::{inpaint_command, read_hole_mask};
 pub use harmonic::{HarmonicInpainter, SketchInpainter};
-pub use patchmatch::{InpaintPreset, PatchMatchInpainter, PatchMatchParams};
+pub use patchmatch::{
+    CopyMap, DUPLICATION_BLOCK, InpaintPreset, PatchMatchInpainter, PatchMatchParams,
+};
+pub use salient::unique_objects;
 
 use crate::error::Result;
 use crate::progress::Progress;

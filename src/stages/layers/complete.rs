@@ -7,7 +7,7 @@ use crate::geometry::Intrinsics;
 use crate::progress::Progress;
 use crate::raster::{RgbRaster, quantile};
 use crate::stages::depth::DepthEstimator;
-use crate::stages::inpaint::{InpaintRequest, Inpainter};
+use crate::stages::inpaint::{InpaintRequest, Inpainter, unique_objects};
 use serde::{Deserialize, Serialize};
 
 /// The seed of layer `index`'s inpainting job, derived from the stage seed (SplitMix64 finaliser,
@@ -240,10 +240,16 @@ fn complete_layers(
         };
         let has_hole = hole.data().iter().any(|&v| v);
         let (completed_image, completed_depth) = if has_hole {
+            // The context's unique objects (a boat on the water) are no source for what the
+            // nearer layers hide: they would show twice.
+            let objects = unique_objects(canvas, Some(&region.context));
+            let allowed = crate::raster::Raster::from_fn(w, h, |x, y| {
+                region.context.at(x, y) && !objects.at(x, y)
+            });
             let request = InpaintRequest {
                 image: known_image,
                 hole,
-                allowed_source: Some(&region.context),
+                allowed_source: Some(&allowed),
                 guide: Some(known_depth),
                 seed: layer_seed(seed, k),
             };

@@ -62,7 +62,9 @@
 
 use super::spec::{Arrow, MotionRegion, MotionSpec, Stroke, rasterise_strokes};
 use crate::error::{Error, Result};
-use crate::raster::{GrayRaster, MaskRaster, Raster, RgbRaster, luma, quantile};
+use crate::raster::{
+    GrayRaster, MaskRaster, Raster, RgbRaster, connected_components, luma, quantile,
+};
 
 /// Sky drift speed as a fraction of the canvas width per frame (0.3 px/frame at 1280 px).
 pub const SKY_DRIFT_PER_WIDTH: f32 = 0.3 / 1280.0;
@@ -307,7 +309,7 @@ fn drop_short_runs(mask: &MaskRaster, min_len: usize, vertical: bool) -> MaskRas
 /// `mask` without its 4-connected parts smaller than `min_area` pixels.
 fn drop_small_parts(mask: &MaskRaster, min_area: usize) -> MaskRaster {
     let mut out = MaskRaster::new(mask.width(), mask.height(), false);
-    for part in components(mask) {
+    for part in connected_components(mask) {
         if part.len() >= min_area {
             for i in part {
                 out.data_mut()[i] = true;
@@ -342,7 +344,7 @@ fn fill_sky_holes(sky: &MaskRaster, horizon: f32) -> MaskRaster {
     let (w, h) = sky.size();
     let max_area = (MAX_SKY_HOLE_AREA * (w * h) as f32) as usize;
     let mut out = sky.clone();
-    for part in components(&sky.map(|s| !s)) {
+    for part in connected_components(&sky.map(|s| !s)) {
         let enclosed = part.iter().all(|&i| {
             let (x, y) = (i % w, i / w);
             x > 0 && y > 0 && x + 1 < w && y + 1 < h && (y as f32) < horizon
@@ -559,7 +561,7 @@ fn estimate_water(
     });
     let min_part = (MIN_WATER_PART * (w * h) as f32).ceil() as usize;
     // Large parts, each cut below its neck.
-    let parts: Vec<Vec<usize>> = components(&voted)
+    let parts: Vec<Vec<usize>> = connected_components(&voted)
         .into_iter()
         .filter(|p| p.len() >= min_part)
         .map(|p| cut_at_neck(&p, w))
@@ -615,7 +617,7 @@ fn estimate_water(
     let water = drop_short_runs(&water, min_run, true);
     let mut kept = empty.clone();
     let (mut area, mut left, mut right) = (0, usize::MAX, 0);
-    for part in components(&water) {
+    for part in connected_components(&water) {
         if part.len() < min_part {
             continue;
         }
@@ -660,40 +662,6 @@ fn cut_at_neck(part: &[usize], width: usize) -> Vec<usize> {
             .collect(),
         None => part.to_vec(),
     }
-}
-
-/// The 4-connected parts of `mask`, as pixel indices.
-fn components(mask: &MaskRaster) -> Vec<Vec<usize>> {
-    let (w, h) = mask.size();
-    let mut parts = Vec::new();
-    let mut seen = vec![false; w * h];
-    let mut stack = Vec::new();
-    for start in 0..w * h {
-        if !mask.data()[start] || seen[start] {
-            continue;
-        }
-        let mut part = Vec::new();
-        seen[start] = true;
-        stack.push(start);
-        while let Some(i) = stack.pop() {
-            part.push(i);
-            let (x, y) = (i % w, i / w);
-            let neighbours = [
-                (x > 0).then(|| i - 1),
-                (x + 1 < w).then(|| i + 1),
-                (y > 0).then(|| i - w),
-                (y + 1 < h).then(|| i + w),
-            ];
-            for j in neighbours.into_iter().flatten() {
-                if mask.data()[j] && !seen[j] {
-                    seen[j] = true;
-                    stack.push(j);
-                }
-            }
-        }
-        parts.push(part);
-    }
-    parts
 }
 
 /// `mask` eroded by a `(2r + 1)²` square (the canvas edge does not erode).
