@@ -461,9 +461,19 @@ struct RenderArgs {
     #[arg(long)]
     preset: Option<String>,
     /// Print per-frame hole and synthesised-content fractions of the path (low-resolution
-    /// renders), frames over the threshold, and the safe extent.
+    /// renders), frames over a threshold, and the safe extent. Without it, render still warns
+    /// (on stderr) about frames over a threshold.
     #[arg(long)]
     diagnostics: bool,
+    /// Hole fraction above which a frame of the path gets a warning, 0–1 (default: the
+    /// project's camera.diagnostics.hole_threshold, 0.02; 1 disables).
+    #[arg(long, value_name = "FRACTION", value_parser = parse_fraction)]
+    hole_threshold: Option<f32>,
+    /// Synthesised (inpainted or outpainted) fraction above which a frame of the path gets a
+    /// warning, 0–1 (default: the project's camera.diagnostics.synth_threshold, 0.20; 1
+    /// disables).
+    #[arg(long, value_name = "FRACTION", value_parser = parse_fraction)]
+    synth_threshold: Option<f32>,
     /// Output size WIDTHxHEIGHT (default: the input's).
     #[arg(long, value_parser = parse_size)]
     size: Option<(usize, usize)>,
@@ -572,6 +582,14 @@ fn parse_bit_depth(s: &str) -> Result<u8, String> {
         "8" => Ok(8),
         "16" => Ok(16),
         _ => Err(format!("bit depth must be 8 or 16, got '{s}'")),
+    }
+}
+
+/// Parses a fraction in `[0, 1]` (`--hole-threshold`, `--synth-threshold`).
+fn parse_fraction(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
+        _ => Err(format!("expected a fraction in [0, 1], got '{s}'")),
     }
 }
 
@@ -802,6 +820,12 @@ fn render_one(
     if let Some(fov) = args.fov {
         project.camera.hfov_deg = fov;
     }
+    if let Some(t) = args.hole_threshold {
+        project.camera.diagnostics.hole_threshold = t;
+    }
+    if let Some(t) = args.synth_threshold {
+        project.camera.diagnostics.synth_threshold = t;
+    }
     let autocruise = args.preset.as_deref() == Some("autocruise");
     if let Some(name) = args.preset.as_deref().filter(|_| !autocruise) {
         let kind: PresetKind = name.parse()?;
@@ -859,19 +883,39 @@ fn render_one(
     for w in &scene.warnings {
         bar.suspend(|| eprintln!("warning: {w}"));
     }
-    if args.diagnostics {
+    // The path's diagnostics: the whole report with --diagnostics, else only the warnings of
+    // the quick ones (a fraction of the frames at a lower resolution), said once the renderer
+    // is chosen so that a failing render still ends in one error line.
+    let path_warnings = {
         let (w, h) = scene.output_camera(&project).size;
         let views = scene.output_views(&project)?;
-        let d = makeit4d::path::path_diagnostics(
-            &scene.cloud,
-            &views,
-            w,
-            h,
-            &makeit4d::path::DiagnosticsParams::default(),
-            &progress,
-        )?;
-        bar.suspend(|| println!("{d}"));
-    }
+        let params = project.camera.diagnostics.params();
+        let diagnostics_progress = progress.sub(0.1, 0.1);
+        if args.diagnostics {
+            let d = makeit4d::path::path_diagnostics(
+                &scene.cloud,
+                &views,
+                w,
+                h,
+                &params,
+                &diagnostics_progress,
+            )?;
+            bar.suspend(|| println!("{d}"));
+            Vec::new()
+        } else {
+            let d = makeit4d::path::quick_path_diagnostics(
+                &scene.cloud,
+                &views,
+                w,
+                h,
+                &params,
+                &diagnostics_progress,
+            )?;
+            let mut lines = d.warning_lines();
+            lines.extend(d.safe_extent_line());
+            lines
+        }
+    };
     makeit4d::image_io::prepare_output_dir(out)?;
     if let Some(path) = &args.save_project {
         project
@@ -882,7 +926,12 @@ fn render_one(
     // Vulkan layers print to stderr, which would spoil the one-line error of a bad input.
     let (mut renderer, why) = select_renderer(args.renderer, project.render)?;
     // Said on stdout, with the summary: stderr is kept for warnings and the one-line error.
-    bar.suspend(|| println!("renderer: {why}"));
+    bar.suspend(|| {
+        for line in &path_warnings {
+            eprintln!("warning: {line}");
+        }
+        println!("renderer: {why}");
+    });
     let summary = render_sequence(
         &project,
         &scene,

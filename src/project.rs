@@ -156,6 +156,9 @@ pub struct CameraSettings {
     /// Parameters of the autocruise suggestion (`render --preset autocruise`, the editor's
     /// Autocruise button); the path it suggests becomes `path`'s keyframes.
     pub autocruise: crate::path::AutocruiseParams,
+    /// When the path diagnostics warn (`render` and the editor's Camera tab): a frame whose
+    /// hole or synthesised fraction exceeds its threshold is over.
+    pub diagnostics: crate::path::DiagnosticsThresholds,
 }
 
 impl Default for CameraSettings {
@@ -164,6 +167,7 @@ impl Default for CameraSettings {
             hfov_deg: 60.0,
             path: CameraPath::default(),
             autocruise: crate::path::AutocruiseParams::default(),
+            diagnostics: crate::path::DiagnosticsThresholds::default(),
         }
     }
 }
@@ -232,6 +236,7 @@ impl Project {
             )));
         }
         self.camera.autocruise.validate()?;
+        self.camera.diagnostics.validate()?;
         self.layers.params.validate()?;
         self.render.validate()
     }
@@ -460,6 +465,46 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("missing field `input`"), "{e}");
+    }
+
+    #[test]
+    fn diagnostics_thresholds_default_load_and_are_checked() {
+        let p = Project::from_json(r#"{"version": 1, "input": "a.jpg", "camera": {}}"#).unwrap();
+        assert_eq!(p.camera.diagnostics.synth_threshold, 0.2);
+        assert_eq!(p.camera.diagnostics.hole_threshold, 0.02);
+        let p = Project::from_json(
+            r#"{"version": 1, "input": "a.jpg", "camera": {"diagnostics": {"synth_threshold": 0.05}}}"#,
+        )
+        .unwrap();
+        assert_eq!(p.camera.diagnostics.synth_threshold, 0.05);
+        assert_eq!(p.camera.diagnostics.hole_threshold, 0.02);
+        for (json, needle) in [
+            (
+                r#"{"synth_threshold": 1.5}"#,
+                "camera.diagnostics.synth_threshold = 1.5 is outside [0, 1]",
+            ),
+            (
+                r#"{"hole_threshold": -0.1}"#,
+                "camera.diagnostics.hole_threshold = -0.1 is outside [0, 1]",
+            ),
+            (
+                r#"{"synth_threshold": "high"}"#,
+                "\"camera.diagnostics.synth_threshold\"",
+            ),
+            (r#"{"synth": 0.1}"#, "unknown field `synth`"),
+        ] {
+            let e = Project::from_json(&format!(
+                r#"{{"version": 1, "input": "a.jpg", "camera": {{"diagnostics": {json}}}}}"#
+            ))
+            .unwrap_err()
+            .to_string();
+            assert!(e.contains(needle), "{json} → {e}");
+            assert!(!e.contains('\n'), "{e}");
+        }
+        let mut p = Project::new("a.jpg");
+        p.camera.diagnostics.synth_threshold = f32::NAN;
+        let e = p.validate().unwrap_err().to_string();
+        assert!(e.contains("camera.diagnostics.synth_threshold"), "{e}");
     }
 
     #[test]

@@ -305,3 +305,143 @@ fn autocruise_becomes_editable_keyframes_with_diagnostics() {
         assert_eq!(std::fs::read(x).unwrap(), std::fs::read(&y).unwrap());
     }
 }
+
+/// The lines of `out`'s stderr that are path warnings.
+fn path_warnings(out: &Output) -> Vec<String> {
+    String::from_utf8_lossy(&out.stderr)
+        .lines()
+        .filter(|l| l.starts_with("warning: frame") || l.starts_with("warning: safe extent"))
+        .map(str::to_string)
+        .collect()
+}
+
+#[test]
+fn render_warns_when_the_path_shows_synthesised_content() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let img = data("forest_path_320.jpg");
+    let quick = [
+        "--frames",
+        "6",
+        "--size",
+        "160x100",
+        "--inpaint-preset",
+        "draft",
+    ];
+    // A fly-out shows outpainted canvas from its second frame on: over a 1 % threshold.
+    let args = [
+        &quick[..],
+        &["--preset", "fly-out", "--synth-threshold", "0.01"],
+    ]
+    .concat();
+    let o = render(&img, &d.join("out"), &args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let warnings = path_warnings(&o);
+    assert!(
+        warnings.iter().any(|l| l.starts_with("warning: frames ")
+            && l.contains("synthesised up to")
+            && l.contains("(threshold 1.0 %)")),
+        "{warnings:?}"
+    );
+    assert!(
+        warnings
+            .iter()
+            .any(|l| l.contains("synthesised content exceeds its threshold from frame")),
+        "{warnings:?}"
+    );
+    // Without --diagnostics the table is not printed.
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("path diagnostics"));
+    // A still path at the default thresholds: no warning.
+    let args = [&quick[..], &["--preset", "still"]].concat();
+    let o = render(&img, &d.join("still"), &args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(path_warnings(&o), Vec::<String>::new());
+    // The project setting warns too, and the flag overrides it.
+    let project = d.join("p.json");
+    std::fs::write(
+        &project,
+        format!(
+            r#"{{"version": 1, "input": {:?}, "camera": {{"path": {{"type": "preset", "kind": "fly-out"}}, "diagnostics": {{"synth_threshold": 0.01}}}}}}"#,
+            img.to_str().unwrap()
+        ),
+    )
+    .unwrap();
+    let with_project = |extra: &[&str]| {
+        exe()
+            .arg("render")
+            .arg("--project")
+            .arg(&project)
+            .arg("--out")
+            .arg(d.join("p"))
+            .args(quick)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let o = with_project(&[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        path_warnings(&o)
+            .iter()
+            .any(|l| l.contains("synthesised up to")),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let o = with_project(&["--synth-threshold", "1", "--hole-threshold", "1"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(path_warnings(&o), Vec::<String>::new());
+    // --diagnostics prints the table with both thresholds and marks the frames over.
+    let args = [
+        &quick[..],
+        &[
+            "--preset",
+            "fly-out",
+            "--synth-threshold",
+            "0.01",
+            "--diagnostics",
+        ],
+    ]
+    .concat();
+    let o = render(&img, &d.join("table"), &args);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("hole threshold 2.0 %, synthesised threshold 1.0 %")
+            && stdout.contains("over: synth"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn bad_thresholds_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    for (flag, value) in [
+        ("--synth-threshold", "1.5"),
+        ("--synth-threshold", "-0.1"),
+        ("--synth-threshold", "NaN"),
+        ("--hole-threshold", "2"),
+    ] {
+        let o = render(
+            &data("forest_path_320.jpg"),
+            &out,
+            &[&format!("{flag}={value}")],
+        );
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{stderr}");
+        assert!(
+            stderr.contains(flag) && stderr.contains("expected a fraction in [0, 1]"),
+            "{stderr}"
+        );
+        assert!(!out.exists());
+    }
+    // In a project file the error names the field.
+    let project = dir.path().join("bad.json");
+    std::fs::write(
+        &project,
+        r#"{"version": 1, "input": "a.jpg", "camera": {"diagnostics": {"synth_threshold": 1.5}}}"#,
+    )
+    .unwrap();
+    let o = run(&[os("--project"), os(&project), os("--out"), os(&out)]);
+    assert_clean_failure(&o, &["camera.diagnostics.synth_threshold = 1.5"]);
+    assert!(!out.exists());
+}

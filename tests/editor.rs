@@ -875,3 +875,102 @@ fn the_depth_tab_offers_the_installed_models() {
         );
     }
 }
+
+/// Steps a headless editor (no window, no GPU: the CPU preview) until `done`, or panics.
+fn step_headless_until(
+    ctx: &egui::Context,
+    app: &mut EditorApp,
+    limit: Duration,
+    mut done: impl FnMut(&EditorApp) -> bool,
+) {
+    let start = Instant::now();
+    loop {
+        let input = egui::RawInput {
+            screen_rect: Some(egui::Rect::from_min_size(
+                egui::Pos2::ZERO,
+                egui::vec2(1280.0, 800.0),
+            )),
+            time: Some(start.elapsed().as_secs_f64()),
+            ..Default::default()
+        };
+        // Nothing draws the frame: its texture updates are dropped on purpose.
+        app.run_frame(ctx, input).textures_delta.clear();
+        if done(app) {
+            return;
+        }
+        assert!(
+            start.elapsed() < limit,
+            "timed out; job {:?}; messages {:?}",
+            app.job(),
+            app.notices()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn the_timeline_and_camera_tab_show_holes_and_synthesised_share() {
+    use makeit4d::path::{Preset, PresetKind};
+    let dir = tempfile::tempdir().unwrap();
+    let mut p = Project::new(sample());
+    p.inpaint.preset = InpaintPreset::Draft;
+    p.output.frames = 12;
+    p.output.width = Some(160);
+    p.output.height = Some(100);
+    p.camera.path = CameraPath::Preset(Preset::new(PresetKind::FlyOut));
+    p.camera.diagnostics.synth_threshold = 0.01;
+    let file = dir.path().join("project.json");
+    p.save(&file).unwrap();
+    let ctx = egui::Context::default();
+    let mut app = EditorApp::headless(
+        ctx.clone(),
+        EditorOptions {
+            open: Some(file),
+            ephemeral: true,
+            preview_renderer: RendererChoice::Cpu,
+            ..Default::default()
+        },
+    );
+    app.select_tab(Tab::Camera);
+    let limit = Duration::from_secs(300);
+    // The diagnostics of the scene on screen come from the worker, for every frame, without
+    // any frame having been previewed but the first.
+    let current = |app: &EditorApp| {
+        app.is_idle()
+            && app
+                .path_diagnostics()
+                .is_some_and(|(g, _)| g == app.generation())
+    };
+    step_headless_until(&ctx, &mut app, limit, current);
+    let (_, d) = app.path_diagnostics().unwrap();
+    assert_eq!(d.frames.len(), 12);
+    assert_eq!(d.synth_threshold, 0.01);
+    assert_eq!(d.frames[0].inpainted_fraction, 0.0, "{d}");
+    assert!(d.frames[11].inpainted_fraction > 0.01, "{d}");
+    let first_over = d.safe_frames();
+    assert!((1..12).contains(&first_over), "{d}");
+    let timeline = makeit4d::app::timeline::TimelineState {
+        diagnostics: Some((app.generation(), d.clone())),
+        ..Default::default()
+    };
+    for f in 0..12 {
+        let (holes, synth) =
+            makeit4d::app::timeline::strip_colours(&timeline, (0.02, 0.01), f).expect("a cell");
+        assert_ne!(holes, synth, "frame {f}: two colours");
+    }
+    // The Camera tab names the frame range.
+    let warning = app.camera_warning().expect("a warning");
+    assert!(
+        warning.starts_with(&format!("frames {first_over}–11: synthesised up to ")),
+        "{warning}"
+    );
+    assert!(warning.contains("(threshold 1.0 %)"), "{warning}");
+    assert!(warning.contains("safe extent: frames 0–"), "{warning}");
+    // A threshold of 100 % turns the warning off (the path is rechecked after the edit).
+    let mut project = app.project().unwrap().clone();
+    project.camera.diagnostics.synth_threshold = 1.0;
+    app.apply_edit("threshold", project);
+    step_headless_until(&ctx, &mut app, limit, current);
+    assert_eq!(app.path_diagnostics().unwrap().1.synth_threshold, 1.0);
+    assert_eq!(app.camera_warning(), None);
+}

@@ -699,6 +699,18 @@ impl EditorApp {
         &self.timeline.hole_fractions
     }
 
+    /// The latest path diagnostics (holes and synthesised share of every frame, measured in
+    /// the background after each scene) and the scene generation they belong to.
+    pub fn path_diagnostics(&self) -> Option<(u64, &crate::path::PathDiagnostics)> {
+        self.timeline.diagnostics.as_ref().map(|(g, d)| (*g, d))
+    }
+
+    /// The Camera tab's warning about the path (frames over a threshold), if any.
+    pub fn camera_warning(&self) -> Option<String> {
+        let project = &self.doc.as_ref()?.project;
+        super::panels::camera::path_warning(project, &self.timeline)
+    }
+
     /// The messages on screen, oldest first.
     pub fn notices(&self) -> Vec<String> {
         self.notices.iter().map(|n| n.text.clone()).collect()
@@ -1579,6 +1591,20 @@ impl EditorApp {
                     keyframes,
                     report,
                 } => self.apply_cruise(generation, keyframes, &report),
+                Event::Diagnostics {
+                    generation,
+                    diagnostics,
+                } => {
+                    // Newest scene's wins; an older one's stays on screen until it comes.
+                    if self
+                        .timeline
+                        .diagnostics
+                        .as_ref()
+                        .is_none_or(|(g, _)| *g <= generation)
+                    {
+                        self.timeline.diagnostics = Some((generation, diagnostics));
+                    }
+                }
                 Event::ExportDone(summary) => {
                     let mut text = summary.to_string();
                     for w in &summary.warnings {

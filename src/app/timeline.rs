@@ -1,8 +1,9 @@
 //! The timeline under the views: play/pause, scrubbing, loop, keyframe markers (select,
-//! delete, interpolation and ease per key) and a strip coloured by each frame's hole fraction.
+//! delete, interpolation and ease per key) and a strip coloured by each frame's hole fraction
+//! (upper half) and synthesised share (lower half).
 
 use super::panels::{PanelContext, Request};
-use crate::path::{CameraPath, Ease, Interpolation};
+use crate::path::{CameraPath, Ease, Interpolation, PathDiagnostics};
 use eframe::egui::{self, Color32, Sense, Stroke, Ui, pos2, vec2};
 use std::collections::BTreeMap;
 
@@ -21,6 +22,9 @@ pub struct TimelineState {
     pub selected_key: Option<usize>,
     /// Hole fraction of every rendered preview frame, by frame (reset with each new scene).
     pub hole_fractions: BTreeMap<usize, f32>,
+    /// The path diagnostics of the newest scene checked (its generation): holes and
+    /// synthesised share of every frame, from the scene worker.
+    pub diagnostics: Option<(u64, PathDiagnostics)>,
     /// While playing, [`TimelineState::frame`] is the frame the preview picture shows (set by
     /// the app when a rendered frame arrives) and only the clock runs on: a preview slower
     /// than the timeline drops frames instead of lagging behind the counter (the CPU
@@ -268,33 +272,123 @@ fn scrub_bar_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, frames: usize) {
     }
 }
 
-/// One cell per frame, red by hole fraction (grey: not rendered yet).
+/// Colour of the holes half of a strip cell: grey-green at none, red at the threshold.
+pub const HOLES_COLOUR: Color32 = Color32::from_rgb(235, 60, 50);
+/// Colour of the synthesised half of a strip cell: grey-blue at none, violet at the threshold.
+pub const SYNTH_COLOUR: Color32 = Color32::from_rgb(190, 90, 255);
+
+/// `base` → `full` by `t ∈ [0, 1]`.
+fn ramp(base: Color32, full: Color32, t: f32) -> Color32 {
+    let t = t.clamp(0.0, 1.0);
+    let mix = |a: u8, b: u8| (a as f32 + (b as f32 - a as f32) * t).round() as u8;
+    Color32::from_rgb(
+        mix(base.r(), full.r()),
+        mix(base.g(), full.g()),
+        mix(base.b(), full.b()),
+    )
+}
+
+/// The two colours of frame `f`'s strip cell (holes above, synthesised below), by each
+/// fraction over its threshold, from the path diagnostics; without them, the holes of the
+/// previewed frames (red at 5 %) and grey.
+pub fn strip_colours(
+    timeline: &TimelineState,
+    thresholds: (f32, f32),
+    f: usize,
+) -> Option<(Color32, Color32)> {
+    let grey = Color32::from_gray(60);
+    let scale = |v: f32, threshold: f32| {
+        if threshold > 0.0 {
+            v / threshold
+        } else if v > 0.0 {
+            1.0
+        } else {
+            0.0
+        }
+    };
+    if let Some((_, d)) = &timeline.diagnostics {
+        let frame = d.frames.get(f)?;
+        return Some((
+            ramp(
+                Color32::from_rgb(60, 110, 70),
+                HOLES_COLOUR,
+                scale(frame.hole_fraction, thresholds.0),
+            ),
+            ramp(
+                Color32::from_rgb(60, 80, 110),
+                SYNTH_COLOUR,
+                scale(frame.inpainted_fraction, thresholds.1),
+            ),
+        ));
+    }
+    let h = *timeline.hole_fractions.get(&f)?;
+    Some((
+        ramp(Color32::from_rgb(60, 210, 60), HOLES_COLOUR, h / 0.05),
+        grey,
+    ))
+}
+
+/// One cell per frame: its upper half by hole fraction, its lower half by synthesised share
+/// (from the path diagnostics; grey: not measured yet). Hovering names the frame's numbers.
 fn hole_strip_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, frames: usize) {
-    let (rect, response) = ui.allocate_exact_size(vec2(ui.available_width(), 8.0), Sense::hover());
+    let (rect, response) = ui.allocate_exact_size(vec2(ui.available_width(), 14.0), Sense::hover());
     let painter = ui.painter_at(rect);
     painter.rect_filled(rect, 0.0, Color32::from_gray(60));
     let inner_left = rect.left() + 8.0;
     let inner_width = rect.width() - 16.0;
     let cell = inner_width / frames as f32;
-    for (&f, &h) in &cx.timeline.hole_fractions {
-        if f >= frames {
+    let t = cx.project.camera.diagnostics;
+    let thresholds = (t.hole_threshold, t.synth_threshold);
+    let mid = rect.center().y;
+    for f in 0..frames {
+        let Some((holes, synth)) = strip_colours(cx.timeline, thresholds, f) else {
             continue;
-        }
-        let t = (h / 0.05).clamp(0.0, 1.0);
-        let colour = Color32::from_rgb(
-            (60.0 + 195.0 * t) as u8,
-            (170.0 * (1.0 - t) + 40.0) as u8,
-            60,
-        );
+        };
         let x = inner_left + f as f32 * cell;
+        let x1 = x + cell.max(1.0);
         painter.rect_filled(
-            egui::Rect::from_min_max(pos2(x, rect.top()), pos2(x + cell.max(1.0), rect.bottom())),
+            egui::Rect::from_min_max(pos2(x, rect.top()), pos2(x1, mid)),
             0.0,
-            colour,
+            holes,
+        );
+        painter.rect_filled(
+            egui::Rect::from_min_max(pos2(x, mid), pos2(x1, rect.bottom())),
+            0.0,
+            synth,
         );
     }
+    let hovered = response.hover_pos().map(|p| {
+        (((p.x - inner_left) / cell).floor().max(0.0) as usize).min(frames.saturating_sub(1))
+    });
+    let diagnostics = cx.timeline.diagnostics.as_ref().map(|(_, d)| d);
     response.on_hover_ui(|ui| {
-        ui.label("Hole fraction of each rendered preview frame: green none, red ≥ 5 %, grey not rendered yet.");
+        ui.label(egui::RichText::new("holes").color(HOLES_COLOUR).strong());
+        ui.label(format!(
+            "upper half: the share of the frame nothing covers (red at {:.1} %)",
+            100.0 * thresholds.0
+        ));
+        ui.label(
+            egui::RichText::new("synthesised")
+                .color(SYNTH_COLOUR)
+                .strong(),
+        );
+        ui.label(format!(
+            "lower half: the share showing inpainted or outpainted content (violet at {:.1} %)",
+            100.0 * thresholds.1
+        ));
+        match (hovered, diagnostics) {
+            (Some(f), Some(d)) if f < d.frames.len() => {
+                let m = d.frames[f];
+                ui.label(format!(
+                    "frame {f}: {:.1} % holes, {:.1} % synthesised",
+                    100.0 * m.hole_fraction,
+                    100.0 * m.inpainted_fraction
+                ));
+            }
+            _ => {
+                ui.label("grey: not measured yet");
+            }
+        }
     });
 }
 

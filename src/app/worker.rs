@@ -82,6 +82,8 @@ pub enum JobKind {
     Autocruise,
     /// Exporting frames.
     Export,
+    /// Checking the path of the scene on screen ([`crate::path::quick_path_diagnostics`]).
+    Diagnose,
 }
 
 impl JobKind {
@@ -92,6 +94,7 @@ impl JobKind {
             JobKind::Suggest => "suggesting motion",
             JobKind::Autocruise => "autocruise",
             JobKind::Export => "exporting",
+            JobKind::Diagnose => "checking the path",
         }
     }
 }
@@ -141,6 +144,14 @@ pub enum Event {
         keyframes: crate::path::KeyframePath,
         /// The multi-line report (distance, obstacles, warnings).
         report: String,
+    },
+    /// The path diagnostics of the scene of generation `generation` (its project's path and
+    /// thresholds), run after each final build.
+    Diagnostics {
+        /// The scene generation they were measured on.
+        generation: u64,
+        /// Per frame holes and synthesised share.
+        diagnostics: crate::path::PathDiagnostics,
     },
     /// An export finished.
     ExportDone(RenderSummary),
@@ -376,9 +387,11 @@ impl SceneWorker {
         })
     }
 
-    /// Asks for a build of `project`; a build in flight is cancelled (newest request wins).
+    /// Asks for a build of `project`; a build or path check in flight is cancelled (newest
+    /// request wins).
     pub fn build(&mut self, generation: u64, project: &Project) {
         self.cancel_if(JobKind::Build);
+        self.cancel_if(JobKind::Diagnose);
         self.pending_build = Some(Command::Build {
             generation,
             project: Box::new(project.clone()),
@@ -386,11 +399,13 @@ impl SceneWorker {
         self.flush();
     }
 
-    /// Sends a command other than a build. Errors when the queue is full (the UI says so).
+    /// Sends a command other than a build (a path check in flight gives way to it). Errors
+    /// when the queue is full (the UI says so).
     pub fn send(&mut self, command: Command) -> Result<(), String> {
         let Some(tx) = &self.commands else {
             return Err("the scene worker has stopped".into());
         };
+        self.cancel_if(JobKind::Diagnose);
         match tx.try_send(command) {
             Ok(()) => Ok(()),
             Err(TrySendError::Full(_)) => Err("the scene worker is busy; try again".into()),
@@ -540,7 +555,20 @@ fn scene_thread(
         ok
     };
     let is_build = |c: &Command| matches!(c, Command::Build { .. });
+    // The final scene whose path is still to be checked (superseded by any newer command).
+    let mut to_diagnose: Option<Arc<SceneSnapshot>> = None;
     loop {
+        while let Ok(c) = commands.try_recv() {
+            queue.push_back(c);
+        }
+        if queue.is_empty()
+            && let Some(snapshot) = to_diagnose.take()
+        {
+            if !run_diagnostics(&shared, &ctx, pool, &snapshot, &send) {
+                return;
+            }
+            continue;
+        }
         if queue.is_empty() {
             match commands.recv() {
                 Ok(c) => queue.push_back(c),
@@ -566,15 +594,21 @@ fn scene_thread(
             Command::Build {
                 generation,
                 project,
-            } => run_build(
-                &mut builder,
-                &shared,
-                &ctx,
-                [pool, sketch_pool],
-                generation,
-                *project,
-                &send,
-            ),
+            } => {
+                let alive = run_build(
+                    &mut builder,
+                    &shared,
+                    &ctx,
+                    [pool, sketch_pool],
+                    generation,
+                    *project,
+                    &send,
+                );
+                to_diagnose = lock(&shared.scene)
+                    .clone()
+                    .filter(|s| s.generation == generation && !s.draft);
+                alive
+            }
             Command::SuggestMotion => {
                 let snapshot = lock(&shared.scene).clone();
                 match snapshot {
@@ -654,6 +688,42 @@ fn scene_thread(
         if !alive {
             return;
         }
+    }
+}
+
+/// Measures the path of `snapshot` (its project's path, output size and thresholds) with the
+/// quick diagnostics and sends them; a cancelled check sends nothing. False when the UI is
+/// gone.
+fn run_diagnostics(
+    shared: &Arc<Shared>,
+    ctx: &egui::Context,
+    pool: Option<&rayon::ThreadPool>,
+    snapshot: &SceneSnapshot,
+    send: &impl Fn(Event) -> bool,
+) -> bool {
+    let result = job(shared, ctx, JobKind::Diagnose, pool, |progress| {
+        let (project, scene) = (&snapshot.project, &snapshot.scene);
+        let (w, h) = scene.output_camera(project).size;
+        let views = scene.output_views(project)?;
+        crate::path::quick_path_diagnostics(
+            &scene.cloud,
+            &views,
+            w,
+            h,
+            &project.camera.diagnostics.params(),
+            progress,
+        )
+    });
+    match result {
+        Ok(diagnostics) => send(Event::Diagnostics {
+            generation: snapshot.generation,
+            diagnostics,
+        }),
+        Err(crate::Error::Cancelled) => true,
+        Err(e) => send(Event::Error(format!(
+            "the path could not be checked: {}",
+            one_line(&e)
+        ))),
     }
 }
 
@@ -1161,6 +1231,8 @@ mod tests {
                     } => format!("scene {generation} draft={draft}"),
                     Event::DepthReady(d) => format!("depth {}", d.generation),
                     Event::BuildFailed { message, .. } => panic!("build failed: {message}"),
+                    // The path check after each final scene is not part of these sequences.
+                    Event::Diagnostics { .. } => continue,
                     other => format!("{other:?}"),
                 });
                 if stop {
@@ -1230,6 +1302,37 @@ mod tests {
             matches!(e, Event::SceneReady { generation: 3, .. })
         });
         assert_eq!(third, ["scene 3 draft=false"]);
+    }
+
+    #[test]
+    fn every_final_scene_gets_its_path_checked_and_a_newer_edit_supersedes_it() {
+        let photo = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data/evening_glow_320.jpg");
+        let mut project = Project::new(photo);
+        project.output.frames = 5;
+        project.inpaint.preset = crate::stages::inpaint::InpaintPreset::Draft;
+        let ctx = egui::Context::default();
+        let mut worker = SceneWorker::start(ctx).unwrap();
+        worker.build(1, &project);
+        // A camera edit right away: the first build (or its check) is superseded.
+        project.output.frames = 7;
+        worker.build(2, &project);
+        let start = Instant::now();
+        let d = loop {
+            match worker.try_event() {
+                Some(Event::Diagnostics {
+                    generation: 2,
+                    diagnostics,
+                }) => break diagnostics,
+                Some(Event::BuildFailed { message, .. }) => panic!("{message}"),
+                Some(_) => {}
+                None => std::thread::sleep(std::time::Duration::from_millis(10)),
+            }
+            assert!(start.elapsed().as_secs() < 120, "no diagnostics");
+        };
+        assert_eq!(d.frames.len(), 7);
+        assert_eq!(d.synth_threshold, 0.2);
+        assert_eq!(d.frames[0].hole_fraction, 0.0, "{d}");
     }
 
     #[test]

@@ -30,7 +30,10 @@ pub mod rotation;
 pub mod timing;
 
 pub use autocruise::{AutocruiseParams, AutocruiseResult, CruiseDirection, autocruise};
-pub use diagnostics::{DiagnosticsParams, PathDiagnostics, path_diagnostics};
+pub use diagnostics::{
+    DiagnosticsParams, DiagnosticsThresholds, PathDiagnostics, path_diagnostics,
+    path_diagnostics_sampled, quick_path_diagnostics,
+};
 pub use ease::Ease;
 pub use keyframes::{Interpolation, Keyframe, KeyframePath};
 pub use presets::{Preset, PresetKind};

@@ -3,6 +3,7 @@
 //! keyframes in the inspector.
 
 use super::{PanelContext, Request, StagePanel, Tab, committed, placeholder_ui};
+use crate::app::timeline::TimelineState;
 use crate::geometry::View;
 use crate::path::{
     AutocruiseParams, CameraPath, CruiseDirection, Ease, Interpolation, Preset, PresetKind,
@@ -21,6 +22,85 @@ const GRAB_RADIUS: f32 = 10.0;
 pub fn path_views(project: &Project, scene: &Scene) -> (crate::Result<Vec<View>>, (usize, usize)) {
     let camera = scene.output_camera(project);
     (camera.views(project, &scene.scale), camera.size)
+}
+
+/// The warning about `project`'s path from the latest path diagnostics (judged by the
+/// project's thresholds): one line per run of frames over a threshold and the safe extent.
+/// `None` when no frame is over, or when the diagnostics are of a path of another length (a
+/// newer check is on its way).
+pub fn path_warning(project: &Project, timeline: &TimelineState) -> Option<String> {
+    let (_, d) = timeline.diagnostics.as_ref()?;
+    if d.frames.len() != project.output.frames {
+        return None;
+    }
+    let t = project.camera.diagnostics;
+    let judged;
+    let d = if (d.hole_threshold, d.synth_threshold) == (t.hole_threshold, t.synth_threshold) {
+        d
+    } else {
+        judged = d
+            .clone()
+            .with_thresholds(t.hole_threshold, t.synth_threshold);
+        &judged
+    };
+    let mut lines = d.warning_lines();
+    if lines.is_empty() {
+        return None;
+    }
+    lines.extend(d.safe_extent_line());
+    Some(lines.join("\n"))
+}
+
+/// The path warning (see [`path_warning`]) and the two thresholds, in percent.
+fn path_check_ui(ui: &mut Ui, cx: &mut PanelContext<'_>) {
+    match path_warning(cx.project, cx.timeline) {
+        Some(text) => {
+            ui.label(
+                egui::RichText::new(format!("warning: {text}"))
+                    .color(ui.visuals().warn_fg_color),
+            )
+            .on_hover_text(
+                "Frames whose holes or synthesised (inpainted or outpainted) share exceed the thresholds below: the scene runs out or is mostly invented there. Shorten the path or lower its amplitude.",
+            );
+        }
+        None if cx.timeline.diagnostics.is_some() => {
+            ui.label(egui::RichText::new("every frame under both thresholds").weak());
+        }
+        None => {
+            ui.label(egui::RichText::new("checking the path…").weak());
+        }
+    }
+    let t = cx.project.camera.diagnostics;
+    type Field = fn(&mut crate::path::DiagnosticsThresholds) -> &mut f32;
+    let sliders: [(&str, &str, f32, Field); 2] = [
+        (
+            "warn above holes",
+            "hole share of a frame above which it is over (100 % turns the warning off)",
+            t.hole_threshold,
+            |t| &mut t.hole_threshold,
+        ),
+        (
+            "warn above synthesised",
+            "synthesised share of a frame above which it is over (100 % turns the warning off)",
+            t.synth_threshold,
+            |t| &mut t.synth_threshold,
+        ),
+    ];
+    for (name, help, value, field) in sliders {
+        if let Some(v) = committed(ui, name, 100.0 * value, |ui, v| {
+            ui.add(
+                egui::Slider::new(v, 0.0..=100.0)
+                    .suffix(" %")
+                    .max_decimals(1)
+                    .text(name),
+            )
+            .on_hover_text(help)
+        }) {
+            cx.edit("Path warning threshold", |p| {
+                *field(&mut p.camera.diagnostics) = (v / 100.0).clamp(0.0, 1.0)
+            });
+        }
+    }
 }
 
 /// The autocruise button and its main settings: the flight replaces the path with its
@@ -344,6 +424,8 @@ impl StagePanel for CameraPanel {
 
     fn inspector_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>) {
         ui.heading("Path");
+        path_check_ui(ui, cx);
+        ui.separator();
         let path = cx.project.camera.path.clone();
         match &path {
             CameraPath::Preset(preset) => {
