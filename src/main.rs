@@ -460,6 +460,12 @@ struct RenderArgs {
     /// (auto-pilot over the 3D scene; becomes editable keyframes in --save-project).
     #[arg(long)]
     preset: Option<String>,
+    /// Size of the --preset move, a multiple of its default (negative: the other way, for
+    /// orbit, swing and pan). Without it an orbit, swing, pan or fly-out is sized to what the
+    /// scene supports: the largest amplitude up to 1 that keeps every frame under the
+    /// synthesised-share and hole thresholds.
+    #[arg(long, allow_negative_numbers = true, requires = "preset")]
+    amplitude: Option<f64>,
     /// Print per-frame hole and synthesised-content fractions of the path (low-resolution
     /// renders), frames over a threshold, and the safe extent. Without it, render still warns
     /// (on stderr) about frames over a threshold.
@@ -829,8 +835,18 @@ fn render_one(
     let autocruise = args.preset.as_deref() == Some("autocruise");
     if let Some(name) = args.preset.as_deref().filter(|_| !autocruise) {
         let kind: PresetKind = name.parse()?;
-        project.camera.path = CameraPath::Preset(Preset::new(kind));
+        let mut preset = Preset::new(kind);
+        if let Some(amplitude) = args.amplitude {
+            preset.amplitude = amplitude;
+        }
+        project.camera.path = CameraPath::Preset(preset);
     }
+    if autocruise && args.amplitude.is_some() {
+        bail!("--amplitude sizes a preset move; autocruise chooses its own path");
+    }
+    // A preset named here without an amplitude is sized to the scene; one from a project file
+    // or with --amplitude is the user's.
+    let size_to_scene = args.preset.is_some() && !autocruise && args.amplitude.is_none();
     if autocruise {
         // First pass: the photo's own cloud (a still path needs no canvas).
         project.camera.path = CameraPath::Preset(Preset::new(PresetKind::Still));
@@ -861,6 +877,21 @@ fn render_one(
     let (bar, progress) = progress_bar(cancel);
     let mut builder = SceneBuilder::new();
     let mut scene = builder.build(&project, &progress.sub(0.0, 0.1))?;
+    if size_to_scene
+        && let Some(sizing) =
+            makeit4d::scene::size_preset(&project, &scene, &progress.sub(0.0, 0.1))?
+    {
+        if sizing.fits {
+            bar.suspend(|| println!("{sizing}"));
+        } else {
+            bar.suspend(|| eprintln!("warning: {sizing}"));
+        }
+        if sizing.lowered() {
+            // The smaller move needs a smaller canvas: rebuilt for exactly that path.
+            project.camera.path = CameraPath::Preset(sizing.preset());
+            scene = builder.build(&project, &progress.sub(0.0, 0.1))?;
+        }
+    }
     if autocruise {
         // Fly the auto-pilot over the scene, then rebuild with its keyframes so the canvas is
         // outpainted for exactly that path (load and depth are re-used from the cache).

@@ -328,10 +328,18 @@ fn render_warns_when_the_path_shows_synthesised_content() {
         "--inpaint-preset",
         "draft",
     ];
-    // A fly-out shows outpainted canvas from its second frame on: over a 1 % threshold.
+    // A fly-out shows outpainted canvas from its second frame on: over a 1 % threshold (at
+    // its full amplitude, given so that it is not sized to the threshold).
     let args = [
         &quick[..],
-        &["--preset", "fly-out", "--synth-threshold", "0.01"],
+        &[
+            "--preset",
+            "fly-out",
+            "--amplitude",
+            "1",
+            "--synth-threshold",
+            "0.01",
+        ],
     ]
     .concat();
     let o = render(&img, &d.join("out"), &args);
@@ -396,6 +404,8 @@ fn render_warns_when_the_path_shows_synthesised_content() {
         &[
             "--preset",
             "fly-out",
+            "--amplitude",
+            "1",
             "--synth-threshold",
             "0.01",
             "--diagnostics",
@@ -444,4 +454,48 @@ fn bad_thresholds_are_refused() {
     let o = run(&[os("--project"), os(&project), os("--out"), os(&out)]);
     assert_clean_failure(&o, &["camera.diagnostics.synth_threshold = 1.5"]);
     assert!(!out.exists());
+}
+
+#[test]
+fn a_named_preset_is_sized_to_the_scene_unless_an_amplitude_is_given() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let img = data("forest_path_320.jpg");
+    let quick = [
+        "--frames",
+        "8",
+        "--size",
+        "160x100",
+        "--inpaint-preset",
+        "draft",
+        "--preset",
+        "orbit",
+        "--synth-threshold",
+        "0.05",
+    ];
+    let o = render(&img, &d.join("sized"), &quick);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("orbit sized to amplitude 0."),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    // An explicit amplitude wins: no sizing.
+    let args = [&quick[..], &["--amplitude", "1"]].concat();
+    let o = render(&img, &d.join("explicit"), &args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("sized to amplitude"));
+    // --amplitude needs a preset, and autocruise chooses its own path.
+    let o = render(&img, &d.join("bad"), &["--amplitude", "0.5"]);
+    assert!(!o.status.success());
+    let o = render(
+        &img,
+        &d.join("bad2"),
+        &["--preset", "autocruise", "--amplitude", "0.5"],
+    );
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("--amplitude"), "{err}");
+    assert!(!d.join("bad2").exists(), "nothing written");
 }

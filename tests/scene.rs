@@ -365,3 +365,78 @@ fn a_depth_stroke_paints_over_the_cached_estimate() {
     assert_eq!(again.estimate.depth, bare.estimate.depth);
     assert_eq!(builder.runs()[&Stage::Depth], 2);
 }
+
+#[test]
+fn presets_are_sized_to_what_the_scene_supports() {
+    use makeit4d::scene::{MIN_SIZED_AMPLITUDE, SIZING_MARGIN, size_preset};
+    let mut p = project("evening_glow_320.jpg", PresetKind::Orbit, 12);
+    p.camera.diagnostics.synth_threshold = 0.03;
+    let mut builder = SceneBuilder::new();
+    let scene = builder.build(&p, &Progress::none()).expect("build");
+    let sizing = size_preset(&p, &scene, &Progress::none())
+        .expect("sizing")
+        .expect("an orbit is sized");
+    // A 3 % threshold is too tight for the whole orbit: a smaller one that stays under it.
+    assert!(sizing.fits, "{sizing}");
+    assert!(
+        sizing.amplitude < 1.0 && sizing.amplitude >= MIN_SIZED_AMPLITUDE,
+        "{sizing}"
+    );
+    assert!(sizing.worst_synthesised <= SIZING_MARGIN * 0.03, "{sizing}");
+    assert!(!sizing.requested_warnings.is_empty(), "{sizing}");
+    let text = sizing.to_string();
+    assert!(text.contains("orbit sized to amplitude"), "{text}");
+    // A larger share would not fit (the bisection found the edge, within its precision).
+    let mut larger = p.clone();
+    larger.camera.path = CameraPath::Preset(Preset {
+        kind: PresetKind::Orbit,
+        amplitude: (sizing.amplitude + 0.1).min(1.0),
+    });
+    let views = scene.output_views(&larger).expect("views");
+    let (w, h) = scene.output_camera(&larger).size;
+    let d = makeit4d::path::quick_path_diagnostics(
+        &scene.cloud,
+        &views,
+        w,
+        h,
+        &larger.camera.diagnostics.params(),
+        &Progress::none(),
+    )
+    .expect("diagnostics");
+    let worst = d
+        .frames
+        .iter()
+        .map(|f| f.inpainted_fraction)
+        .fold(0.0, f32::max);
+    assert!(
+        worst > SIZING_MARGIN * 0.03,
+        "amplitude +0.1 still fits: {worst}"
+    );
+
+    // A threshold the whole move stays under keeps the default.
+    p.camera.diagnostics.synth_threshold = 1.0;
+    p.camera.diagnostics.hole_threshold = 1.0;
+    let kept = size_preset(&p, &scene, &Progress::none())
+        .expect("sizing")
+        .expect("sized");
+    assert!(
+        kept.fits && !kept.lowered() && kept.amplitude == 1.0,
+        "{kept}"
+    );
+    // Nothing fits a zero threshold (frame 0 has no synthesised content, but later ones do):
+    // the requested amplitude is kept and the report says why.
+    p.camera.diagnostics.synth_threshold = 0.0;
+    let none = size_preset(&p, &scene, &Progress::none())
+        .expect("sizing")
+        .expect("sized");
+    assert!(!none.fits && none.amplitude == 1.0, "{none}");
+    assert!(none.to_string().contains("cannot stay under"), "{none}");
+    // Fly-ins and keyframes are not sized.
+    let mut fly = project("evening_glow_320.jpg", PresetKind::FlyIn, 12);
+    fly.camera.diagnostics.synth_threshold = 0.0;
+    assert!(
+        size_preset(&fly, &scene, &Progress::none())
+            .expect("sizing")
+            .is_none()
+    );
+}
