@@ -1323,7 +1323,8 @@ fn placed<T: Copy>(
 /// Completes the `hole` of a canvas whose known pixels are `image` and `disparity` (`1/Z`),
 /// colour and disparity together (disparity is bounded and smooth across the horizon, so the
 /// fill copies the sky's far plane and the ground's slope sensibly); hole pixels at the far
-/// plane (`far`) join `sky`.
+/// plane (`far`) join `sky`. The known pixels' unique objects
+/// ([`crate::stages::inpaint::unique_objects`]) are left out of the sources.
 #[allow(clippy::too_many_arguments)]
 fn complete_canvas(
     layout: CanvasLayout,
@@ -1338,11 +1339,18 @@ fn complete_canvas(
     seed: u64,
     progress: &Progress,
 ) -> Result<Canvas> {
+    // The photo's unique objects (a kite, a boat) are no source: the margin would show them a
+    // second time.
+    let known = hole.map(|h| !h);
+    let objects = crate::stages::inpaint::unique_objects(&image, Some(&known));
+    let allowed = Raster::from_fn(image.width(), image.height(), |x, y| {
+        known.at(x, y) && !objects.at(x, y)
+    });
     let result = inpainter.inpaint(
         &InpaintRequest {
             image: &image,
             hole,
-            allowed_source: None,
+            allowed_source: Some(&allowed),
             guide: Some(&disparity),
             seed,
         },
