@@ -57,8 +57,11 @@
 //! order, so the result is the same whatever the number of threads.
 //!
 //! Memory: a few buffers of the image's size per level (working pixels of 6 floats, the NNF,
-//! distances, weights, masks); about 500 MB peak for a 2560×1600 image with a 60 % hole, 720 MB
-//! with the k-NN vote of `final` (k source indices, costs and weights per target centre).
+//! distances, weights, masks); about 500 MB peak for a 2560×1600 image with a 60 % hole, 743 MB
+//! with the k-NN vote of `final` (k source indices, costs and weights per target centre;
+//! `examples/inpaint_large` under `/usr/bin/time -v`, 2026-12-02: 741.5 MB before the occurrence
+//! penalty, whose cell counts are small). [`PatchMatchInpainter::inpaint_traced`] adds two
+//! `u32` per pixel for its copy map.
 
 use super::common::{self, KeyedRng, Plan};
 use super::harmonic::membrane_fill;
@@ -306,8 +309,7 @@ impl Inpainter for PatchMatchInpainter {
     }
 
     fn inpaint(&self, request: &InpaintRequest<'_>, progress: &Progress) -> Result<InpaintResult> {
-        self.inpaint_traced(request, progress)
-            .map(|(result, _)| result)
+        self.run(request, false, progress).map(|(result, _)| result)
     }
 }
 
@@ -361,10 +363,21 @@ impl CopyMap {
 }
 
 impl PatchMatchInpainter {
-    /// [`Inpainter::inpaint`] that also says where each hole pixel was copied from.
+    /// [`Inpainter::inpaint`] that also says where each hole pixel was copied from (two more
+    /// `u32` per pixel at the peak).
     pub fn inpaint_traced(
         &self,
         request: &InpaintRequest<'_>,
+        progress: &Progress,
+    ) -> Result<(InpaintResult, CopyMap)> {
+        self.run(request, true, progress)
+    }
+
+    /// The fill, and with `trace` its copy map (else an empty one).
+    fn run(
+        &self,
+        request: &InpaintRequest<'_>,
+        trace: bool,
         progress: &Progress,
     ) -> Result<(InpaintResult, CopyMap)> {
         let (w, h) = request.image.size();
@@ -392,8 +405,16 @@ impl PatchMatchInpainter {
             hole: request.hole.data().to_vec(),
             source,
         };
-        let (pixels, best) = complete(finest, p, request.seed, progress)?;
-        let map = copy_map(request.hole, &best, p.patch_size);
+        let (pixels, best) = complete(finest, p, request.seed, trace, progress)?;
+        let map = if trace {
+            copy_map(request.hole, &best, p.patch_size)
+        } else {
+            CopyMap {
+                width: 0,
+                height: 0,
+                source: Vec::new(),
+            }
+        };
         Ok((common::finish(request, &pixels, scale), map))
     }
 }
@@ -859,7 +880,7 @@ impl Occurrence {
     /// the field.
     fn recount(&mut self, problem: &Problem, field: &Field) {
         self.remember();
-        self.recount_sources(problem, &field.nnf);
+        self.recount_sources(problem, field.nnf.iter().copied());
     }
 
     /// Halves the memory and adds the current excess to it.
@@ -870,14 +891,14 @@ impl Occurrence {
         }
     }
 
-    /// Recounts the cells from a list of source centres (`NONE` = none).
-    fn recount_sources(&mut self, problem: &Problem, sources: &[u32]) {
+    /// Recounts the cells from the source centres (`NONE` = none).
+    fn recount_sources(&mut self, problem: &Problem, sources: impl IntoIterator<Item = u32>) {
         if !self.enabled() {
             return;
         }
         self.counts.iter_mut().for_each(|c| *c = 0.0);
         let mut targets = 0usize;
-        for &s in sources {
+        for s in sources {
             if s != NONE {
                 let cell = self.cell(s as usize, problem.w);
                 self.counts[cell] += 1.0;
@@ -899,12 +920,14 @@ impl Occurrence {
     }
 }
 
-/// Runs the whole coarse-to-fine completion; returns the finest level's pixels and, per pixel,
-/// the source centre of the best match of the target patch centred there (`NONE` where none).
+/// Runs the whole coarse-to-fine completion; returns the finest level's pixels and, with
+/// `trace`, per pixel the source centre of the best match of the target patch centred there
+/// (`NONE` where none; empty without `trace`).
 fn complete(
     finest: Level,
     params: &PatchMatchParams,
     seed: u64,
+    trace: bool,
     progress: &Progress,
 ) -> Result<(Vec<Px>, Vec<u32>)> {
     progress.report(0.0, "inpainting: pyramid");
@@ -1045,17 +1068,19 @@ fn complete(
                     l as u64,
                 );
                 vote_candidates(&problem, &mut level.pixels, &candidates);
-                best_sources = candidates
-                    .slot
-                    .iter()
-                    .map(|&t| {
-                        if t == NONE {
-                            NONE
-                        } else {
-                            candidates.src[t as usize * k]
-                        }
-                    })
-                    .collect();
+                if trace {
+                    best_sources = candidates
+                        .slot
+                        .iter()
+                        .map(|&t| {
+                            if t == NONE {
+                                NONE
+                            } else {
+                                candidates.src[t as usize * k]
+                            }
+                        })
+                        .collect();
+                }
                 if params.seamless {
                     let weights = candidate_weights(&problem, &candidates);
                     let predict = |px: &[Px], i: usize| {
@@ -1069,7 +1094,7 @@ fn complete(
                 poisson_correct(&problem, &mut level, predict, progress)?;
             }
         }
-        if l == 0 && best_sources.is_empty() {
+        if trace && l == 0 && best_sources.is_empty() {
             best_sources = field.nnf.clone();
         }
         done += work[l];
@@ -1322,7 +1347,7 @@ fn patchmatch_pass(
     };
     for phase in 0..phases {
         if phase > 0 {
-            occurrence.recount_sources(problem, &field.nnf);
+            occurrence.recount_sources(problem, field.nnf.iter().copied());
         }
         let occurrence = &*occurrence;
         field
@@ -1572,8 +1597,7 @@ fn knn_candidates(
     let max_radius = problem.search_radius;
     for pass in 0..KNN_PASSES {
         if pass > 0 {
-            let best: Vec<u32> = src.chunks(k).map(|c| c[0]).collect();
-            occurrence.recount_sources(problem, &best);
+            occurrence.recount_sources(problem, src.chunks(k).map(|c| c[0]));
         }
         let prev_src = src.clone();
         let mut src_bands = Vec::with_capacity(bands.len());
@@ -1600,11 +1624,10 @@ fn knn_candidates(
             .collect();
         for phase in 0..phases {
             if phase > 0 {
-                let best: Vec<u32> = jobs
+                let best = jobs
                     .iter()
-                    .flat_map(|(_, ((src, _), _))| src.chunks(k).map(|c| c[0]))
-                    .collect();
-                occurrence.recount_sources(problem, &best);
+                    .flat_map(|(_, ((src, _), _))| src.chunks(k).map(|c| c[0]));
+                occurrence.recount_sources(problem, best);
             }
             let occurrence = &*occurrence;
             jobs.par_iter_mut()
