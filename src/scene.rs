@@ -1356,6 +1356,8 @@ fn complete_canvas(
         },
         progress,
     )?;
+    let mut result = result;
+    crate::stages::outpaint::continue_smooth_regions(&mut result.image, hole);
     let filled_disparity = result.guide.unwrap_or(disparity);
     let depth = filled_disparity.map(|d| {
         if d.is_finite() && d > 0.0 {
