@@ -1144,15 +1144,22 @@ impl std::fmt::Display for PresetSizing {
                 self.requested_warnings.join("; ")
             )
         } else if self.lowered() {
+            let at_requested = if self.requested_warnings.is_empty() {
+                format!(
+                    "within {:.0} % of a threshold",
+                    100.0 * (1.0 - SIZING_MARGIN)
+                )
+            } else {
+                self.requested_warnings.join("; ")
+            };
             write!(
                 f,
-                "{kind} sized to amplitude {:.2} (of {}), the largest that stays under {limits} (at most {:.1} % synthesised, {:.1} % holes); at {}: {}",
+                "{kind} sized to amplitude {:.2} (of {}), the largest that stays under {limits} (at most {:.1} % synthesised, {:.1} % holes); at {}: {at_requested}",
                 self.amplitude,
                 self.requested.amplitude,
                 100.0 * self.worst_synthesised,
                 100.0 * self.worst_holes,
                 self.requested.amplitude,
-                self.requested_warnings.join("; ")
             )
         } else {
             write!(
