@@ -1201,12 +1201,7 @@ pub fn size_preset(
     let camera = scene.output_camera(project);
     let (w, h) = camera.size;
     let params = project.camera.diagnostics.params();
-    let quick = crate::path::DiagnosticsParams {
-        max_render_width: params
-            .max_render_width
-            .min(crate::path::diagnostics::QUICK_RENDER_WIDTH),
-        ..params
-    };
+    let quick = params.quick();
     let steps = (SIZING_STEPS + 2) as f32;
     let mut step = 0usize;
     let mut diagnose = |share: f64| -> Result<crate::path::PathDiagnostics> {
@@ -1348,11 +1343,7 @@ fn complete_canvas(
 ) -> Result<Canvas> {
     // The photo's unique objects (a kite, a boat) are no source: the margin would show them a
     // second time.
-    let known = hole.map(|h| !h);
-    let objects = crate::stages::inpaint::unique_objects(&image, Some(&known));
-    let allowed = Raster::from_fn(image.width(), image.height(), |x, y| {
-        known.at(x, y) && !objects.at(x, y)
-    });
+    let allowed = crate::stages::inpaint::without_unique_objects(&image, &hole.map(|h| !h));
     let result = inpainter.inpaint(
         &InpaintRequest {
             image: &image,

@@ -137,6 +137,15 @@ impl Default for DiagnosticsParams {
 }
 
 impl DiagnosticsParams {
+    /// These settings at most [`QUICK_RENDER_WIDTH`] pixels wide (the quick diagnostics'
+    /// resolution).
+    pub fn quick(&self) -> DiagnosticsParams {
+        DiagnosticsParams {
+            max_render_width: self.max_render_width.min(QUICK_RENDER_WIDTH),
+            ..*self
+        }
+    }
+
     /// Checks ranges.
     pub fn validate(&self) -> Result<()> {
         if !(self.scale > 0.0 && self.scale <= 1.0) {
@@ -597,16 +606,12 @@ pub fn quick_path_diagnostics(
     params: &DiagnosticsParams,
     progress: &Progress,
 ) -> Result<PathDiagnostics> {
-    let quick = DiagnosticsParams {
-        max_render_width: params.max_render_width.min(QUICK_RENDER_WIDTH),
-        ..*params
-    };
     path_diagnostics_sampled(
         cloud,
         views,
         width,
         height,
-        &quick,
+        &params.quick(),
         QUICK_MAX_FRAMES,
         progress,
     )

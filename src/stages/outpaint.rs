@@ -18,8 +18,8 @@
 use crate::error::{Error, Result};
 use crate::geometry::{Intrinsics, View};
 use crate::progress::Progress;
-use crate::raster::{GrayRaster, MaskRaster, RgbRaster, quantile};
-use crate::stages::inpaint::{InpaintRequest, Inpainter, unique_objects};
+use crate::raster::{GrayRaster, MaskRaster, Raster, RgbRaster, quantile};
+use crate::stages::inpaint::{InpaintRequest, Inpainter, without_unique_objects};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
@@ -513,11 +513,7 @@ pub fn outpaint(
     }
     // The photo's unique objects (a kite, a boat) are left out of the sources, so the margin
     // never shows them a second time.
-    let photo_region = mask.map(|m| !m);
-    let objects = unique_objects(&canvas, Some(&photo_region));
-    let allowed = MaskRaster::from_fn(layout.width, layout.height, |x, y| {
-        photo_region.at(x, y) && !objects.at(x, y)
-    });
+    let allowed = without_unique_objects(&canvas, &mask.map(|m| !m));
     let request = InpaintRequest {
         image: &canvas,
         hole: &mask,
@@ -638,9 +634,8 @@ pub fn continue_smooth_regions(filled: &mut RgbRaster, hole: &MaskRaster) {
         }
     }
     // Bilinear between cell centres, added to the hole pixels.
-    let at = |x: isize, y: isize| {
-        correction
-            [(y.clamp(0, ch as isize - 1) as usize) * cw + x.clamp(0, cw as isize - 1) as usize]
+    let Some(correction) = Raster::from_vec(cw, ch, correction) else {
+        return;
     };
     for y in 0..h {
         for x in 0..w {
@@ -649,20 +644,10 @@ pub fn continue_smooth_regions(filled: &mut RgbRaster, hole: &MaskRaster) {
             }
             let fx = (x as f32 + 0.5) / c as f32 - 0.5;
             let fy = (y as f32 + 0.5) / c as f32 - 0.5;
-            let (x0, y0) = (fx.floor() as isize, fy.floor() as isize);
-            let (tx, ty) = (fx - x0 as f32, fy - y0 as f32);
-            let (a, b, cc, d) = (
-                at(x0, y0),
-                at(x0 + 1, y0),
-                at(x0, y0 + 1),
-                at(x0 + 1, y0 + 1),
-            );
-            let v = filled.data_mut();
-            let px = &mut v[y * w + x];
+            let dv = correction.sample_bilinear(fx, fy);
+            let px = &mut filled.data_mut()[y * w + x];
             for k in 0..3 {
-                let top = a[k] + (b[k] - a[k]) * tx;
-                let bottom = cc[k] + (d[k] - cc[k]) * tx;
-                px[k] = (px[k] + top + (bottom - top) * ty).clamp(0.0, 1.0);
+                px[k] = (px[k] + dv[k]).clamp(0.0, 1.0);
             }
         }
     }

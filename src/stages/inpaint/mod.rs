@@ -22,7 +22,7 @@ pub use harmonic::{HarmonicInpainter, SketchInpainter};
 pub use patchmatch::{
     CopyMap, DUPLICATION_BLOCK, InpaintPreset, PatchMatchInpainter, PatchMatchParams,
 };
-pub use salient::unique_objects;
+pub use salient::{unique_objects, without_unique_objects};
 
 use crate::error::Result;
 use crate::progress::Progress;

@@ -156,6 +156,15 @@ pub fn unique_objects(image: &RgbRaster, within: Option<&MaskRaster>) -> MaskRas
     out
 }
 
+/// `region` without its unique objects ([`unique_objects`] of `image` within it): the source
+/// set of outpainting (region = the photo) and of layer inpainting (region = a layer's context).
+pub fn without_unique_objects(image: &RgbRaster, region: &MaskRaster) -> MaskRaster {
+    let objects = unique_objects(image, Some(region));
+    MaskRaster::from_fn(region.width(), region.height(), |x, y| {
+        region.at(x, y) && !objects.at(x, y)
+    })
+}
+
 /// Per pixel: the bin of its 3×3 mean colour (`LEVELS` per channel; non-finite values read 0).
 fn colour_bins(image: &RgbRaster) -> Vec<u16> {
     let (w, h) = image.size();

@@ -7,7 +7,7 @@ use crate::geometry::Intrinsics;
 use crate::progress::Progress;
 use crate::raster::{RgbRaster, quantile};
 use crate::stages::depth::DepthEstimator;
-use crate::stages::inpaint::{InpaintRequest, Inpainter, unique_objects};
+use crate::stages::inpaint::{InpaintRequest, Inpainter, without_unique_objects};
 use serde::{Deserialize, Serialize};
 
 /// The seed of layer `index`'s inpainting job, derived from the stage seed (SplitMix64 finaliser,
@@ -242,10 +242,7 @@ fn complete_layers(
         let (completed_image, completed_depth) = if has_hole {
             // The context's unique objects (a boat on the water) are no source for what the
             // nearer layers hide: they would show twice.
-            let objects = unique_objects(canvas, Some(&region.context));
-            let allowed = crate::raster::Raster::from_fn(w, h, |x, y| {
-                region.context.at(x, y) && !objects.at(x, y)
-            });
+            let allowed = without_unique_objects(canvas, &region.context);
             let request = InpaintRequest {
                 image: known_image,
                 hole,
