@@ -56,6 +56,11 @@ const MIN_VISIBLE_WEIGHT: f32 = 0.000244140625;
 const OPAQUE_REMAINDER: f32 = 0.000244140625;
 const BASE_RELATIVE_TOLERANCE: f32 = 0.01;
 const SAME_SURFACE_RELATIVE_DEPTH: f32 = 0.1;
+// `cpu::PARALLAX_TOLERANCE_PX`, `cpu::MAX_TOLERANCE`.
+const PARALLAX_TOLERANCE_PX: f32 = 0.5;
+const MAX_TOLERANCE: f32 = 1.0e6;
+// `cpu::MAX_DEPTH_OFFSET`.
+const MAX_DEPTH_OFFSET: f32 = 0.125;
 // Fixed-point scales of the surface sums: weights, colours (8 bits) and relative depth offsets.
 const WEIGHT_ONE: f32 = 32768.0;
 // `cpu::SYNTHESISED_COLOUR_WEIGHT`, `cpu::EDGE_ON_FLOOR`.
@@ -299,6 +304,25 @@ fn depth_tolerance(z: f32, tu_z: f32, tv_z: f32, widen: f32, support_px: f32) ->
     return BASE_RELATIVE_TOLERANCE * z + slope;
 }
 
+// `cpu::parallax_tolerance` of a camera-space point `p`.
+fn parallax_tolerance(p: vec3<f32>) -> f32 {
+    let t = camera.translation.xyz;
+    let iz = 1.0 / p.z;
+    let a = length(vec2<f32>(camera.fx * (p.x * t.z * iz - t.x), camera.fy * (p.y * t.z * iz - t.y)));
+    let b = PARALLAX_TOLERANCE_PX * abs(p.z - t.z) * p.z;
+    if !(is_finite(a) && is_finite(b)) {
+        return 0.0;
+    }
+    var linear = MAX_TOLERANCE;
+    if a * MAX_TOLERANCE > b {
+        linear = b / a;
+    }
+    if linear > 0.0 {
+        return p.z / (1.0 + p.z / linear);
+    }
+    return 0.0;
+}
+
 // Point `i` as a splat (as `cpu::Projector::splat`); `c.z = 0` when it is culled.
 fn project_point(i: u32) -> Splat {
     let info = point_meta[i];
@@ -328,7 +352,10 @@ fn project_point(i: u32) -> Splat {
     if !(scale > 0.0) || u + ex < -0.5 || v + ey < -0.5 || u - ex > wf - 0.5 || v - ey > hf - 0.5 {
         return culled();
     }
-    let tol = depth_tolerance(z, tu.z, tv.z, f.extra.w, support(max(f.gamma.x, f.gamma.y)));
+    let tol = max(
+        depth_tolerance(z, tu.z, tv.z, f.extra.w, support(max(f.gamma.x, f.gamma.y))),
+        parallax_tolerance(p),
+    );
     let code = round(f.gamma.x * 1023.0) * 1024.0 + round(f.gamma.y * 1023.0);
     return Splat(vec4<f32>(u, v, z, tol), f.inverse, vec4<f32>(ex, ey, f.extra.z, code));
 }
@@ -531,6 +558,8 @@ struct Pixel {
     q_kernel: i32,
     q_kernel_colour: vec3<i32>,
     q_depth: i32,
+    // `cpu::SurfaceSums::reserved`.
+    q_reserved: u32,
 }
 
 fn pixel_open(px: ptr<function, Pixel>) -> bool {
@@ -594,7 +623,7 @@ fn visit(px: ptr<function, Pixel>, q: u32, x: f32, y: f32, pass_index: u32) {
         let qcw = u32(round(rho * w_c * WEIGHT_ONE));
         let qk = i32(round(rho * w * WEIGHT_ONE));
         let z_cur = (*px).cur.z;
-        let dz = i32(round(clamp((key.z - z_cur) / z_cur, -0.125, 0.125) * DEPTH_ONE));
+        let dz = i32(round(clamp((key.z - z_cur) / z_cur, -MAX_DEPTH_OFFSET, MAX_DEPTH_OFFSET) * DEPTH_ONE));
         (*px).q_geometry += qg;
         (*px).q_coverage += qc;
         (*px).q_coverage_weight += qcw;
@@ -602,9 +631,13 @@ fn visit(px: ptr<function, Pixel>, q: u32, x: f32, y: f32, pass_index: u32) {
         (*px).q_kernel += qk;
         (*px).q_kernel_colour += qk * vec3<i32>(c8);
         (*px).q_depth += i32(qc) * dz;
-    } else if key_before((*px).cur, key) && w_c >= MIN_VISIBLE_WEIGHT
-        && key_before(key, (*px).next) {
-        (*px).next = key;
+    } else if key_before((*px).cur, key) {
+        if key.observed && !(*px).cur.observed {
+            (*px).q_reserved += u32(round(w_c * WEIGHT_ONE));
+        }
+        if w_c >= MIN_VISIBLE_WEIGHT && key_before(key, (*px).next) {
+            (*px).next = key;
+        }
     }
 }
 
@@ -627,7 +660,13 @@ fn finish_surface(px: ptr<function, Pixel>) {
         let qg = f32((*px).q_geometry);
         let opacity = min(qc / qg, 1.0);
         let covered = min(qg / WEIGHT_ONE, 1.0);
-        wt = opacity * min(covered, (*px).budget);
+        // `cpu::PixelState::finish_surface`: a synthesised surface fills only what the observed
+        // surfaces behind it leave.
+        var available = (*px).budget;
+        if !(*px).cur.observed {
+            available = max(available - min(f32((*px).q_reserved) / WEIGHT_ONE, 1.0), 0.0);
+        }
+        wt = opacity * min(covered, available);
         depth = (*px).cur.z * (1.0 + f32((*px).q_depth) / (qc * DEPTH_ONE));
     }
     (*px).colour += wt * colour;
@@ -641,6 +680,7 @@ fn finish_surface(px: ptr<function, Pixel>) {
     (*px).q_kernel = 0;
     (*px).q_kernel_colour = vec3<i32>(0);
     (*px).q_depth = 0;
+    (*px).q_reserved = 0u;
     (*px).prev = (*px).cur;
     (*px).cur = (*px).next;
     (*px).next = key_none();
@@ -744,7 +784,7 @@ fn raster(
 
     var px = Pixel(
         Key(-3.4e38, 0xffffffffu, false), key_none(), key_none(), 1.0, vec3<f32>(0.0), 0.0, 0.0,
-        0u, 0u, 0u, vec3<u32>(0u), 0, vec3<i32>(0), 0,
+        0u, 0u, 0u, vec3<u32>(0u), 0, vec3<i32>(0), 0, 0u,
     );
     // Visibility: the nearest covering depth of every pixel.
     tile_pass(&px, 0u, start, end, li, tile_x0, tile_y0, tile_x1, tile_y1, inside, x, y);

@@ -94,6 +94,11 @@ pub const SYNTHESISED_COLOUR_WEIGHT: f32 = 1.0 / 16.0;
 /// Relative depth tolerance every point has at least (see the module docs).
 pub const BASE_RELATIVE_TOLERANCE: f32 = 0.01;
 
+/// Largest relative depth offset of a sample from its surface's front that the surface's depth
+/// takes in (a surface that the parallax tolerance joins across a depth step reports a depth
+/// near its front; the GPU sums these offsets in fixed point).
+pub const MAX_DEPTH_OFFSET: f32 = 0.125;
+
 /// A point's footprint in a target view (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Footprint {
@@ -336,6 +341,55 @@ pub fn depth_tolerance(z: f32, tu_z: f32, tv_z: f32, widen: f32, support: f32) -
     BASE_RELATIVE_TOLERANCE * z + slope
 }
 
+/// Screen distance, pixels, that two points of a surface may move relative to each other because
+/// of their depth difference and still be blended as one surface (see [`parallax_tolerance`]).
+pub const PARALLAX_TOLERANCE_PX: f32 = 0.5;
+
+/// Largest depth tolerance, world units (keeps every tolerance finite for the GPU).
+pub const MAX_TOLERANCE: f32 = 1.0e6;
+
+/// The depth difference (along the target camera's axis) that moves a point less than
+/// [`PARALLAX_TOLERANCE_PX`] on screen relative to a neighbour in front of or behind it on its
+/// source ray (the source camera sits at the world origin): `ε·|r_z| / |J·r|` with `r` the unit
+/// source ray in target camera space and `J` the projection's Jacobian at the point `p`. With
+/// `t` the target's `camera_from_world` translation, `r = (p − t)/|p − t|`, and this is
+/// `ε·|p_z − t_z|·p_z / |(f_x·(p_x·t_z/p_z − t_x), f_y·(p_y·t_z/p_z − t_y))|`, written so that
+/// nothing cancels. Where the target camera sits at the source camera's centre (a pure zoom or
+/// rotation: `t = 0`) depth differences are invisible, so the photo's neighbouring pixels blend
+/// as one surface whatever the depth estimate says across them; the more parallax a move
+/// creates, the tighter the tolerance.
+#[inline]
+pub fn parallax_tolerance(
+    intrinsics: &crate::geometry::Intrinsics,
+    point_in_camera: Vec3,
+    translation: Vec3,
+) -> f32 {
+    let (p, t) = (point_in_camera, translation);
+    let iz = 1.0 / p.z;
+    let a = Vec2::new(
+        intrinsics.fx * (p.x * t.z * iz - t.x),
+        intrinsics.fy * (p.y * t.z * iz - t.y),
+    )
+    .length();
+    let b = PARALLAX_TOLERANCE_PX * (p.z - t.z).abs() * p.z;
+    if !(a.is_finite() && b.is_finite()) {
+        return 0.0;
+    }
+    let linear = if a * MAX_TOLERANCE > b {
+        b / a
+    } else {
+        MAX_TOLERANCE
+    };
+    // Parallax is linear in inverse depth: `τ` is exact only near `z`. The interval of depths
+    // whose inverse lies within `τ/z²` of `1/z` is `[z/(1 + τ/z), z/(1 − τ/z)]`; its nearer half,
+    // `z·τ/(z + τ)` (at most `z`), is the tolerance on both sides.
+    if linear > 0.0 {
+        p.z / (1.0 + p.z / linear)
+    } else {
+        0.0
+    }
+}
+
 /// A projected point.
 #[derive(Clone, Copy, Debug, Default)]
 struct Splat {
@@ -433,7 +487,8 @@ impl<'a> Projector<'a> {
                 tv.z,
                 f.widen,
                 support(f.sharpness[0].max(f.sharpness[1]), self.settings.kernel),
-            ),
+            )
+            .max(parallax_tolerance(k, p, self.w2c.translation)),
             inverse: f.inverse,
             extent: f.extent,
             tent_extent: f.tent_extent,
@@ -532,15 +587,19 @@ struct SurfaceSums {
     kernel: f32,
     /// `Σ ρ·w·c`.
     kernel_colour: [f32; 3],
-    /// `Σ w_c·z`.
+    /// `Σ w_c·δ`, `δ` a sample's depth relative to the surface's front,
+    /// `(z − z₁)/z₁`, clamped to ±[`MAX_DEPTH_OFFSET`].
     depth: f32,
+    /// `Σ w_c` of the observed points behind a synthesised surface: the share of the pixel the
+    /// photo's own pixels claim there (see [`PixelState::finish_surface`]).
+    reserved: f32,
 }
 
 impl SurfaceSums {
     /// The surface's colour, opacity `α = Σ w_c / Σ g·tent`, covered share `min(1, Σ g·tent)`
     /// and depth.
     #[inline]
-    fn resolve(&self) -> ([f32; 3], f32, f32, f32) {
+    fn resolve(&self, front: f32) -> ([f32; 3], f32, f32, f32) {
         if !(self.coverage > 0.0 && self.geometry > 0.0) {
             return ([0.0; 3], 0.0, 0.0, 0.0);
         }
@@ -557,7 +616,12 @@ impl SurfaceSums {
             smooth
         };
         let opacity = (self.coverage / self.geometry).min(1.0);
-        (colour, opacity, self.geometry.min(1.0), self.depth * inv)
+        (
+            colour,
+            opacity,
+            self.geometry.min(1.0),
+            front * (1.0 + self.depth * inv),
+        )
     }
 }
 
@@ -652,8 +716,15 @@ impl PixelState {
     /// it takes `a = α·min(covered, budget)` of the pixel (module docs).
     #[inline]
     fn finish_surface(&mut self) {
-        let (c, opacity, covered, z) = self.sums.resolve();
-        let wt = opacity * covered.min(self.budget);
+        let (c, opacity, covered, z) = self.sums.resolve(self.cur.z);
+        // A synthesised surface fills only what the observed surfaces behind it leave: it is
+        // what a layer shows where nothing was observed, never a cover over the photo's pixels.
+        let available = if self.cur.observed {
+            self.budget
+        } else {
+            (self.budget - self.sums.reserved.min(1.0)).max(0.0)
+        };
+        let wt = opacity * covered.min(available);
         for (acc, v) in self.colour.iter_mut().zip(c) {
             *acc += wt * v;
         }
@@ -851,9 +922,15 @@ pub fn render_cpu_with(
                                         sums.coverage_colour[i] += cw * v;
                                         sums.kernel_colour[i] += kw * v;
                                     }
-                                    sums.depth += w_c * s.z;
+                                    let front = px.cur.z;
+                                    sums.depth += w_c
+                                        * ((s.z - front) / front)
+                                            .clamp(-MAX_DEPTH_OFFSET, MAX_DEPTH_OFFSET);
                                 }
                                 Role::Behind => {
+                                    if s.observed && !px.cur.observed {
+                                        px.sums.reserved += w_c;
+                                    }
                                     let key = SurfaceKey::of(s);
                                     if w_c >= MIN_VISIBLE_WEIGHT && key.before(&px.next) {
                                         px.next = key;
@@ -1418,19 +1495,73 @@ mod tests {
         )
         .unwrap();
         assert!((f.coverage.at(0, 0) - 0.5).abs() < 1e-5);
-        // The same two points at very different depths: two surfaces, each covering its half of
-        // the pixel (the nearer first, the farther the rest: coverages add, they are not
-        // "over"ed, or the background would leak through between adjacent surfaces).
-        cloud.positions[1] = k.unproject(1.0, 0.0, 40.0);
-        cloud.tangent_u[1] *= 10.0;
-        cloud.tangent_v[1] *= 10.0;
-        let f = render_cpu(&cloud, None, &view(zoom), 3, 1, &tent).unwrap();
+        // The same two points at very different depths. Seen from the source camera's centre (a
+        // pure zoom) the depth step shows no parallax: still one surface, its depth near its
+        // front (offsets clamped to `MAX_DEPTH_OFFSET`).
+        let far = |pose: &Pose| {
+            let mut c = cloud.clone();
+            c.positions[1] = pose.transform_point(zoom.unproject(2.0, 0.0, 40.0));
+            c.tangent_u[1] *= 10.0;
+            c.tangent_v[1] *= 10.0;
+            c
+        };
+        let f = render_cpu(&far(&Pose::IDENTITY), None, &view(zoom), 3, 1, &tent).unwrap();
+        half_and_half(&f);
+        let one = 4.0 * (1.0 + 0.5 * MAX_DEPTH_OFFSET);
+        assert!(
+            (f.depth.at(1, 0) - one).abs() < 1e-4,
+            "{}",
+            f.depth.at(1, 0)
+        );
+        // From a camera moved 0.1 sideways the step moves them 200·0.1·(1/4 − 1/40) = 4.5 px
+        // apart: two surfaces, each covering its half of the pixel (the nearer first, the
+        // farther the rest: coverages add, they are not "over"ed, or the background would leak
+        // through between adjacent surfaces).
+        let moved = Pose::new(glam::Quat::IDENTITY, Vec3::new(0.1, 0.0, 0.0));
+        let mut cloud = far(&moved);
+        cloud.positions[0] = moved.transform_point(zoom.unproject(0.0, 0.0, 4.0));
+        let v = View {
+            intrinsics: zoom,
+            world_from_camera: moved,
+        };
+        let f = render_cpu(&cloud, None, &v, 3, 1, &tent).unwrap();
         half_and_half(&f);
         assert!(
             (f.depth.at(1, 0) - 22.0).abs() < 1e-3,
             "{}",
             f.depth.at(1, 0)
         );
+    }
+
+    #[test]
+    fn parallax_tolerance_has_known_answers() {
+        let k = Intrinsics {
+            fx: 200.0,
+            fy: 100.0,
+            cx: 0.0,
+            cy: 0.0,
+        };
+        // At the source camera's centre: every depth step is invisible, tolerance z.
+        let p = Vec3::new(0.3, -0.2, 5.0);
+        assert!((parallax_tolerance(&k, p, Vec3::ZERO) - 5.0).abs() < 1e-3);
+        // Sideways by t: parallax per unit inverse depth f·t, so τ = ε·z²/(f·t) and the
+        // tolerance z·τ/(z + τ). z = 4, t = 0.1, f = 200: τ = 0.5·16/20 = 0.4, tolerance 4·0.4/4.4.
+        let t = Vec3::new(-0.1, 0.0, 0.0);
+        let p = Vec3::new(0.0, 0.0, 4.0);
+        let expected = 4.0 * 0.4 / 4.4;
+        assert!((parallax_tolerance(&k, p, t) - expected).abs() < 1e-5);
+        // Vertically the focal length is fy.
+        let t = Vec3::new(0.0, -0.1, 0.0);
+        let expected = 4.0 * 0.8 / 4.8;
+        assert!((parallax_tolerance(&k, p, t) - expected).abs() < 1e-5);
+        // Straight ahead along the optical axis the point on the axis does not move either.
+        assert!((parallax_tolerance(&k, p, Vec3::new(0.0, 0.0, -1.0)) - 4.0).abs() < 1e-3);
+        // Non-finite input gives no tolerance, never NaN.
+        assert_eq!(
+            parallax_tolerance(&k, Vec3::new(f32::NAN, 0.0, 4.0), t),
+            0.0
+        );
+        assert_eq!(parallax_tolerance(&k, p, Vec3::splat(f32::INFINITY)), 0.0);
     }
 
     #[test]
@@ -1498,6 +1629,10 @@ mod tests {
         let near = single_point(1.0, 1.0, 2.0, [1.0, 0.0, 0.0], &k);
         cloud.append(near);
         cloud.alphas[1] = 0.5;
+        // Synthesised points of two layers (two observed points on one source ray are one
+        // surface in the source view, where their depth difference shows no parallax).
+        cloud.layer = vec![1, 0];
+        cloud.inpainted = vec![true; 2];
         let f = render_cpu(&cloud, None, &view(k), 3, 3, &SplatSettings::default()).unwrap();
         // Red (w = 0.5) in front of blue (w = 1): C = 0.5 red + 0.5 blue, A = 1.
         let c = f.colour.at(1, 1);
@@ -1521,6 +1656,8 @@ mod tests {
         for i in 0..4 {
             let mut p = single_point(0.0, 0.0, 1.0 + i as f32, [i as f32 / 3.0; 3], &k);
             p.alphas[0] = 0.5;
+            p.layer[0] = i as u16;
+            p.inpainted[0] = true;
             cloud.append(p);
         }
         let settings = SplatSettings {

@@ -1603,8 +1603,12 @@ pub(crate) mod tests {
             layer: vec![0],
             inpainted: vec![false],
         };
+        // (Synthesised points of two layers: two observed points on one source ray would be one
+        // surface in the source view, where their depth difference shows no parallax.)
         let mut cloud = point(2.0, 2.0, 3.0, [1.0; 3], 1.0);
         cloud.append(point(2.5, 1.75, 2.0, [1.0, 0.0, 0.0], 0.5));
+        cloud.layer = vec![1, 0];
+        cloud.inpainted = vec![true, true];
         gpu.set_cloud(&cloud).unwrap();
         let v = view(k, Pose::IDENTITY);
         let f = gpu.render(&v, 5, 5, None).unwrap();
