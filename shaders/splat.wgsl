@@ -59,6 +59,9 @@ const SAME_SURFACE_RELATIVE_DEPTH: f32 = 0.1;
 // `cpu::PARALLAX_TOLERANCE_PX`, `cpu::MAX_TOLERANCE`.
 const PARALLAX_TOLERANCE_PX: f32 = 0.5;
 const MAX_TOLERANCE: f32 = 1.0e6;
+// `cpu::SURROUNDED`, `cpu::SURROUNDED_MIN_GEOMETRY`.
+const SURROUNDED: u32 = 15u;
+const SURROUNDED_MIN_GEOMETRY: f32 = 0.5;
 // `cpu::MAX_DEPTH_OFFSET`.
 const MAX_DEPTH_OFFSET: f32 = 0.125;
 // Fixed-point scales of the surface sums: weights, colours (8 bits) and relative depth offsets.
@@ -507,6 +510,12 @@ fn kernel_1d(x: f32, gamma: f32) -> f32 {
     return t;
 }
 
+// `cpu::sides_of`.
+fn sides_of(sx: f32, sy: f32) -> u32 {
+    return select(0u, 1u, sx <= 0.0) | select(0u, 2u, sx >= 0.0) | select(0u, 4u, sy <= 0.0)
+        | select(0u, 8u, sy >= 0.0);
+}
+
 // `cpu::kernel_weights`: (tent, kernel).
 fn kernel_weights(sx: f32, sy: f32, gamma: vec2<f32>) -> vec2<f32> {
     if !(abs(sx) < support(gamma.x) && abs(sy) < support(gamma.y)) {
@@ -560,6 +569,8 @@ struct Pixel {
     q_depth: i32,
     // `cpu::SurfaceSums::reserved`.
     q_reserved: u32,
+    // `cpu::SurfaceSums::sides`.
+    sides: u32,
 }
 
 fn pixel_open(px: ptr<function, Pixel>) -> bool {
@@ -631,6 +642,9 @@ fn visit(px: ptr<function, Pixel>, q: u32, x: f32, y: f32, pass_index: u32) {
         (*px).q_kernel += qk;
         (*px).q_kernel_colour += qk * vec3<i32>(c8);
         (*px).q_depth += i32(qc) * dz;
+        if kw.x > 0.0 {
+            (*px).sides |= sides_of(sx, sy);
+        }
     } else if key_before((*px).cur, key) {
         if key.observed && !(*px).cur.observed {
             (*px).q_reserved += u32(round(w_c * WEIGHT_ONE));
@@ -659,7 +673,10 @@ fn finish_surface(px: ptr<function, Pixel>) {
         }
         let qg = f32((*px).q_geometry);
         let opacity = min(qc / qg, 1.0);
-        let covered = min(qg / WEIGHT_ONE, 1.0);
+        var covered = min(qg / WEIGHT_ONE, 1.0);
+        if (*px).sides == SURROUNDED && qg / WEIGHT_ONE >= SURROUNDED_MIN_GEOMETRY {
+            covered = 1.0;
+        }
         // `cpu::PixelState::finish_surface`: a synthesised surface fills only what the observed
         // surfaces behind it leave.
         var available = (*px).budget;
@@ -681,6 +698,7 @@ fn finish_surface(px: ptr<function, Pixel>) {
     (*px).q_kernel_colour = vec3<i32>(0);
     (*px).q_depth = 0;
     (*px).q_reserved = 0u;
+    (*px).sides = 0u;
     (*px).prev = (*px).cur;
     (*px).cur = (*px).next;
     (*px).next = key_none();
@@ -784,7 +802,7 @@ fn raster(
 
     var px = Pixel(
         Key(-3.4e38, 0xffffffffu, false), key_none(), key_none(), 1.0, vec3<f32>(0.0), 0.0, 0.0,
-        0u, 0u, 0u, vec3<u32>(0u), 0, vec3<i32>(0), 0, 0u,
+        0u, 0u, 0u, vec3<u32>(0u), 0, vec3<i32>(0), 0, 0u, 0u,
     );
     // Visibility: the nearest covering depth of every pixel.
     tile_pass(&px, 0u, start, end, li, tile_x0, tile_y0, tile_x1, tile_y1, inside, x, y);

@@ -94,6 +94,10 @@ pub const SYNTHESISED_COLOUR_WEIGHT: f32 = 1.0 / 16.0;
 /// Relative depth tolerance every point has at least (see the module docs).
 pub const BASE_RELATIVE_TOLERANCE: f32 = 0.01;
 
+/// Smallest `Σ g·tent` with which a surface that surrounds a pixel covers it whole (see
+/// [`SurfaceSums::resolve`]).
+pub const SURROUNDED_MIN_GEOMETRY: f32 = 0.5;
+
 /// Largest relative depth offset of a sample from its surface's front that the surface's depth
 /// takes in (a surface that the parallax tolerance joins across a depth step reports a depth
 /// near its front; the GPU sums these offsets in fixed point).
@@ -587,6 +591,8 @@ struct SurfaceSums {
     kernel: f32,
     /// `Σ ρ·w·c`.
     kernel_colour: [f32; 3],
+    /// [`sides_of`] of the samples with a non-zero tent weight, or-ed.
+    sides: u8,
     /// `Σ w_c·δ`, `δ` a sample's depth relative to the surface's front,
     /// `(z − z₁)/z₁`, clamped to ±[`MAX_DEPTH_OFFSET`].
     depth: f32,
@@ -616,12 +622,17 @@ impl SurfaceSums {
             smooth
         };
         let opacity = (self.coverage / self.geometry).min(1.0);
-        (
-            colour,
-            opacity,
-            self.geometry.min(1.0),
-            front * (1.0 + self.depth * inv),
-        )
+        // Inside a surface (its samples on both sides of the pixel along both source axes) the
+        // pixel is covered whatever the tents add up to: a footprint from central differences
+        // on a depth ramp falls short of its farther neighbour, and the shortfall would let what
+        // lies behind show through as a crack. Sub-pixel samples (a minified surface's sum is
+        // its area) keep their partial coverage.
+        let covered = if self.sides == SURROUNDED && self.geometry >= SURROUNDED_MIN_GEOMETRY {
+            1.0
+        } else {
+            self.geometry.min(1.0)
+        };
+        (colour, opacity, covered, front * (1.0 + self.depth * inv))
     }
 }
 
@@ -867,7 +878,7 @@ pub fn render_cpu_with(
                 };
                 // Visibility: the nearest point that covers each pixel.
                 for s in tile_splats() {
-                    for_each_covered(s, &tile, width, height, None, |p, t, _| {
+                    for_each_covered(s, &tile, width, height, None, |p, t, _, _| {
                         let w_c = s.scale * t;
                         let px = &mut pixels[p];
                         let key = SurfaceKey::of(s);
@@ -899,7 +910,7 @@ pub fn render_cpu_with(
                         }
                         let shape = if s.z - s.tol > z_hi { None } else { shape };
                         let c = values[s.index as usize];
-                        for_each_covered(s, &tile, width, height, shape, |p, t, k| {
+                        for_each_covered(s, &tile, width, height, shape, |p, t, k, sides| {
                             let (w_c, w) = (s.scale * t, s.scale * k);
                             let px = &mut pixels[p];
                             if !px.open() {
@@ -923,6 +934,9 @@ pub fn render_cpu_with(
                                         sums.kernel_colour[i] += kw * v;
                                     }
                                     let front = px.cur.z;
+                                    if t > 0.0 {
+                                        sums.sides |= sides;
+                                    }
                                     sums.depth += w_c
                                         * ((s.z - front) / front)
                                             .clamp(-MAX_DEPTH_OFFSET, MAX_DEPTH_OFFSET);
@@ -980,7 +994,7 @@ fn for_each_covered(
     width: usize,
     height: usize,
     kernel: Option<SplatKernel>,
-    mut f: impl FnMut(usize, f32, f32),
+    mut f: impl FnMut(usize, f32, f32, u8),
 ) {
     let extent = if kernel.is_some() {
         s.extent
@@ -1014,10 +1028,29 @@ fn for_each_covered(
             if w_c == 0.0 && w == 0.0 {
                 continue;
             }
-            f((y - tile.y0) * TILE + (x - tile.x0), w_c, w);
+            f(
+                (y - tile.y0) * TILE + (x - tile.x0),
+                w_c,
+                w,
+                sides_of(sx, sy),
+            );
         }
     }
 }
+
+/// On which sides of a pixel a sample at source-grid offset `s` from it lies, as bits: `s_x ≤ 0`
+/// (1), `s_x ≥ 0` (2), `s_y ≤ 0` (4), `s_y ≥ 0` (8). A surface whose samples set all four
+/// ([`SURROUNDED`]) surrounds the pixel along both of its source axes.
+#[inline]
+pub fn sides_of(sx: f32, sy: f32) -> u8 {
+    u8::from(sx <= 0.0)
+        | (u8::from(sx >= 0.0) << 1)
+        | (u8::from(sy <= 0.0) << 2)
+        | (u8::from(sy >= 0.0) << 3)
+}
+
+/// [`sides_of`] of a pixel that a surface's samples surround.
+pub const SURROUNDED: u8 = 15;
 
 /// `(tent(s_x)·tent(s_y), k_γu(s_x)·k_γv(s_y))` at a source-grid offset ([`kernel_1d`]).
 #[inline]
