@@ -1387,8 +1387,7 @@ pub(crate) mod tests {
     /// Real photos: classical depth, lifted, as the scene builder does it.
     mod real_data {
         use super::*;
-        use crate::image_io::{load_image, save_rgb_png};
-        use crate::path::diagnostics::{DiagnosticsParams, path_diagnostics};
+        use crate::image_io::load_image;
         use crate::stages::depth::DepthEstimator;
         use crate::stages::depth::classical::ClassicalDepth;
         use std::path::Path;
@@ -1398,7 +1397,6 @@ pub(crate) mod tests {
             pub intrinsics: Intrinsics,
             pub size: (usize, usize),
             pub scene: SceneScale,
-            pub image: RgbRaster,
         }
 
         pub(crate) fn photo(name: &str) -> Photo {
@@ -1442,7 +1440,6 @@ pub(crate) mod tests {
                 intrinsics: k,
                 size: (w, h),
                 scene,
-                image,
             }
         }
 
@@ -1523,137 +1520,6 @@ pub(crate) mod tests {
                 (0.2..0.45).contains(&heading),
                 "heading column {heading}\n{result}"
             );
-        }
-
-        /// Renders a few frames of the autocruise path of two photos to
-        /// `$TMPDIR/makeit4d_autocruise/` and prints every photo's per-frame hole fractions.
-        #[test]
-        #[ignore = "writes images; run by hand and look at them"]
-        fn autocruise_frames_and_hole_fractions() {
-            let out = std::env::temp_dir().join("makeit4d_autocruise");
-            std::fs::create_dir_all(&out).unwrap();
-            let env = |name: &str| std::env::var(name).ok();
-            let frames: usize = env("CRUISE_FRAMES")
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(60);
-            let defaults = AutocruiseParams::default();
-            let speed = env("CRUISE_SPEED")
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(defaults.speed);
-            let hole_weight = env("CRUISE_HOLE_WEIGHT")
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(defaults.hole_weight);
-            let level_horizon = env("CRUISE_LEVEL").is_some();
-            let free_space_steering = env("CRUISE_STEER")
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(defaults.free_space_steering);
-            let frames_per_step = env("CRUISE_FPS")
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(defaults.frames_per_step);
-            let photos = env("CRUISE_PHOTOS").unwrap_or_else(|| {
-                "forest_path_320.jpg evening_glow_320.jpg cold_ripple_320.jpg starry_night_320.jpg aloe_left_q.jpg".into()
-            });
-            for name in photos.split_whitespace() {
-                let photo = photo(name);
-                let (w, h) = photo.size;
-                for direction in [CruiseDirection::Forward, CruiseDirection::Backward] {
-                    let params = AutocruiseParams {
-                        direction,
-                        speed,
-                        frames_per_step,
-                        hole_weight,
-                        free_space_steering,
-                        level_horizon,
-                        ..Default::default()
-                    };
-                    let result = cruise(&photo, &params, frames);
-                    let stem = name.trim_end_matches(".jpg");
-                    let tag = format!("{stem}_{direction:?}_s{speed}_n{frames_per_step}_w{hole_weight}_f{free_space_steering}").to_lowercase();
-                    eprintln!("== {tag}: scene {:?}\n{result}", photo.scene);
-                    for (i, (v, f)) in result.views.iter().zip(&result.frames).enumerate() {
-                        if i % 10 == 0 || i + 1 == frames {
-                            let p = v.world_from_camera.translation / photo.scene.near_depth;
-                            let fwd = v.world_from_camera.forward();
-                            let roll = (v.world_from_camera.rotation * Vec3::X)
-                                .y
-                                .asin()
-                                .to_degrees();
-                            eprintln!(
-                                "  frame {i:>3}: at ({:+.2}, {:+.2}, {:+.2}) near, facing ({:+.2}, {:+.2}, {:+.2}), roll {roll:+.1}°, sky {:.2}, ground {:.2}, speed {:.2}",
-                                p.x,
-                                p.y,
-                                p.z,
-                                fwd.x,
-                                fwd.y,
-                                fwd.z,
-                                f.sky_fraction,
-                                f.ground_fraction,
-                                f.speed_factor
-                            );
-                        }
-                    }
-                    let diagnostics = path_diagnostics(
-                        &photo.cloud,
-                        &result.views,
-                        w,
-                        h,
-                        &DiagnosticsParams {
-                            scale: 1.0,
-                            ..Default::default()
-                        },
-                        &Progress::none(),
-                    )
-                    .unwrap();
-                    let holes: Vec<String> = diagnostics
-                        .frames
-                        .iter()
-                        .map(|f| format!("{:.1}", 100.0 * f.hole_fraction))
-                        .collect();
-                    eprintln!("  hole % per frame (full size): {}", holes.join(" "));
-                    eprint!("{diagnostics}");
-                    if direction == CruiseDirection::Forward
-                        && (name.starts_with("forest") || name.starts_with("evening"))
-                        || name.starts_with("forest")
-                    {
-                        save_rgb_png(&out.join(format!("{tag}_input.png")), &photo.image, false)
-                            .unwrap();
-                        let input = render_cpu(
-                            &photo.cloud,
-                            None,
-                            &result.views[0],
-                            w,
-                            h,
-                            &SplatSettings::default(),
-                        )
-                        .unwrap();
-                        let (d, _) = disparity_map(&input, photo.scene.near_depth, 1.0);
-                        save_rgb_png(
-                            &out.join(format!("{tag}_disparity.png")),
-                            &d.map(|v| [v; 3]),
-                            false,
-                        )
-                        .unwrap();
-                        for i in [0, frames / 4, frames / 2, 3 * frames / 4, frames - 1] {
-                            let frame = render_cpu(
-                                &photo.cloud,
-                                None,
-                                &result.views[i],
-                                w,
-                                h,
-                                &SplatSettings::default(),
-                            )
-                            .unwrap();
-                            save_rgb_png(
-                                &out.join(format!("{tag}_{i:03}.png")),
-                                &frame.colour,
-                                false,
-                            )
-                            .unwrap();
-                        }
-                    }
-                }
-            }
-            eprintln!("frames in {}", out.display());
         }
     }
 }
