@@ -63,7 +63,7 @@
 use super::spec::{Arrow, MotionRegion, MotionSpec, Stroke, rasterise_strokes};
 use crate::error::{Error, Result};
 use crate::raster::{
-    GrayRaster, MaskRaster, Raster, RgbRaster, connected_components, luma, quantile,
+    GrayRaster, MaskRaster, Raster, RgbRaster, box_mean, connected_components, luma, quantile,
 };
 
 /// Sky drift speed as a fraction of the canvas width per frame (0.3 px/frame at 1280 px).
@@ -371,41 +371,6 @@ fn texture(image: &RgbRaster) -> GrayRaster {
     box_mean(&gradient, (w.min(h) / 100).max(1))
 }
 
-/// `(2r + 1)²` box mean, normalised by the number of in-canvas pixels.
-fn box_mean(v: &GrayRaster, r: usize) -> GrayRaster {
-    let (w, h) = v.size();
-    let mut horizontal = GrayRaster::new(w, h, 0.0);
-    let mut prefix = vec![0.0f64; w.max(h) + 1];
-    for y in 0..h {
-        for x in 0..w {
-            prefix[x + 1] = prefix[x] + v.at(x, y) as f64;
-        }
-        for x in 0..w {
-            let (lo, hi) = (x.saturating_sub(r), (x + r).min(w - 1));
-            horizontal.set(
-                x,
-                y,
-                ((prefix[hi + 1] - prefix[lo]) / (hi - lo + 1) as f64) as f32,
-            );
-        }
-    }
-    let mut out = GrayRaster::new(w, h, 0.0);
-    for x in 0..w {
-        for y in 0..h {
-            prefix[y + 1] = prefix[y] + horizontal.at(x, y) as f64;
-        }
-        for y in 0..h {
-            let (lo, hi) = (y.saturating_sub(r), (y + r).min(h - 1));
-            out.set(
-                x,
-                y,
-                ((prefix[hi + 1] - prefix[lo]) / (hi - lo + 1) as f64) as f32,
-            );
-        }
-    }
-    out
-}
-
 /// Skyline sky estimate (see the module documentation).
 fn estimate_sky(image: &RgbRaster, texture: &GrayRaster) -> MaskRaster {
     let (w, h) = texture.size();
@@ -666,7 +631,7 @@ fn cut_at_neck(part: &[usize], width: usize) -> Vec<usize> {
 
 /// `mask` eroded by a `(2r + 1)²` square (the canvas edge does not erode).
 fn erode(mask: &MaskRaster, r: usize) -> MaskRaster {
-    box_mean(&mask.map(|m| if m { 1.0 } else { 0.0 }), r).map(|v| v >= 1.0 - 1e-4)
+    crate::stages::layers::morph::erode(mask, 2 * r + 1)
 }
 
 /// Vectorises a hard mask into horizontal strokes of radius `r` and hardness ½ that paint
