@@ -19,12 +19,18 @@
 #[allow(clippy::module_inception)]
 mod app;
 pub mod bench;
+mod dialogs;
 pub mod gpu_preview;
 pub mod history;
 pub mod images;
+mod menu;
+mod notices;
 pub mod panels;
+mod recovery;
+mod status_bar;
 pub mod timeline;
 pub mod viewport;
+mod welcome;
 pub mod worker;
 
 pub use app::{EditorApp, EditorOptions, PLAYBACK_FPS, ShownFrame};
