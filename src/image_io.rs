@@ -68,6 +68,13 @@ pub fn check_size(path: &Path, width: u32, height: u32) -> Result<()> {
 
 /// Decodes an image file (see the module docs for what is accepted and how).
 pub fn load_image(path: &Path) -> Result<LoadedImage> {
+    decode_image(path).map(|image| from_dynamic(&image))
+}
+
+/// Decodes an image file as [`load_image`] does (regular file, size limits, complete JPEG,
+/// EXIF orientation applied) but keeps the decoded pixels as they are: for masks and other
+/// inputs that are not photos.
+pub fn decode_image(path: &Path) -> Result<DynamicImage> {
     check_regular_file(path)?;
     let bytes = std::fs::read(path).map_err(|e| Error::file(path, e))?;
     let mut reader = ImageReader::new(std::io::Cursor::new(&bytes[..]))
@@ -99,7 +106,7 @@ pub fn load_image(path: &Path) -> Result<LoadedImage> {
     let mut image =
         DynamicImage::from_decoder(decoder).map_err(|e| Error::file(path, decode_message(&e)))?;
     image.apply_orientation(orientation);
-    Ok(from_dynamic(&image))
+    Ok(image)
 }
 
 /// True when a JPEG byte stream has an end-of-image marker (`FF D9`) after its last

@@ -18,5 +18,6 @@ pub mod raster;
 pub mod render;
 pub mod scene;
 pub mod stages;
+pub mod workflow;
 
 pub use error::{Error, Result};

@@ -5,6 +5,7 @@
 //! renderer blends in the same encoding the photo came in, as the papers do). Masks are `f32` in
 //! `[0, 1]` (soft) or `bool` (hard).
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// One sRGB-encoded colour, channels in `[0, 1]`.
@@ -268,22 +269,76 @@ impl BoxAverage for Rgb {
     }
 }
 
+/// Mean over the `(2·radius_px + 1)²` window around every pixel, the window clipped to the
+/// image (each output is divided by the number of pixels actually inside). O(pixels) for any
+/// radius: running sums along rows, then along columns.
+pub fn box_mean(src: &GrayRaster, radius_px: usize) -> GrayRaster {
+    let (w, h) = src.size();
+    if w == 0 || h == 0 || radius_px == 0 {
+        return src.clone();
+    }
+    let rows = box_rows(src.data(), w, h, radius_px);
+    let transposed = transpose(&rows, w, h);
+    let cols = box_rows(&transposed, h, w, radius_px);
+    let out = transpose(&cols, h, w);
+    Raster::from_vec(w, h, out).unwrap_or_else(|| src.clone())
+}
+
+/// Running-sum box mean along each row of a `w × h` row-major buffer.
+fn box_rows(data: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
+    let mut out = vec![0.0f32; w * h];
+    out.par_chunks_mut(w)
+        .zip(data.par_chunks(w))
+        .for_each(|(dst, row)| {
+            // Prefix sums in f64 so long rows keep their precision.
+            let mut prefix = Vec::with_capacity(w + 1);
+            prefix.push(0.0f64);
+            let mut s = 0.0f64;
+            for &v in row {
+                s += v as f64;
+                prefix.push(s);
+            }
+            for (x, d) in dst.iter_mut().enumerate() {
+                let lo = x.saturating_sub(r);
+                let hi = (x + r + 1).min(w);
+                *d = ((prefix[hi] - prefix[lo]) / (hi - lo) as f64) as f32;
+            }
+        });
+    let _ = h;
+    out
+}
+
+/// Transposes a `w × h` row-major buffer into an `h × w` one.
+pub(crate) fn transpose(data: &[f32], w: usize, h: usize) -> Vec<f32> {
+    let mut out = vec![0.0f32; w * h];
+    out.par_chunks_mut(h).enumerate().for_each(|(x, col)| {
+        for (y, c) in col.iter_mut().enumerate() {
+            *c = data[y * w + x];
+        }
+    });
+    out
+}
+
+/// The linear indices of the 4-neighbours of pixel `i` in a row-major `w × h` grid, in the
+/// order left, right, up, down; `None` for those outside it. The one neighbour rule of the
+/// program: [`for_each_neighbour4`] and every flood fill go through it.
+#[inline]
+pub fn neighbours4(i: usize, w: usize, h: usize) -> [Option<usize>; 4] {
+    let (x, y) = (i % w, i / w);
+    [
+        (x > 0).then(|| i - 1),
+        (x + 1 < w).then(|| i + 1),
+        (y > 0).then(|| i - w),
+        (y + 1 < h).then(|| i + w),
+    ]
+}
+
 /// Calls `f` with the linear index of each 4-neighbour (left, right, up, down) of pixel `i` in a
 /// row-major `w × h` grid, skipping those outside it.
 #[inline]
 pub fn for_each_neighbour4(i: usize, w: usize, h: usize, mut f: impl FnMut(usize)) {
-    let (x, y) = (i % w, i / w);
-    if x > 0 {
-        f(i - 1);
-    }
-    if x + 1 < w {
-        f(i + 1);
-    }
-    if y > 0 {
-        f(i - w);
-    }
-    if y + 1 < h {
-        f(i + w);
+    for j in neighbours4(i, w, h).into_iter().flatten() {
+        f(j);
     }
 }
 

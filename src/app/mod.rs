@@ -19,12 +19,21 @@
 #[allow(clippy::module_inception)]
 mod app;
 pub mod bench;
+mod dialogs;
 pub mod gpu_preview;
 pub mod history;
 pub mod images;
+mod input;
+mod inspect;
+mod menu;
+mod notices;
 pub mod panels;
+mod preview;
+mod recovery;
+mod status_bar;
 pub mod timeline;
 pub mod viewport;
+mod welcome;
 pub mod worker;
 
 pub use app::{EditorApp, EditorOptions, PLAYBACK_FPS, ShownFrame};

@@ -448,27 +448,6 @@ mod tests {
         assert_eq!(decode_flow([FLOW_OFFSET, FLOW_OFFSET, 0], FLOW_SCALE), None);
     }
 
-    /// PSNR of `a` against `b` over the pixels where `mask` holds, in dB.
-    fn psnr(a: &RgbRaster, b: &RgbRaster, mask: impl Fn(usize, usize) -> bool) -> f64 {
-        let (w, h) = a.size();
-        let (mut sum, mut n) = (0.0f64, 0usize);
-        for y in 0..h {
-            for x in 0..w {
-                if !mask(x, y) {
-                    continue;
-                }
-                for c in 0..3 {
-                    // Quantised as the PNGs are.
-                    let q = |v: f32| crate::image_io::unit_to_u8(v) as f64 / 255.0;
-                    let d = q(a.at(x, y)[c]) - q(b.at(x, y)[c]);
-                    sum += d * d;
-                    n += 1;
-                }
-            }
-        }
-        10.0 * (n as f64 / sum.max(1e-12)).log10()
-    }
-
     #[test]
     fn layers_composited_back_to_front_give_the_colour_frame() {
         let (w, h) = (64, 48);
@@ -528,9 +507,11 @@ mod tests {
         assert!(layers[0].1.data().iter().filter(|&&a| a > 0.5).count() < w * h / 2);
         assert!(layers[1].1.data().iter().filter(|&&a| a > 0.5).count() > w * h * 9 / 10);
         let (composite, alpha) = composite_layers(&layers).unwrap();
-        let db = psnr(&composite, &beauty.colour, |x, y| {
-            beauty.coverage.at(x, y) > 0.0
-        });
+        // Scored quantised, as the PNGs are.
+        let q = |c: [f32; 3]| c.map(|v| crate::image_io::unit_to_u8(v) as f32 / 255.0);
+        let covered = beauty.coverage.map(|a| a > 0.0);
+        let db = crate::metrics::psnr_masked(&composite.map(q), &beauty.colour.map(q), &covered)
+            .unwrap();
         assert!(db > 35.0, "layers composite PSNR {db:.1} dB");
         for (a, b) in alpha.data().iter().zip(beauty.coverage.data()) {
             assert!((a - b).abs() < 0.02, "{a} vs {b}");

@@ -1095,18 +1095,6 @@ mod tests {
     }
 
     #[test]
-    #[ignore = "timing: 10 000 frames (run in release)"]
-    fn ten_thousand_frames() {
-        let (cloud, k, _) = landscape(320, 200, 60.0, 80.0, 1.0);
-        let views: Vec<View> = (0..10_000)
-            .map(|i| view(k, Vec3::new(0.0, 0.0, 0.0004 * i as f32)))
-            .collect();
-        let start = std::time::Instant::now();
-        let d = run(&cloud, &views, (320, 200));
-        eprintln!("10 000 frames in {:.2?}\n{d}", start.elapsed());
-    }
-
-    #[test]
     fn thinning_keeps_the_input_view_closed() {
         let (cloud, k, _) = landscape(256, 160, 60.0, 60.0, 1.0);
         let thin = preview_cloud(&cloud, 256, 32);

@@ -182,6 +182,31 @@ impl KeyframePath {
         }
     }
 
+    /// Puts `key` at its frame: a key already within half a frame of it is replaced (keeping
+    /// that key's interpolation and ease), else `key` is inserted so that the keys stay in frame
+    /// order (their numbers are their order on the timeline). Returns the key's index.
+    pub fn insert_or_replace(&mut self, key: Keyframe) -> usize {
+        match self
+            .keys
+            .iter()
+            .position(|k| (k.frame - key.frame).abs() < 0.5)
+        {
+            Some(i) => {
+                self.keys[i] = Keyframe {
+                    interpolation: self.keys[i].interpolation,
+                    ease: self.keys[i].ease,
+                    ..key
+                };
+                i
+            }
+            None => {
+                let at = self.keys.partition_point(|k| k.frame < key.frame);
+                self.keys.insert(at, key);
+                at
+            }
+        }
+    }
+
     /// One key per view at frames `0, 1, 2, …` (for generated paths such as autocruise: a dense
     /// suggestion the user then thins out or edits). The field of view is read from each view's
     /// `fx` for an image `width` pixels wide.

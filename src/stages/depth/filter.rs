@@ -1,58 +1,9 @@
 //! O(pixels) image filters used by the depth stage: box mean, guided filter (He et al. 2010)
 //! and its subsampled "fast" variant (He & Sun 2015), and a separable Gaussian blur.
 
-use crate::raster::{GrayRaster, Raster};
+pub use crate::raster::box_mean;
+use crate::raster::{GrayRaster, Raster, transpose};
 use rayon::prelude::*;
-
-/// Mean over the `(2·radius_px + 1)²` window around every pixel, the window clipped to the
-/// image (each output is divided by the number of pixels actually inside). O(pixels) for any
-/// radius: running sums along rows, then along columns.
-pub fn box_mean(src: &GrayRaster, radius_px: usize) -> GrayRaster {
-    let (w, h) = src.size();
-    if w == 0 || h == 0 || radius_px == 0 {
-        return src.clone();
-    }
-    let rows = box_rows(src.data(), w, h, radius_px);
-    let transposed = transpose(&rows, w, h);
-    let cols = box_rows(&transposed, h, w, radius_px);
-    let out = transpose(&cols, h, w);
-    Raster::from_vec(w, h, out).unwrap_or_else(|| src.clone())
-}
-
-/// Running-sum box mean along each row of a `w × h` row-major buffer.
-fn box_rows(data: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
-    let mut out = vec![0.0f32; w * h];
-    out.par_chunks_mut(w)
-        .zip(data.par_chunks(w))
-        .for_each(|(dst, row)| {
-            // Prefix sums in f64 so long rows keep their precision.
-            let mut prefix = Vec::with_capacity(w + 1);
-            prefix.push(0.0f64);
-            let mut s = 0.0f64;
-            for &v in row {
-                s += v as f64;
-                prefix.push(s);
-            }
-            for (x, d) in dst.iter_mut().enumerate() {
-                let lo = x.saturating_sub(r);
-                let hi = (x + r + 1).min(w);
-                *d = ((prefix[hi] - prefix[lo]) / (hi - lo) as f64) as f32;
-            }
-        });
-    let _ = h;
-    out
-}
-
-/// Transposes a `w × h` row-major buffer into an `h × w` one.
-fn transpose(data: &[f32], w: usize, h: usize) -> Vec<f32> {
-    let mut out = vec![0.0f32; w * h];
-    out.par_chunks_mut(h).enumerate().for_each(|(x, col)| {
-        for (y, c) in col.iter_mut().enumerate() {
-            *c = data[y * w + x];
-        }
-    });
-    out
-}
 
 /// Element-wise product of two same-sized rasters.
 fn product(a: &GrayRaster, b: &GrayRaster) -> GrayRaster {

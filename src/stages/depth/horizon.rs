@@ -46,11 +46,8 @@ impl HorizonPrior {
     /// Depth `Z = h·f_y / (v − v_h)` of a ground pixel in row `v`, clamped to `[0, far]`;
     /// `far` at or above the horizon.
     pub fn ground_depth(&self, v: f32, v_horizon: f32, fy: f32, far: f32) -> f32 {
-        let dv = v - v_horizon;
-        if dv <= 0.0 {
-            return far;
-        }
-        (self.params.camera_height * fy / dv).min(far)
+        super::classical::ground_plane_depth(v, v_horizon, self.params.camera_height, fy)
+            .map_or(far, |z| z.min(far))
     }
 }
 

@@ -28,17 +28,7 @@ pub fn fill_invalid_depth(depth: &GrayRaster) -> Option<(GrayRaster, usize)> {
         return None;
     }
     let mut out = depth.clone();
-    let neighbours = |i: usize| {
-        let (x, y) = (i % w, i / w);
-        [
-            (x > 0).then(|| i - 1),
-            (x + 1 < w).then(|| i + 1),
-            (y > 0).then(|| i - w),
-            (y + 1 < h).then(|| i + w),
-        ]
-        .into_iter()
-        .flatten()
-    };
+    let neighbours = |i: usize| crate::raster::neighbours4(i, w, h).into_iter().flatten();
     let mut queued = valid.clone();
     let mut frontier: Vec<usize> = Vec::new();
     for i in 0..valid.len() {

@@ -404,13 +404,7 @@ impl Level {
         let mut diagonal = vec![0.0f32; m];
         let mut rhs = vec![[0.0f32; 2]; m];
         for (k, &i) in pixel_of.iter().enumerate() {
-            let (x, y) = (i % w, i / w);
-            let candidates = [
-                (x > 0).then(|| i - 1),
-                (x + 1 < w).then(|| i + 1),
-                (y > 0).then(|| i - w),
-                (y + 1 < h).then(|| i + w),
-            ];
+            let candidates = crate::raster::neighbours4(i, w, h);
             for (slot, j) in candidates.into_iter().enumerate() {
                 let Some(j) = j else { continue };
                 if !self.support[j] {

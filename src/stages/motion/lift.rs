@@ -85,30 +85,6 @@ fn pixel_of(p: [f32; 2], width: usize, height: usize) -> Option<(usize, usize)> 
         .then_some((x as usize, y as usize))
 }
 
-/// Square erosion by `radius` pixels (a pixel stays when every pixel within the
-/// `(2r + 1)²` square, clipped to the canvas, is set).
-pub fn erode(mask: &MaskRaster, radius: usize) -> MaskRaster {
-    let (w, h) = mask.size();
-    if radius == 0 || w == 0 || h == 0 {
-        return mask.clone();
-    }
-    let pass = |src: &MaskRaster, horizontal: bool| -> MaskRaster {
-        Raster::from_fn(w, h, |x, y| {
-            let (c, n) = if horizontal { (x, w) } else { (y, h) };
-            let lo = c.saturating_sub(radius);
-            let hi = (c + radius).min(n - 1);
-            (lo..=hi).all(|k| {
-                if horizontal {
-                    src.at(k, y)
-                } else {
-                    src.at(x, k)
-                }
-            })
-        })
-    };
-    pass(&pass(mask, true), false)
-}
-
 /// Masked diffusion: `values` where `known`, a smooth fill everywhere else.
 ///
 /// Pull-push (Gortler et al. 1996): the known values are averaged down a 2×2 pyramid with
@@ -289,7 +265,7 @@ pub fn layer_flows(
             flows.push(None);
             continue;
         }
-        let mut seeds = erode(&visible, SEED_EROSION_PX);
+        let mut seeds = crate::stages::layers::morph::erode(&visible, 2 * SEED_EROSION_PX + 1);
         if !seeds.data().iter().any(|&s| s) {
             seeds = visible.clone();
         }
@@ -673,6 +649,8 @@ mod tests {
     #[test]
     fn erosion_known_answer() {
         let m = Raster::from_fn(7, 7, |x, y| (1..6).contains(&x) && (1..6).contains(&y));
+        // The seed erosion's rule: radius r is the (2r + 1)² square of `morph::erode`.
+        let erode = |m: &MaskRaster, r: usize| crate::stages::layers::morph::erode(m, 2 * r + 1);
         let e = erode(&m, 1);
         let count = e.data().iter().filter(|&&v| v).count();
         assert_eq!(count, 9);

@@ -1,0 +1,663 @@
+//! The command line's arguments: one struct per subcommand, and the value parsers.
+
+use clap::{Args, Parser, Subcommand};
+use makeit4d::export::Pass;
+use makeit4d::render::gpu::RendererChoice;
+use std::path::PathBuf;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "makeit4d",
+    version,
+    about = "One still photo to a consistent, living fly-through video (Make-It-4D)."
+)]
+pub(crate) struct Cli {
+    /// Without a subcommand the editor opens.
+    #[command(subcommand)]
+    pub(crate) command: Option<Command>,
+}
+
+#[derive(Subcommand, Debug)]
+pub(crate) enum Command {
+    /// Open the editor (the default), optionally with a photo or a project file.
+    Edit(EditArgs),
+    /// Render a photo (or a project) to a folder of PNG frames.
+    Render(Box<RenderArgs>),
+    /// Estimate the depth of a photo on its own (16-bit disparity PNG + JSON sidecar).
+    Depth(DepthArgs),
+    /// Fill the white pixels of a mask in a photo (PatchMatch), on its own.
+    Inpaint(InpaintArgs),
+    /// Score stages against ground truth.
+    #[command(subcommand)]
+    Eval(EvalCommand),
+    /// Measure speed (and quality) of the stages; prints markdown tables.
+    #[command(subcommand)]
+    Bench(BenchCommand),
+    /// Print what this machine offers: GPU adapter, ONNX Runtime, models, ffmpeg.
+    Doctor(DoctorArgs),
+    /// The built-in catalogue of learned models: list, install, remove, print a manifest.
+    #[command(subcommand)]
+    Models(ModelsCommand),
+}
+
+#[derive(Subcommand, Debug)]
+pub(crate) enum ModelsCommand {
+    /// The catalogue, and which models are installed (with their size on disk).
+    List(ModelsDirArgs),
+    /// Download a model (or take a file you have, with --file), check it and install it.
+    Install(ModelsInstallArgs),
+    /// Remove an installed model.
+    Remove(ModelsNameArgs),
+    /// Print a model's manifest (to adapt it to another export).
+    Manifest(ModelsNameArgs),
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct ModelsDirArgs {
+    /// The models folder (default: $MAKEIT4D_MODELS_DIR, else $XDG_DATA_HOME/makeit4d/models).
+    #[arg(long)]
+    pub(crate) dir: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct ModelsNameArgs {
+    /// The model's name (see `makeit4d models list`).
+    pub(crate) name: String,
+    #[command(flatten)]
+    pub(crate) dir: ModelsDirArgs,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct ModelsInstallArgs {
+    /// The model's name (see `makeit4d models list`).
+    pub(crate) name: String,
+    /// Install this file (downloaded by hand, copied from another machine) instead of
+    /// downloading.
+    #[arg(long)]
+    pub(crate) file: Option<PathBuf>,
+    /// Download from this address instead of the catalogue's (a mirror).
+    #[arg(long)]
+    pub(crate) url: Option<String>,
+    /// Accept bytes that differ from the catalogue's size and SHA-256 (another revision of
+    /// the same export); the graph is still checked against the manifest.
+    #[arg(long)]
+    pub(crate) skip_checksum: bool,
+    #[command(flatten)]
+    pub(crate) dir: ModelsDirArgs,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct EditArgs {
+    /// A photo or a project file (.json) to open.
+    pub(crate) path: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct DepthArgs {
+    /// The input photo.
+    pub(crate) image: PathBuf,
+    /// The 16-bit disparity PNG to write (normalised to the full range; the scale goes to
+    /// the .json beside it).
+    #[arg(long)]
+    pub(crate) out: PathBuf,
+    /// An ONNX depth model manifest (JSON); without it the classical estimator runs.
+    #[arg(long)]
+    pub(crate) model: Option<PathBuf>,
+    /// Also write a colourised preview (near = red, far = dark blue).
+    #[arg(long)]
+    pub(crate) colour: Option<PathBuf>,
+    /// Horizontal field of view of the photo, degrees.
+    #[arg(long, default_value_t = 60.0)]
+    pub(crate) fov: f32,
+    /// Horizon row as a fraction of the height (0 = top); default: detected.
+    #[arg(long)]
+    pub(crate) horizon: Option<f32>,
+    /// Also write the classical estimator's cues (position, object, haze, sky, confidence) as
+    /// grey PNGs into this folder and print its analysis (horizon, haziness, …).
+    #[arg(long, value_name = "DIR")]
+    pub(crate) cues: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct InpaintArgs {
+    /// The photo.
+    pub(crate) image: PathBuf,
+    /// The hole mask: same size as the photo, white (≥ 50 %) = fill.
+    #[arg(long)]
+    pub(crate) mask: PathBuf,
+    /// The filled PNG to write.
+    #[arg(long)]
+    pub(crate) out: PathBuf,
+    /// Quality: draft, preview or final.
+    #[arg(long, default_value = "preview")]
+    pub(crate) preset: String,
+    /// Seed for the random search (same seed, same bytes).
+    #[arg(long, default_value_t = 0)]
+    pub(crate) seed: u64,
+    /// A learned inpainting model instead of PatchMatch: a catalogue name (`lama`) or a
+    /// manifest file. An error, not a fallback, when it cannot run.
+    #[arg(long)]
+    pub(crate) model: Option<PathBuf>,
+}
+
+#[derive(Subcommand, Debug)]
+pub(crate) enum EvalCommand {
+    /// Depth accuracy against ground-truth disparity (scale-and-shift aligned, MiDaS protocol).
+    Depth(EvalDepthArgs),
+    /// Novel-view synthesis on a stereo pair: render the right view from the left image, with
+    /// the paper's ablations as rows.
+    Nvs(EvalNvsArgs),
+    /// Magnification: a still camera zooming into (and out of) real high-resolution photos, the
+    /// renderer against bicubic, bilinear, nearest and area resampling of the same input.
+    Zoom(EvalZoomArgs),
+    /// Ordinal depth: the share of hand-annotated "a is nearer than b" pairs a depth map orders
+    /// wrongly (WHDR), per photo and group, with the vertical-ramp and constant baselines.
+    Ordinal(EvalOrdinalArgs),
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct EvalOrdinalArgs {
+    /// The annotation file (JSON: {"photos": {"PATH": [[[xa, ya], [xb, yb]], ...]}}).
+    pub(crate) annotations: PathBuf,
+    /// Folder the photo paths are relative to (default: the annotation file's folder).
+    #[arg(long)]
+    pub(crate) root: Option<PathBuf>,
+    /// Also score this ONNX depth model manifest.
+    #[arg(long)]
+    pub(crate) model: Option<PathBuf>,
+    /// Write each photo's classical depth preview into this folder.
+    #[arg(long)]
+    pub(crate) save: Option<PathBuf>,
+    /// Print JSON instead of a markdown table.
+    #[arg(long)]
+    pub(crate) json: bool,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct EvalZoomArgs {
+    /// High-resolution originals (each is halved to make the input); default
+    /// ../shared/data/hires/*.jpg and ../shared/data/photos/evening_glow_2560.jpg, those present.
+    pub(crate) photos: Vec<PathBuf>,
+    /// Zoom factors (focal length multipliers), comma-separated.
+    #[arg(long, value_delimiter = ',', default_values_t = makeit4d::eval::zoom::DEFAULT_ZOOMS)]
+    pub(crate) zoom: Vec<f32>,
+    /// Reconstruction kernel of the renderer.
+    #[arg(long, value_enum, default_value = "catmull-rom")]
+    pub(crate) kernel: KernelArg,
+    /// Inpainting preset of the scenes: draft, preview or final.
+    #[arg(long, default_value = "draft")]
+    pub(crate) inpaint_preset: String,
+    /// Write a crop strip (ground truth | bicubic | ours) per photo and zoom into this folder.
+    #[arg(long)]
+    pub(crate) crops: Option<PathBuf>,
+    /// Print JSON instead of a markdown table.
+    #[arg(long)]
+    pub(crate) json: bool,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct BenchEditorArgs {
+    /// Photos (or projects): the first drives the editor; every one gets the sketch-vs-final
+    /// table (default: ../shared/data/photos/forest_path.jpg when present, else
+    /// tests/data/evening_glow_320.jpg).
+    pub(crate) photos: Vec<PathBuf>,
+    /// Seconds of playback to measure.
+    #[arg(long, default_value_t = 6.0)]
+    pub(crate) playback_seconds: f64,
+    /// Give up on one edit after this many seconds.
+    #[arg(long, default_value_t = 300.0)]
+    pub(crate) limit: f64,
+    /// Only the sketch-vs-final table (no editor).
+    #[arg(long)]
+    pub(crate) trade_only: bool,
+    /// Print JSON instead of markdown.
+    #[arg(long)]
+    pub(crate) json: bool,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct BenchRenderArgs {
+    /// Reconstruction kernel of both renderers.
+    #[arg(long, value_enum, default_value = "catmull-rom")]
+    pub(crate) kernel: KernelArg,
+    /// CPU only.
+    #[arg(long)]
+    pub(crate) no_gpu: bool,
+    /// Cloud sizes, points, comma-separated (default: 500000,2000000,8000000).
+    #[arg(long, value_delimiter = ',')]
+    pub(crate) points: Vec<usize>,
+    /// Output sizes WIDTHxHEIGHT, comma-separated (default: 1280x720,1920x1080).
+    #[arg(long, value_delimiter = ',', value_parser = parse_size)]
+    pub(crate) sizes: Vec<(usize, usize)>,
+    /// Each renderer renders each cell for at least this many seconds (default: 1).
+    #[arg(long)]
+    pub(crate) min_seconds: Option<f64>,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum KernelArg {
+    Tent,
+    CatmullRom,
+}
+
+impl From<KernelArg> for makeit4d::render::SplatKernel {
+    fn from(k: KernelArg) -> Self {
+        match k {
+            KernelArg::Tent => Self::Tent,
+            KernelArg::CatmullRom => Self::CatmullRom,
+        }
+    }
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct EvalNvsArgs {
+    /// The left image (the input).
+    #[arg(long)]
+    pub(crate) left: PathBuf,
+    /// The right image (the answer).
+    #[arg(long)]
+    pub(crate) right: PathBuf,
+    /// Ground-truth disparity of the left image (8/16-bit PNG or .npy), 0 = unknown.
+    #[arg(long)]
+    pub(crate) gt_disparity: PathBuf,
+    /// The disparity file holds disparity × this factor (e.g. 256 for aloe_disparity_q.png).
+    #[arg(long, default_value_t = 1.0)]
+    pub(crate) disparity_factor: f32,
+    /// Focal length, pixels (of the files as given).
+    #[arg(long)]
+    pub(crate) focal: f32,
+    /// Baseline: the right camera's translation along +x (depth comes out in its unit).
+    #[arg(long)]
+    pub(crate) baseline: f32,
+    /// Depth of the scene: the ground truth, or the depth stage's estimate aligned to it.
+    #[arg(long, value_enum, default_value = "oracle")]
+    pub(crate) depth: NvsDepthArg,
+    /// An ONNX depth model manifest for --depth estimated (default: the classical estimator).
+    #[arg(long)]
+    pub(crate) depth_model: Option<PathBuf>,
+    /// Resample the pair by this factor first, in (0, 1].
+    #[arg(long, default_value_t = 1.0)]
+    pub(crate) scale: f32,
+    /// Left border strip left out of the view score, pixels of the files as given (scaled
+    /// with --scale).
+    #[arg(long, default_value_t = 40)]
+    pub(crate) border: usize,
+    /// Steps from the left to the right camera (per-frame generation, consistency).
+    #[arg(long, default_value_t = 8)]
+    pub(crate) steps: usize,
+    /// Inpainting preset: draft, preview or final.
+    #[arg(long, default_value = "preview")]
+    pub(crate) inpaint_preset: String,
+    /// Layer-based depth on or off (default: off for oracle depth, on for estimated).
+    #[arg(long)]
+    pub(crate) layer_depth: Option<bool>,
+    /// Also write each row's right view into this folder.
+    #[arg(long)]
+    pub(crate) save: Option<PathBuf>,
+    /// Reconstruction kernel of the renderer (scene rows).
+    #[arg(long, value_enum, default_value = "catmull-rom")]
+    pub(crate) kernel: KernelArg,
+    /// Print JSON instead of a markdown table.
+    #[arg(long)]
+    pub(crate) json: bool,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum NvsDepthArg {
+    Oracle,
+    Estimated,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct EvalDepthArgs {
+    /// The (left) image.
+    #[arg(long)]
+    pub(crate) image: PathBuf,
+    /// Ground-truth disparity of that image (8/16-bit PNG or .npy).
+    #[arg(long)]
+    pub(crate) gt_disparity: PathBuf,
+    /// Disparity value that marks unknown pixels.
+    #[arg(long, default_value_t = 0.0)]
+    pub(crate) invalid: f32,
+    /// Also score this ONNX depth model manifest.
+    #[arg(long)]
+    pub(crate) model: Option<PathBuf>,
+    /// Print JSON instead of a markdown table.
+    #[arg(long)]
+    pub(crate) json: bool,
+}
+
+#[derive(Subcommand, Debug)]
+pub(crate) enum BenchCommand {
+    /// The classical depth estimator: median seconds over several runs.
+    Depth(BenchDepthArgs),
+    /// Inpainting presets against the harmonic baseline on holes cut from real photos.
+    Inpaint(BenchInpaintArgs),
+    /// Motion: flow solve, loop precompute, per-frame displacement and blend cost.
+    Motion(BenchMotionArgs),
+    /// Renderers: frames/s and points/s for 0.5 M, 2 M and 8 M points at 720p and 1080p, GPU
+    /// and CPU side by side, with the CPU bandwidth floor.
+    Render(BenchRenderArgs),
+    /// The editor, headless (its real workers, CPU preview): seconds from each edit to the
+    /// first picture, the edit's scene and the final quality; playback frames/s.
+    Editor(BenchEditorArgs),
+    /// Every stage for each inpainting preset on each photo: seconds, peak memory, quality
+    /// against the final preset; writes bench.md, bench.json and quality_vs_time.png.
+    Scene(BenchSceneArgs),
+    /// One case of `bench scene` (run in a child process for a clean peak memory); prints JSON.
+    #[command(hide = true)]
+    SceneCase(BenchSceneCaseArgs),
+    /// `models install`'s download against curl, from a server on 127.0.0.1: seconds, MB/s
+    /// and peak memory.
+    Download(BenchDownloadArgs),
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct BenchDownloadArgs {
+    /// Size of the download, MB.
+    #[arg(long, default_value_t = 200)]
+    pub(crate) mb: u64,
+    /// Downloads per client (the median is printed).
+    #[arg(long, default_value_t = 3)]
+    pub(crate) runs: usize,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct BenchInpaintArgs {
+    /// Photos (default: ../shared/data/photos/*.jpg when present, else tests/data).
+    pub(crate) photos: Vec<PathBuf>,
+    /// Timed repeats per case (the median is printed).
+    #[arg(long, default_value_t = 3)]
+    pub(crate) repeats: usize,
+    /// Hole kinds, comma-separated: strokes, blobs, border (default: all).
+    #[arg(long, value_delimiter = ',', value_parser = parse_hole_kind)]
+    pub(crate) holes: Vec<makeit4d::stages::inpaint::bench::HoleKind>,
+    /// Methods, comma-separated: harmonic, draft, preview, final (default: all).
+    #[arg(long, value_delimiter = ',', value_parser = parse_bench_method)]
+    pub(crate) methods: Vec<makeit4d::stages::inpaint::bench::BenchMethod>,
+}
+
+/// Parses a `--holes` entry.
+fn parse_hole_kind(s: &str) -> Result<makeit4d::stages::inpaint::bench::HoleKind, String> {
+    use makeit4d::stages::inpaint::bench::HoleKind;
+    match s.trim() {
+        "strokes" => Ok(HoleKind::Strokes),
+        "blobs" => Ok(HoleKind::Blobs),
+        "border" => Ok(HoleKind::BorderStrip),
+        _ => Err(format!(
+            "hole kind must be strokes, blobs or border, got '{s}'"
+        )),
+    }
+}
+
+/// Parses a `--methods` entry.
+fn parse_bench_method(s: &str) -> Result<makeit4d::stages::inpaint::bench::BenchMethod, String> {
+    use makeit4d::stages::inpaint::bench::BenchMethod;
+    match s.trim() {
+        "harmonic" => Ok(BenchMethod::Harmonic),
+        other => other
+            .parse()
+            .map(BenchMethod::PatchMatch)
+            .map_err(|_| format!("method must be harmonic, draft, preview or final, got '{s}'")),
+    }
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct BenchMotionArgs {
+    /// Canvas width.
+    #[arg(long, default_value_t = 1280)]
+    pub(crate) width: usize,
+    /// Canvas height.
+    #[arg(long, default_value_t = 800)]
+    pub(crate) height: usize,
+    /// Loop length N.
+    #[arg(long, default_value_t = 100)]
+    pub(crate) frames: u32,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct BenchSceneArgs {
+    /// Output folder.
+    #[arg(long)]
+    pub(crate) out: PathBuf,
+    /// Photos (default: shared/data/photos/*.jpg above the working directory, else the
+    /// tests/data copies). Repeatable.
+    #[arg(long)]
+    pub(crate) photo: Vec<PathBuf>,
+    /// Presets to run, comma-separated.
+    #[arg(long, default_value = "draft,preview,final", value_delimiter = ',')]
+    pub(crate) presets: Vec<String>,
+    /// Run every case in this process (peak memory is then cumulative).
+    #[arg(long)]
+    pub(crate) in_process: bool,
+    /// Keep the rendered middle frames in OUT/frames (default: a temporary folder).
+    #[arg(long)]
+    pub(crate) keep_frames: bool,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct BenchSceneCaseArgs {
+    #[arg(long)]
+    pub(crate) image: PathBuf,
+    #[arg(long)]
+    pub(crate) preset: String,
+    #[arg(long)]
+    pub(crate) frame: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct BenchDepthArgs {
+    /// Photo to estimate (default: assets/evening_glow.jpg, 1280×800).
+    #[arg(long, default_value = "assets/evening_glow.jpg")]
+    pub(crate) image: PathBuf,
+    /// Number of runs.
+    #[arg(long, default_value_t = 5)]
+    pub(crate) runs: usize,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct DoctorArgs {
+    /// Also list the models this project configures.
+    #[arg(long)]
+    pub(crate) project: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct RenderArgs {
+    /// The input photo (optional when --project names one).
+    pub(crate) image: Option<PathBuf>,
+    /// Output folder (created if missing). With several projects, each renders into
+    /// OUT/<project name>/.
+    #[arg(long)]
+    pub(crate) out: PathBuf,
+    /// A project file, or a folder of *.json project files, to render; repeat for a batch.
+    /// Command-line flags override the projects' values.
+    #[arg(long)]
+    pub(crate) project: Vec<PathBuf>,
+    /// Write the effective project (after overrides) to this file before rendering.
+    #[arg(long)]
+    pub(crate) save_project: Option<PathBuf>,
+    /// Number of frames.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=makeit4d::project::MAX_FRAMES as u64))]
+    pub(crate) frames: Option<u64>,
+    /// Frames per second.
+    #[arg(long)]
+    pub(crate) fps: Option<f32>,
+    /// Camera preset: still, fly-in, fly-out, orbit, swing, pan, dolly-zoom, or autocruise
+    /// (auto-pilot over the 3D scene; becomes editable keyframes in --save-project).
+    #[arg(long)]
+    pub(crate) preset: Option<String>,
+    /// Size of the --preset move, a multiple of its default (negative: the other way, for
+    /// orbit, swing and pan). Without it an orbit, swing, pan or fly-out is sized to what the
+    /// scene supports: the largest amplitude up to 1 that keeps every frame under the
+    /// synthesised-share and hole thresholds.
+    #[arg(long, allow_negative_numbers = true, requires = "preset")]
+    pub(crate) amplitude: Option<f64>,
+    /// Print per-frame hole and synthesised-content fractions of the path (low-resolution
+    /// renders), frames over a threshold, and the safe extent. Without it, render still warns
+    /// (on stderr) about frames over a threshold.
+    #[arg(long)]
+    pub(crate) diagnostics: bool,
+    /// Hole fraction above which a frame of the path gets a warning, 0–1 (default: the
+    /// project's camera.diagnostics.hole_threshold, 0.02; 1 disables).
+    #[arg(long, value_name = "FRACTION", value_parser = parse_fraction)]
+    pub(crate) hole_threshold: Option<f32>,
+    /// Synthesised (inpainted or outpainted) fraction above which a frame of the path gets a
+    /// warning, 0–1 (default: the project's camera.diagnostics.synth_threshold, 0.20; 1
+    /// disables).
+    #[arg(long, value_name = "FRACTION", value_parser = parse_fraction)]
+    pub(crate) synth_threshold: Option<f32>,
+    /// Output size WIDTHxHEIGHT (default: the input's).
+    #[arg(long, value_parser = parse_size)]
+    pub(crate) size: Option<(usize, usize)>,
+    /// Horizontal field of view of the input photo, degrees.
+    #[arg(long)]
+    pub(crate) fov: Option<f32>,
+    /// Splat renderer: cpu, gpu (an error without a GPU adapter) or auto (the GPU on a hardware
+    /// adapter, else the CPU; prints which and why).
+    #[arg(long, default_value = "auto")]
+    pub(crate) renderer: RendererChoice,
+    /// Frame file-name pattern with one %d or %0Nd.
+    #[arg(long, default_value = "frame_%04d.png")]
+    pub(crate) pattern: String,
+    /// Bits per channel of the colour PNGs.
+    #[arg(long, default_value_t = 8, value_parser = parse_bit_depth)]
+    pub(crate) bit_depth: u8,
+    /// Skip frames already complete in the output folder (they decode and have the right size).
+    #[arg(long)]
+    pub(crate) resume: bool,
+    /// Extra pass, repeatable: depth (OUT/depth/, 16-bit + depth.json scale), coverage
+    /// (OUT/coverage/, 16-bit alpha), layers (OUT/layer0/, OUT/layer1/, …: each depth layer
+    /// alone as RGBA, alpha = its coverage), motion (OUT/motion/: forward flow to the next
+    /// frame, 16-bit RGB, flow = (RG − 32768) × scale px, B = known; scale in motion.json),
+    /// camera (OUT/camera/camera.json per-frame intrinsics + pose, camera.py for Blender).
+    /// layers and motion are always rendered on the CPU, whatever --renderer says.
+    #[arg(long = "pass", value_name = "NAME", value_parser = parse_pass)]
+    pub(crate) passes: Vec<Pass>,
+    /// Only frames START..END of the path (END exclusive), e.g. 10..20.
+    #[arg(long, value_parser = parse_range)]
+    pub(crate) range: Option<(usize, usize)>,
+    /// Also encode a video through ffmpeg (OUT/video.mp4 or OUT/video.webm).
+    #[arg(long, value_enum)]
+    pub(crate) video: Option<VideoArg>,
+    /// Video quality as a constant rate factor (lower is better; default 18 for mp4, 30 for webm).
+    #[arg(long)]
+    pub(crate) crf: Option<u8>,
+    /// Depth layers: a count (1–16), `auto` (as many as the depth has), or `off` (one layer).
+    #[arg(long, value_parser = parse_layers)]
+    pub(crate) layers: Option<LayersArg>,
+    /// Do not inpaint what each layer hides (the paper's ablation).
+    #[arg(long)]
+    pub(crate) no_layer_inpaint: bool,
+    /// Re-estimate each layer's depth on the inpainted overlay (paper eq. 4–5; off by default,
+    /// best with a learned depth model).
+    #[arg(long)]
+    pub(crate) layer_depth: bool,
+    /// Do not outpaint: the canvas is the photo.
+    #[arg(long)]
+    pub(crate) no_outpaint: bool,
+    /// Inpainting quality: draft, preview or final.
+    #[arg(long)]
+    pub(crate) inpaint_preset: Option<String>,
+    /// Seed for inpainting.
+    #[arg(long)]
+    pub(crate) seed: Option<u64>,
+    /// An ONNX depth model manifest (falls back to the classical estimator, with a warning).
+    #[arg(long)]
+    pub(crate) depth_model: Option<PathBuf>,
+    /// A LaMa-style ONNX inpainting model manifest (falls back to PatchMatch, with a warning).
+    #[arg(long)]
+    pub(crate) inpaint_model: Option<PathBuf>,
+    /// Motion: `auto` applies the automatic sky/water suggestion; `off` removes the project's.
+    #[arg(long, value_enum)]
+    pub(crate) motion: Option<MotionArg>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum LayersArg {
+    Count(usize),
+    Auto,
+    Off,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum MotionArg {
+    Auto,
+    Off,
+}
+
+/// Parses `--layers`.
+pub(crate) fn parse_layers(s: &str) -> Result<LayersArg, String> {
+    match s.trim() {
+        "auto" => Ok(LayersArg::Auto),
+        "off" => Ok(LayersArg::Off),
+        n => match n.parse::<usize>() {
+            Ok(n) if (1..=16).contains(&n) => Ok(LayersArg::Count(n)),
+            _ => Err(format!("layers must be 1..=16, auto or off, got '{s}'")),
+        },
+    }
+}
+
+/// Parses `--pass`; an unknown name lists the valid ones.
+pub(crate) fn parse_pass(s: &str) -> Result<Pass, String> {
+    s.parse::<Pass>().map_err(|e| e.to_string())
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum VideoArg {
+    Mp4,
+    Webm,
+}
+
+/// Parses a PNG bit depth: 8 or 16.
+pub(crate) fn parse_bit_depth(s: &str) -> Result<u8, String> {
+    match s.trim() {
+        "8" => Ok(8),
+        "16" => Ok(16),
+        _ => Err(format!("bit depth must be 8 or 16, got '{s}'")),
+    }
+}
+
+/// Parses a fraction in `[0, 1]` (`--hole-threshold`, `--synth-threshold`).
+pub(crate) fn parse_fraction(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
+        _ => Err(format!("expected a fraction in [0, 1], got '{s}'")),
+    }
+}
+
+/// Parses `START..END`.
+pub(crate) fn parse_range(s: &str) -> Result<(usize, usize), String> {
+    let (a, b) = s
+        .split_once("..")
+        .ok_or_else(|| format!("expected START..END, got '{s}'"))?;
+    let a: usize = a
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad start in '{s}'"))?;
+    let b: usize = b.trim().parse().map_err(|_| format!("bad end in '{s}'"))?;
+    if a >= b {
+        return Err(format!("empty range '{s}'"));
+    }
+    Ok((a, b))
+}
+
+/// Parses `WIDTHxHEIGHT`.
+pub(crate) fn parse_size(s: &str) -> Result<(usize, usize), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("expected WIDTHxHEIGHT, got '{s}'"))?;
+    let w: usize = w
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad width in '{s}'"))?;
+    let h: usize = h
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad height in '{s}'"))?;
+    let max = makeit4d::image_io::MAX_SIDE as usize;
+    if w == 0 || h == 0 || w > max || h > max {
+        return Err(format!("size {w}x{h} is outside 1..={max} per side"));
+    }
+    Ok((w, h))
+}

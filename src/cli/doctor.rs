@@ -1,0 +1,75 @@
+//! `makeit4d doctor`: what this machine offers.
+
+use super::args::DoctorArgs;
+use super::models::check_model_graph;
+use makeit4d::export::{VideoFormat, VideoOptions};
+use makeit4d::project::Project;
+
+pub(crate) fn doctor(args: DoctorArgs) -> anyhow::Result<()> {
+    println!("makeit4d {}", env!("CARGO_PKG_VERSION"));
+    match makeit4d::render::gpu::GpuContext::new() {
+        Ok(context) => println!("GPU adapter: {}", context.describe()),
+        Err(e) => println!("GPU adapter: none ({e:#}); the CPU renderer is used"),
+    }
+    println!("{}", makeit4d::ml::ort_status());
+    match &args.project {
+        Some(p) => {
+            let project = Project::load(p)?;
+            match (&project.depth.method, &project.depth.model) {
+                (makeit4d::stages::depth::DepthMethod::Onnx, Some(m)) => {
+                    match makeit4d::ml::ModelManifest::load(m) {
+                        Ok(manifest) => {
+                            println!("depth model: {} ({})", manifest.display_name(), m.display())
+                        }
+                        Err(e) => println!("depth model: {} — {e:#}", m.display()),
+                    }
+                }
+                (method, _) => println!("depth: {method:?} (no learned model)"),
+            }
+        }
+        None => println!("models: none configured (pass --project to list a project's models)"),
+    }
+    match makeit4d::models::models_dir() {
+        Some(dir) => {
+            let installed: Vec<String> = makeit4d::models::CATALOGUE
+                .iter()
+                .filter_map(|e| makeit4d::models::installed(&dir, e))
+                .map(|m| {
+                    let check = makeit4d::ml::ModelManifest::load(&m.manifest_path)
+                        .and_then(|manifest| check_model_graph(&manifest));
+                    match check {
+                        Ok(()) => {
+                            format!("{} ({:.1} MB, checked)", m.entry.name, m.bytes as f64 / 1e6)
+                        }
+                        Err(e) => format!("{} (broken: {e:#})", m.entry.name),
+                    }
+                })
+                .collect();
+            if installed.is_empty() {
+                println!(
+                    "installed models: none in {} (`makeit4d models list` shows the catalogue)",
+                    dir.display()
+                );
+            } else {
+                println!(
+                    "installed models ({}): {}",
+                    dir.display(),
+                    installed.join(", ")
+                );
+            }
+        }
+        None => println!("installed models: no models folder (no HOME)"),
+    }
+    let ffmpeg = VideoOptions::new(VideoFormat::Mp4).ffmpeg;
+    match std::process::Command::new(&ffmpeg).arg("-version").output() {
+        Ok(out) if out.status.success() => {
+            let text = String::from_utf8_lossy(&out.stdout);
+            println!("ffmpeg: {}", text.lines().next().unwrap_or("found"));
+        }
+        _ => println!(
+            "ffmpeg: not found ({}): video export is off; PNG sequences still work",
+            ffmpeg.display()
+        ),
+    }
+    Ok(())
+}

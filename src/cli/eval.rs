@@ -1,0 +1,130 @@
+//! `makeit4d eval …`: the stages scored against ground truth.
+
+use super::args::{EvalDepthArgs, EvalNvsArgs, EvalOrdinalArgs, EvalZoomArgs, NvsDepthArg};
+use super::{print_table, progress_bar};
+use anyhow::bail;
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+pub(crate) fn eval_depth(args: EvalDepthArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::stages::depth::{DepthEstimator, eval, onnx::OnnxDepth};
+    let image = makeit4d::image_io::load_image(&args.image)?;
+    let gt = eval::read_gt_disparity(&args.gt_disparity)?;
+    let (w, h) = image.rgb.size();
+    let intrinsics = makeit4d::geometry::Intrinsics::from_hfov(w, h, 60.0);
+    let model = match &args.model {
+        Some(m) => Some(OnnxDepth::from_manifest(m)?),
+        None => None,
+    };
+    let extra: Vec<&dyn DepthEstimator> = model.iter().map(|m| m as &dyn DepthEstimator).collect();
+    let (bar, progress) = progress_bar(cancel);
+    let table = eval::eval_depth(
+        &image.rgb,
+        &gt,
+        args.invalid,
+        &intrinsics,
+        &extra,
+        &progress,
+    );
+    bar.finish_and_clear();
+    let table = table?;
+    if args.json {
+        println!("{}", table.to_json()?);
+    } else {
+        print!("{}", table.to_markdown());
+    }
+    Ok(())
+}
+
+pub(crate) fn eval_ordinal(args: EvalOrdinalArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::stages::depth::ordinal::{OrdinalAnnotations, OrdinalOptions, eval_ordinal};
+    use makeit4d::stages::depth::{DepthEstimator, onnx::OnnxDepth};
+    let annotations = OrdinalAnnotations::load(&args.annotations)?;
+    if annotations.pair_count() == 0 {
+        bail!("{}: no annotated pairs", args.annotations.display());
+    }
+    let model = match &args.model {
+        Some(m) => Some(OnnxDepth::from_manifest(m)?),
+        None => None,
+    };
+    let root = match &args.root {
+        Some(r) => r.clone(),
+        None => args
+            .annotations
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_default(),
+    };
+    let options = OrdinalOptions {
+        root,
+        extra: model.iter().map(|m| m as &dyn DepthEstimator).collect(),
+        save_dir: args.save.clone(),
+    };
+    let (bar, progress) = progress_bar(cancel);
+    let table = eval_ordinal(&annotations, &options, &progress);
+    bar.finish_and_clear();
+    let table = table?;
+    print_table(args.json, || table.to_json(), || table.to_markdown())
+}
+
+pub(crate) fn eval_nvs(args: EvalNvsArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::eval::nvs::{NvsDepth, NvsOptions, StereoPair, eval_nvs};
+    let pair = StereoPair::load(
+        &args.left,
+        &args.right,
+        &args.gt_disparity,
+        args.disparity_factor,
+        args.focal,
+        args.baseline,
+    )?
+    .scaled(args.scale)?;
+    let mut options = NvsOptions {
+        depth: match args.depth {
+            NvsDepthArg::Oracle => NvsDepth::Oracle,
+            NvsDepthArg::Estimated => NvsDepth::Estimated,
+        },
+        border_px: (args.border as f32 * args.scale).round() as usize,
+        steps: args.steps,
+        preset: args.inpaint_preset.parse()?,
+        layer_depth: args.layer_depth,
+        save_dir: args.save.clone(),
+        ..NvsOptions::default()
+    };
+    options.render.kernel = args.kernel.into();
+
+    if let Some(m) = &args.depth_model {
+        options.depth_settings.method = makeit4d::stages::depth::DepthMethod::Onnx;
+        options.depth_settings.model = Some(m.clone());
+    }
+    let (bar, progress) = progress_bar(cancel);
+    let table = eval_nvs(&pair, &options, &progress);
+    bar.finish_and_clear();
+    let table = table?;
+    print_table(args.json, || table.to_json(), || table.to_markdown())
+}
+
+pub(crate) fn eval_zoom(args: EvalZoomArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::eval::zoom::{ZoomOptions, default_photos, eval_zoom};
+    let photos = if args.photos.is_empty() {
+        let shared = std::env::current_dir()?.join("../shared/data");
+        default_photos(&shared)
+    } else {
+        args.photos.clone()
+    };
+    if photos.is_empty() {
+        bail!("eval zoom: no photos given and none found in ../shared/data/hires");
+    }
+    let mut options = ZoomOptions {
+        zooms: args.zoom.clone(),
+        crops: args.crops.clone(),
+        ..ZoomOptions::default()
+    };
+    options.project.inpaint.preset = args.inpaint_preset.parse()?;
+    options.project.render.kernel = args.kernel.into();
+    let (bar, progress) = progress_bar(cancel);
+    let table = eval_zoom(&photos, &options, &progress);
+    bar.finish_and_clear();
+    let table = table?;
+    print_table(args.json, || table.to_json(), || table.to_markdown())
+}

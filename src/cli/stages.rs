@@ -1,0 +1,161 @@
+//! The stages on their own: `makeit4d depth` and `makeit4d inpaint`.
+
+use super::args::{DepthArgs, InpaintArgs};
+use super::progress_bar;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+pub(crate) fn depth(args: DepthArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::stages::depth::{DepthMethod, DepthSettings, io, preview, run_depth_stage};
+    let input = makeit4d::image_io::load_image(&args.image)?;
+    let (w, h) = input.rgb.size();
+    let intrinsics = makeit4d::geometry::Intrinsics::from_hfov(w, h, args.fov);
+    let mut settings = DepthSettings::default();
+    settings.classical.horizon = args.horizon;
+    if let Some(model) = &args.model {
+        settings.method = DepthMethod::Onnx;
+        settings.model = Some(model.clone());
+    }
+    let (bar, progress) = progress_bar(cancel);
+    let stage = run_depth_stage(&settings, &input.rgb, &intrinsics, &progress);
+    bar.finish_and_clear();
+    let stage = stage?;
+    for w in &stage.warnings {
+        eprintln!("warning: {w}");
+    }
+    io::export_depth_png(&stage.estimate.depth, &args.out)?;
+    if let Some(path) = &args.colour {
+        let rgb = preview::depth_preview(&stage.estimate.depth, Some(&stage.estimate.sky));
+        makeit4d::image_io::save_rgb_png(path, &rgb, false)?;
+    }
+    if let Some(dir) = &args.cues {
+        write_cues(dir, &args.image, &input.rgb, &intrinsics, &settings)?;
+    }
+    println!(
+        "wrote {} ({}×{}, {} estimator; scale in {})",
+        args.out.display(),
+        w,
+        h,
+        stage.estimator,
+        io::sidecar_path(&args.out).display()
+    );
+    Ok(())
+}
+
+pub(crate) fn inpaint(args: InpaintArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use makeit4d::stages::inpaint::{InpaintPreset, command};
+    let preset: InpaintPreset = args.preset.parse()?;
+    let image = makeit4d::image_io::load_image(&args.image)?;
+    let hole = read_hole_mask(&args.mask, image.rgb.size())?;
+    if let Some(model) = &args.model {
+        use makeit4d::stages::inpaint::{InpaintRequest, Inpainter, onnx::OnnxInpainter};
+        let inpainter = OnnxInpainter::from_manifest(model)?;
+        let (bar, progress) = progress_bar(cancel);
+        let start = std::time::Instant::now();
+        let request = InpaintRequest {
+            image: &image.rgb,
+            hole: &hole,
+            allowed_source: None,
+            guide: None,
+            seed: args.seed,
+        };
+        let filled = inpainter.inpaint(&request, &progress);
+        bar.finish_and_clear();
+        let filled = filled?;
+        makeit4d::image_io::save_rgb_png(&args.out, &filled.image, false)?;
+        let holes = hole.data().iter().filter(|&&h| h).count();
+        println!(
+            "filled {holes} pixels with {} in {:.2} s; wrote {}",
+            inpainter.name(),
+            start.elapsed().as_secs_f64(),
+            args.out.display()
+        );
+        return Ok(());
+    }
+    let (bar, progress) = progress_bar(cancel);
+    let start = std::time::Instant::now();
+    let filled = command::inpaint_command(&image.rgb, &hole, preset, args.seed, &progress);
+    bar.finish_and_clear();
+    let filled = filled?;
+    makeit4d::image_io::save_rgb_png(&args.out, &filled, false)?;
+    println!(
+        "{}; wrote {}",
+        command::format_inpaint_summary(&hole, preset, start.elapsed().as_secs_f64()),
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// `depth --cues`: the classical estimator's cues as grey PNGs and its analysis as one line.
+fn write_cues(
+    dir: &std::path::Path,
+    image_path: &std::path::Path,
+    rgb: &makeit4d::raster::RgbRaster,
+    intrinsics: &makeit4d::geometry::Intrinsics,
+    settings: &makeit4d::stages::depth::DepthSettings,
+) -> anyhow::Result<()> {
+    use makeit4d::image_io::save_rgb_png;
+    use makeit4d::progress::Progress;
+    use makeit4d::raster::GrayRaster;
+    use makeit4d::stages::depth::classical::ClassicalDepth;
+    let a = ClassicalDepth::new(settings.classical.clone()).analyse(
+        rgb,
+        intrinsics,
+        &Progress::none(),
+    )?;
+    makeit4d::image_io::prepare_output_dir(dir)?;
+    let stem = image_path
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("image");
+    let e = &a.estimate;
+    let grey = |g: &GrayRaster| g.map(|v| [v, v, v]);
+    for (name, cue) in [
+        ("cue_position", &a.position_work),
+        ("cue_object", &a.object_work),
+        ("cue_haze", &a.haze_work),
+        ("cue_sky", &a.sky_work),
+        ("confidence", &e.confidence),
+    ] {
+        save_rgb_png(&dir.join(format!("{stem}_{name}.png")), &grey(cue), false)?;
+    }
+    println!(
+        "{stem}: horizon {:.3} ({}), haziness {:.2}, border coherence {:.3}, object structure {:.3}, object weight {:.2}, depth {:.2}–{:.2}",
+        a.horizon,
+        if a.horizon_detected {
+            "from sky"
+        } else {
+            "default/override"
+        },
+        a.haziness,
+        a.border_coherence,
+        a.object_structure,
+        a.object_weight,
+        e.depth.data().iter().copied().fold(f32::INFINITY, f32::min),
+        e.depth.data().iter().copied().fold(0.0f32, f32::max),
+    );
+    Ok(())
+}
+
+/// The hole mask of `inpaint --mask`: decoded by `image_io` (size limits, EXIF orientation),
+/// white (grey ≥ 50 %) = fill; an error when its size is not the photo's.
+fn read_hole_mask(
+    path: &std::path::Path,
+    image_size: (usize, usize),
+) -> makeit4d::Result<makeit4d::raster::MaskRaster> {
+    use makeit4d::stages::inpaint::command::mask_from_image;
+    let mask = mask_from_image(&makeit4d::image_io::decode_image(path)?);
+    if mask.size() != image_size {
+        return Err(makeit4d::Error::file(
+            path,
+            format!(
+                "the mask is {}×{} but the image is {}×{}",
+                mask.width(),
+                mask.height(),
+                image_size.0,
+                image_size.1
+            ),
+        ));
+    }
+    Ok(mask)
+}

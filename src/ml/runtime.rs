@@ -1,0 +1,353 @@
+//! Finding, probing and initialising ONNX Runtime (once per process), its status for `doctor`
+//! and the one-time fallback notice.
+
+use crate::error::Result;
+use std::collections::HashSet;
+use std::ffi::CStr;
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, OnceLock};
+
+/// The ONNX Runtime minor version `ort` needs at least (1.31).
+pub const MIN_ORT_MINOR_VERSION: u32 = ort::MINOR_VERSION;
+
+/// The command that installs ONNX Runtime where [`OrtSearch::from_env`] looks for it.
+pub const ORT_INSTALL_HINT: &str = "python3 -m pip install --target ~/.local/share/makeit4d/ort \
+     onnxruntime==1.31.1 (or set ORT_DYLIB_PATH to libonnxruntime.so)";
+
+/// The folder, below the data directory, where the runtime's shared library lies.
+const DATA_SUBDIR_IN_APP: &str = "ort/onnxruntime/capi";
+
+/// The program's per-user data folder: `$XDG_DATA_HOME/makeit4d` (an absolute
+/// `XDG_DATA_HOME` only, as the XDG spec says), else `~/.local/share/makeit4d`; `None` without
+/// a home. ONNX Runtime, the models and the editor's recovery file live under it.
+pub fn user_data_dir() -> Option<PathBuf> {
+    std::env::var_os("XDG_DATA_HOME")
+        .map(PathBuf::from)
+        .filter(|p| p.is_absolute())
+        .or_else(|| {
+            std::env::var_os("HOME")
+                .filter(|h| !h.is_empty())
+                .map(|home| PathBuf::from(home).join(".local/share"))
+        })
+        .map(|d| d.join("makeit4d"))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Finding and loading the runtime.
+// ---------------------------------------------------------------------------------------------
+
+/// Where to look for the ONNX Runtime shared library. [`OrtSearch::from_env`] fills it from the
+/// process environment; tests build one by hand.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct OrtSearch {
+    /// `ORT_DYLIB_PATH`: when set, the only candidate.
+    pub dylib_path: Option<PathBuf>,
+    /// The folder holding the executable.
+    pub exe_dir: Option<PathBuf>,
+    /// `$XDG_DATA_HOME/makeit4d/ort/onnxruntime/capi` (or its `~/.local/share` default).
+    pub data_dir: Option<PathBuf>,
+}
+
+impl OrtSearch {
+    /// The search the program uses: `ORT_DYLIB_PATH`, the executable's folder, the data folder.
+    pub fn from_env() -> Self {
+        let dylib_path = std::env::var_os("ORT_DYLIB_PATH")
+            .filter(|p| !p.is_empty())
+            .map(PathBuf::from);
+        let exe_dir = std::env::current_exe()
+            .ok()
+            .and_then(|exe| exe.parent().map(Path::to_path_buf));
+        Self {
+            dylib_path,
+            exe_dir,
+            data_dir: user_data_dir().map(|d| d.join(DATA_SUBDIR_IN_APP)),
+        }
+    }
+
+    /// The folders searched (for messages): the `ORT_DYLIB_PATH` file, or the two folders.
+    pub fn places(&self) -> Vec<PathBuf> {
+        match &self.dylib_path {
+            Some(path) => vec![path.clone()],
+            None => self
+                .exe_dir
+                .iter()
+                .chain(self.data_dir.iter())
+                .cloned()
+                .collect(),
+        }
+    }
+
+    /// Candidate library files in the order they are tried.
+    pub fn candidates(&self) -> Vec<PathBuf> {
+        if let Some(path) = &self.dylib_path {
+            return vec![absolute(path)];
+        }
+        let mut found = Vec::new();
+        for dir in self.exe_dir.iter().chain(self.data_dir.iter()) {
+            found.extend(library_files_in(dir));
+        }
+        found
+    }
+}
+
+/// `path` made absolute against the current folder (so `ort` never resolves it itself).
+fn absolute(path: &Path) -> PathBuf {
+    if path.is_absolute() {
+        return path.to_path_buf();
+    }
+    std::env::current_dir()
+        .map(|cwd| cwd.join(path))
+        .unwrap_or_else(|_| path.to_path_buf())
+}
+
+/// True for the runtime's own library names (`libonnxruntime.so`, `libonnxruntime.so.1.31.1`,
+/// `libonnxruntime.1.31.1.dylib`, `onnxruntime.dll`), not for its provider plug-ins.
+fn is_runtime_library_name(name: &str) -> bool {
+    if cfg!(target_os = "windows") {
+        name.eq_ignore_ascii_case("onnxruntime.dll")
+    } else if cfg!(target_os = "macos") {
+        name.starts_with("libonnxruntime.") && name.ends_with(".dylib")
+    } else {
+        name == "libonnxruntime.so" || name.starts_with("libonnxruntime.so.")
+    }
+}
+
+/// The runtime libraries in `dir`, highest version first.
+fn library_files_in(dir: &Path) -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let mut files: Vec<(Vec<u64>, PathBuf)> = entries
+        .filter_map(|entry| entry.ok())
+        .filter_map(|entry| {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if !is_runtime_library_name(&name) {
+                return None;
+            }
+            let version = name
+                .split(|c: char| !c.is_ascii_digit())
+                .filter_map(|part| part.parse::<u64>().ok())
+                .collect();
+            Some((version, absolute(&entry.path())))
+        })
+        .collect();
+    files.sort_by(|a, b| b.cmp(a));
+    files.into_iter().map(|(_, path)| path).collect()
+}
+
+/// Opens `path` as a shared library and checks that it is ONNX Runtime of a usable version;
+/// returns the library (kept loaded) and its version string. Never hands the file to `ort`.
+///
+/// This module's only `unsafe`: opening a shared library and calling its C entry point is unsafe
+/// by nature (`ort` does the same internally). Doing it here first is what turns a wrong file
+/// into a one-line error with the system's reason and gives `doctor` the runtime's version,
+/// which `ort` does not expose.
+#[allow(unsafe_code)]
+fn probe(path: &Path) -> Result<(libloading::Library, String), String> {
+    let where_ = path.display();
+    match std::fs::metadata(path) {
+        Ok(meta) if meta.is_file() => {}
+        Ok(_) => return Err(format!("{where_}: not a file")),
+        Err(err) => return Err(format!("{where_}: {err}")),
+    }
+    // SAFETY: loading a library runs its initialisers. The user (or the documented install
+    // location) named this file as ONNX Runtime; nothing else is loaded from there.
+    let library = unsafe { libloading::Library::new(path) }.map_err(|err| {
+        // libloading's own text is just "dlopen failed"; the system's reason is its source.
+        let reason = std::error::Error::source(&err)
+            .map(|source| source.to_string())
+            .unwrap_or_else(|| err.to_string());
+        let prefix = format!("{where_}: ");
+        let reason = reason.strip_prefix(&prefix).unwrap_or(&reason);
+        format!("{where_}: cannot be loaded as a shared library ({reason})")
+    })?;
+    type GetApiBase = unsafe extern "system" fn() -> *const ort::sys::OrtApiBase;
+    // SAFETY: `OrtGetApiBase` has this signature in every ONNX Runtime release.
+    let get_api_base = unsafe { library.get::<GetApiBase>(b"OrtGetApiBase") }.map_err(|_| {
+        format!("{where_}: not ONNX Runtime (the library has no OrtGetApiBase function)")
+    })?;
+    // SAFETY: the function takes no arguments and returns a pointer to a static table.
+    let base = unsafe { get_api_base() };
+    if base.is_null() {
+        return Err(format!("{where_}: OrtGetApiBase returned nothing"));
+    }
+    // SAFETY: `base` is non-null and points to the library's static `OrtApiBase`, whose
+    // `GetVersionString` returns a static NUL-terminated string.
+    let version_ptr = unsafe { ((*base).GetVersionString)() };
+    if version_ptr.is_null() {
+        return Err(format!("{where_}: ONNX Runtime reported no version"));
+    }
+    // SAFETY: checked non-null above; the string is static and NUL-terminated.
+    let version = unsafe { CStr::from_ptr(version_ptr) }
+        .to_string_lossy()
+        .into_owned();
+    let mut parts = version.split('.').map(|p| p.parse::<u32>().ok());
+    let (major, minor) = (parts.next().flatten(), parts.next().flatten());
+    match (major, minor) {
+        (Some(1), Some(minor)) if minor >= MIN_ORT_MINOR_VERSION => Ok((library, version)),
+        _ => Err(format!(
+            "{where_}: ONNX Runtime {version} is not supported (need 1.{MIN_ORT_MINOR_VERSION} or newer)"
+        )),
+    }
+}
+
+/// Checks that `path` is a usable ONNX Runtime library and returns its version, without
+/// installing it as the process's runtime.
+pub fn probe_library(path: &Path) -> std::result::Result<String, String> {
+    probe(&absolute(path)).map(|(_, version)| version)
+}
+
+/// The process's ONNX Runtime once loaded.
+pub(super) struct Runtime {
+    path: PathBuf,
+    version: String,
+    pub(super) environment: ort::environment::Environment,
+    /// Our own handle on the library, so that it is never unloaded behind `ort`'s back.
+    _library: libloading::Library,
+}
+
+/// Why no runtime could be loaded.
+#[derive(Clone, Debug)]
+pub(super) struct LoadFailure {
+    pub(super) message: String,
+    searched: Vec<PathBuf>,
+}
+
+/// Tries every candidate of `search` in order and initialises `ort` with the first usable one.
+pub(super) fn load_runtime(search: &OrtSearch) -> std::result::Result<Runtime, LoadFailure> {
+    let searched = search.places();
+    let candidates = search.candidates();
+    let fail = |message: String| LoadFailure {
+        message,
+        searched: searched.clone(),
+    };
+    if candidates.is_empty() {
+        let places: Vec<String> = searched.iter().map(|p| p.display().to_string()).collect();
+        return Err(fail(format!(
+            "no ONNX Runtime library in {}",
+            if places.is_empty() {
+                "any folder searched".to_string()
+            } else {
+                places.join(", ")
+            }
+        )));
+    }
+    let mut problems = Vec::new();
+    for path in candidates {
+        let (library, version) = match probe(&path) {
+            Ok(found) => found,
+            Err(problem) => {
+                problems.push(problem);
+                continue;
+            }
+        };
+        let builder = match ort::init_from(&path) {
+            Ok(builder) => builder,
+            Err(err) => {
+                problems.push(format!("{}: {err}", path.display()));
+                continue;
+            }
+        };
+        // From here on the library is `ort`'s for the life of the process: no other can be
+        // tried, so a failure to create the environment is final.
+        return match builder.with_name("makeit4d").with_telemetry(false).build() {
+            Ok(environment) => Ok(Runtime {
+                path,
+                version,
+                environment,
+                _library: library,
+            }),
+            Err(err) => Err(fail(format!(
+                "{}: ONNX Runtime {version} failed to start: {err}",
+                path.display()
+            ))),
+        };
+    }
+    let problems = problems.join("; ");
+    Err(fail(if search.dylib_path.is_some() {
+        format!("ORT_DYLIB_PATH: {problems}")
+    } else {
+        problems
+    }))
+}
+
+static RUNTIME: OnceLock<std::result::Result<Runtime, LoadFailure>> = OnceLock::new();
+
+/// The process's runtime, loaded on first use from [`OrtSearch::from_env`].
+pub(super) fn runtime() -> std::result::Result<&'static Runtime, &'static LoadFailure> {
+    RUNTIME
+        .get_or_init(|| load_runtime(&OrtSearch::from_env()))
+        .as_ref()
+}
+
+/// True when ONNX Runtime is loaded (loading it on first call).
+pub fn ort_available() -> bool {
+    runtime().is_ok()
+}
+
+/// What `doctor` prints about ONNX Runtime. `Display` writes one line per fact.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct OrtStatus {
+    /// The loaded library and its version string, when one loaded.
+    pub found: Option<(PathBuf, String)>,
+    /// Why none loaded (one line), when none did.
+    pub error: Option<String>,
+    /// Where it was looked for: the `ORT_DYLIB_PATH` file, or the folders searched.
+    pub searched: Vec<PathBuf>,
+}
+
+impl fmt::Display for OrtStatus {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match (&self.found, &self.error) {
+            (Some((path, version)), _) => {
+                write!(f, "ONNX Runtime {version}: {}", path.display())
+            }
+            (None, error) => {
+                let error = error.as_deref().unwrap_or("unknown reason");
+                write!(f, "ONNX Runtime: not available: {error}")?;
+                write!(f, "\n  learned models are off; classical methods are used")?;
+                write!(f, "\n  install: {ORT_INSTALL_HINT}")
+            }
+        }
+    }
+}
+
+/// Loads ONNX Runtime if not yet tried and says how it went. Cheap after the first call.
+pub fn ort_status() -> OrtStatus {
+    match runtime() {
+        Ok(rt) => OrtStatus {
+            found: Some((rt.path.clone(), rt.version.clone())),
+            error: None,
+            searched: Vec::new(),
+        },
+        Err(failure) => OrtStatus {
+            found: None,
+            error: Some(failure.message.clone()),
+            searched: failure.searched.clone(),
+        },
+    }
+}
+
+/// Returns a message the first time it is called for `what` in this process, `None` after.
+///
+/// For the front ends: when a learned model cannot be used (no runtime, bad manifest), the
+/// caller falls back to `fallback` and prints the returned message, so the user hears it once,
+/// not once per frame or layer. Example message:
+/// `depth: learned model unavailable (ONNX Runtime not found …); using the classical estimator`.
+pub fn fallback_notice(what: &str, reason: &dyn fmt::Display, fallback: &str) -> Option<String> {
+    static SEEN: OnceLock<Mutex<HashSet<String>>> = OnceLock::new();
+    let mut seen = SEEN
+        .get_or_init(Default::default)
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
+    seen.insert(what.to_string())
+        .then(|| format!("{what}: learned model unavailable ({reason}); using {fallback}"))
+}
+
+/// [`fallback_notice`] printed to standard error as a warning (at most once per `what`).
+pub fn warn_fallback_once(what: &str, reason: &dyn fmt::Display, fallback: &str) {
+    if let Some(message) = fallback_notice(what, reason, fallback) {
+        eprintln!("warning: {message}");
+    }
+}
