@@ -1356,6 +1356,7 @@ fn complete_canvas(
     )?;
     let mut result = result;
     crate::stages::outpaint::continue_smooth_regions(&mut result.image, hole);
+    crate::stages::outpaint::blend_seam(&mut result.image, hole, progress)?;
     let filled_disparity = result.guide.unwrap_or(disparity);
     let depth = filled_disparity.map(|d| {
         if d.is_finite() && d > 0.0 {
