@@ -1187,15 +1187,11 @@ pub fn size_preset(
     scene: &Scene,
     progress: &Progress,
 ) -> Result<Option<PresetSizing>> {
-    use crate::path::{CameraPath, Preset, PresetKind};
+    use crate::path::{CameraPath, Preset};
     let crate::path::CameraPath::Preset(requested) = project.camera.path else {
         return Ok(None);
     };
-    if !matches!(
-        requested.kind,
-        PresetKind::Orbit | PresetKind::Swing | PresetKind::Pan | PresetKind::FlyOut
-    ) || requested.amplitude == 0.0
-    {
+    if !requested.kind.is_sizable() || requested.amplitude == 0.0 {
         return Ok(None);
     }
     let camera = scene.output_camera(project);
