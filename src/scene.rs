@@ -1187,15 +1187,11 @@ pub fn size_preset(
     scene: &Scene,
     progress: &Progress,
 ) -> Result<Option<PresetSizing>> {
-    use crate::path::{CameraPath, Preset, PresetKind};
+    use crate::path::{CameraPath, Preset};
     let crate::path::CameraPath::Preset(requested) = project.camera.path else {
         return Ok(None);
     };
-    if !matches!(
-        requested.kind,
-        PresetKind::Orbit | PresetKind::Swing | PresetKind::Pan | PresetKind::FlyOut
-    ) || requested.amplitude == 0.0
-    {
+    if !requested.kind.is_sizable() || requested.amplitude == 0.0 {
         return Ok(None);
     }
     let camera = scene.output_camera(project);
@@ -1356,6 +1352,7 @@ fn complete_canvas(
     )?;
     let mut result = result;
     crate::stages::outpaint::continue_smooth_regions(&mut result.image, hole);
+    crate::stages::outpaint::blend_seam(&mut result.image, hole, progress)?;
     let filled_disparity = result.guide.unwrap_or(disparity);
     let depth = filled_disparity.map(|d| {
         if d.is_finite() && d > 0.0 {

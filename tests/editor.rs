@@ -441,6 +441,69 @@ fn autocruise_button_makes_keyframes() {
     );
 }
 
+/// Camera tab: "Size to scene" sizes an orbit to what the scene supports in the background
+/// (`scene::size_preset`, as `render --preset orbit` without `--amplitude`), says what it chose,
+/// and a lowered amplitude is one undoable edit.
+#[test]
+fn size_to_scene_sizes_the_preset_and_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = fast_project(dir.path());
+    let mut p = Project::load(&file).unwrap();
+    p.output.frames = 12;
+    let requested = makeit4d::path::Preset {
+        kind: makeit4d::path::PresetKind::Orbit,
+        amplitude: 3.0,
+    };
+    p.camera.path = CameraPath::Preset(requested);
+    p.save(&file).unwrap();
+    let Some(mut h) = harness(file) else {
+        return;
+    };
+    let limit = Duration::from_secs(600);
+    wait_idle(&mut h, limit);
+    h.get_by_label("6 Camera").click();
+    h.step();
+    h.get_by_label("Size to scene").click();
+    let start = Instant::now();
+    let said = |h: &Harness<'_, EditorApp>| {
+        h.state()
+            .notices()
+            .into_iter()
+            .find(|n| n.contains("orbit") && n.contains("amplitude"))
+    };
+    while said(&h).is_none() {
+        assert!(
+            start.elapsed() < limit,
+            "the sizing did not finish: {:?}",
+            h.state().notices()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+        h.step();
+    }
+    let notice = said(&h).unwrap();
+    let CameraPath::Preset(now) = h.state().project().unwrap().camera.path else {
+        panic!("the path is still a preset")
+    };
+    assert_eq!(now.kind, requested.kind);
+    assert!(now.amplitude > 0.0 && now.amplitude <= 3.0, "{now:?}");
+    if now.amplitude < 3.0 {
+        assert!(
+            notice.contains(&format!("sized to amplitude {:.2}", now.amplitude)),
+            "{notice}"
+        );
+        wait_idle(&mut h, limit);
+        h.state_mut().undo();
+        h.step();
+        assert_eq!(
+            h.state().project().unwrap().camera.path,
+            CameraPath::Preset(requested),
+            "one undo brings the requested amplitude back"
+        );
+    } else {
+        assert!(notice.contains("amplitude 3"), "{notice}");
+    }
+}
+
 /// Every tab, with the inspector's optional fields shown (keyframe editor, output size, frame
 /// range), names every widget a user can act on: a screen reader and `get_by_label` reach them.
 #[test]

@@ -200,6 +200,9 @@ pub struct EditorApp {
     pub(super) open_on_start: Option<PathBuf>,
     pub(super) last_build_stages: Vec<Stage>,
     pub(super) last_export: Option<String>,
+    /// A preset to size to the scene once the scene built for it is on screen
+    /// ([`Request::SizePreset`]).
+    pub(super) pending_sizing: Option<crate::path::Preset>,
     /// The view of each preview request in flight (by id), to know what an arriving frame shows.
     pub(super) requested_views: std::collections::BTreeMap<u64, View>,
     /// The preview picture on screen.
@@ -454,6 +457,7 @@ impl EditorApp {
             last_build_stages: Vec::new(),
             typed_path: String::new(),
             last_export: None,
+            pending_sizing: None,
             requested_views: Default::default(),
             shown: None,
             shown_times: Default::default(),
@@ -737,6 +741,61 @@ impl EditorApp {
         self.notify(report.trim_end().to_string());
     }
 
+    /// Sends the pending [`Request::SizePreset`] once the final scene on screen is the one
+    /// built for that preset; drops it when the path has changed since (the user's choice wins).
+    fn size_if_ready(&mut self) {
+        let Some(preset) = self.pending_sizing else {
+            return;
+        };
+        let Some(doc) = &self.doc else {
+            self.pending_sizing = None;
+            return;
+        };
+        if doc.project.camera.path != CameraPath::Preset(preset) {
+            self.pending_sizing = None;
+            return;
+        }
+        let ready = self
+            .snapshot
+            .as_ref()
+            .is_some_and(|s| !s.draft && s.generation == doc.generation);
+        if ready {
+            self.pending_sizing = None;
+            self.send(Command::SizePreset);
+        }
+    }
+
+    /// Applies what [`Command::SizePreset`] chose (one undo step, when it lowered the amplitude)
+    /// and says so, unless the path changed while it measured: then the path as set stays.
+    fn apply_sizing(&mut self, generation: u64, sizing: Option<crate::scene::PresetSizing>) {
+        let Some(sizing) = sizing else {
+            return;
+        };
+        let Some(doc) = &self.doc else { return };
+        let current = self
+            .snapshot
+            .as_ref()
+            .is_some_and(|s| s.generation == generation)
+            && doc.project.camera.path == CameraPath::Preset(sizing.requested);
+        if !current {
+            self.notify(format!(
+                "the path changed while the {} was sized: kept as set",
+                sizing.requested.kind
+            ));
+            return;
+        }
+        if sizing.lowered() {
+            let mut project = doc.project.clone();
+            project.camera.path = CameraPath::Preset(sizing.preset());
+            self.apply_edit("Preset sized to the scene", project);
+        }
+        if sizing.fits {
+            self.notify(sizing.to_string());
+        } else {
+            self.error(format!("warning: {sizing}"));
+        }
+    }
+
     // ---- Per-frame work ----
 
     pub(super) fn handle_events(&mut self) {
@@ -786,6 +845,7 @@ impl EditorApp {
                         let names: Vec<&str> = stages_run.iter().map(|s| s.name()).collect();
                         self.notify(format!("rebuilt {} in {seconds:.1} s", names.join(", ")));
                     }
+                    self.size_if_ready();
                 }
                 Event::DepthReady(early) => self.early_depth = Some(*early),
                 Event::BuildFailed {
@@ -813,6 +873,7 @@ impl EditorApp {
                     keyframes,
                     report,
                 } => self.apply_cruise(generation, keyframes, &report),
+                Event::Sized { generation, sizing } => self.apply_sizing(generation, sizing),
                 Event::Diagnostics {
                     generation,
                     diagnostics,
@@ -870,6 +931,10 @@ impl EditorApp {
         match request {
             Request::SuggestMotion => self.send(Command::SuggestMotion),
             Request::Autocruise => self.send(Command::Autocruise),
+            Request::SizePreset(preset) => {
+                self.pending_sizing = Some(preset);
+                self.size_if_ready();
+            }
             Request::Export {
                 out_dir,
                 options,

@@ -60,6 +60,9 @@ pub enum Command {
     /// Fly autocruise over the current scene (its project's autocruise settings, frame count
     /// and output size).
     Autocruise,
+    /// Size the current scene's orbit, swing, pan or fly-out to what the scene supports
+    /// ([`crate::scene::size_preset`], as `render --preset` without `--amplitude`).
+    SizePreset,
     /// Render the project's frames into a folder (building the scene first if needed).
     Export {
         /// The project to render.
@@ -80,6 +83,8 @@ pub enum JobKind {
     Suggest,
     /// Flying autocruise.
     Autocruise,
+    /// Sizing a preset to the scene.
+    SizePreset,
     /// Exporting frames.
     Export,
     /// Checking the path of the scene on screen ([`crate::path::quick_path_diagnostics`]).
@@ -93,6 +98,7 @@ impl JobKind {
             JobKind::Build => "building",
             JobKind::Suggest => "suggesting motion",
             JobKind::Autocruise => "autocruise",
+            JobKind::SizePreset => "sizing the preset",
             JobKind::Export => "exporting",
             JobKind::Diagnose => "checking the path",
         }
@@ -144,6 +150,13 @@ pub enum Event {
         keyframes: crate::path::KeyframePath,
         /// The multi-line report (distance, obstacles, warnings).
         report: String,
+    },
+    /// What [`Command::SizePreset`] chose (never applied by the worker).
+    Sized {
+        /// The scene generation it was measured on.
+        generation: u64,
+        /// The choice; `None` when the path is not a sizable preset.
+        sizing: Option<crate::scene::PresetSizing>,
     },
     /// The path diagnostics of the scene of generation `generation` (its project's path and
     /// thresholds), run after each final build.
@@ -656,6 +669,32 @@ fn scene_thread(
                             Err(e) => {
                                 send(Event::Error(format!("autocruise failed: {}", one_line(&e))))
                             }
+                        }
+                    }
+                }
+            }
+            Command::SizePreset => {
+                let snapshot = lock(&shared.scene).clone();
+                match snapshot {
+                    None => send(Event::Error(
+                        "no scene yet: wait for the build to finish, then ask again".into(),
+                    )),
+                    Some(s) => {
+                        let result = job(&shared, &ctx, JobKind::SizePreset, pool, |progress| {
+                            crate::scene::size_preset(&s.project, &s.scene, progress)
+                        });
+                        match result {
+                            Ok(sizing) => send(Event::Sized {
+                                generation: s.generation,
+                                sizing,
+                            }),
+                            Err(crate::Error::Cancelled) => {
+                                send(Event::Cancelled(JobKind::SizePreset))
+                            }
+                            Err(e) => send(Event::Error(format!(
+                                "sizing the preset failed: {}",
+                                one_line(&e)
+                            ))),
                         }
                     }
                 }

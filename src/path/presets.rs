@@ -87,6 +87,15 @@ impl PresetKind {
         PresetKind::DollyZoom,
     ];
 
+    /// Whether [`crate::scene::size_preset`] sizes this move to the scene: orbit, swing, pan and
+    /// fly-out (the moves that need content the photo never showed).
+    pub fn is_sizable(self) -> bool {
+        matches!(
+            self,
+            PresetKind::Orbit | PresetKind::Swing | PresetKind::Pan | PresetKind::FlyOut
+        )
+    }
+
     /// The name as project files and the command line spell it.
     pub fn name(self) -> &'static str {
         match self {

@@ -442,6 +442,10 @@ impl StagePanel for CameraPanel {
                     cx.edit("Camera preset", |p| {
                         p.camera.path = CameraPath::Preset(Preset::new(kind))
                     });
+                    // Sized to the scene, as `render --preset` without `--amplitude` does.
+                    if kind.is_sizable() {
+                        cx.requests.push(Request::SizePreset(Preset::new(kind)));
+                    }
                 }
                 ui.label(egui::RichText::new(preset.kind.description()).weak());
                 if let Some(v) = committed(ui, "amplitude", preset.amplitude, |ui, v| {
@@ -451,6 +455,17 @@ impl StagePanel for CameraPanel {
                     cx.edit("Preset amplitude", |p| {
                         p.camera.path = CameraPath::Preset(Preset { kind, amplitude: v })
                     });
+                }
+                if preset.kind.is_sizable()
+                    && ui
+                        .button("Size to scene")
+                        .on_hover_text(
+                            "The largest amplitude (up to this one) that keeps every frame under \
+                             the synthesised-share and hole thresholds",
+                        )
+                        .clicked()
+                {
+                    cx.requests.push(Request::SizePreset(*preset));
                 }
                 if ui
                     .button("Edit as keyframes")

@@ -68,6 +68,10 @@ pub enum Request {
     SuggestMotion,
     /// Fly autocruise over the scene and make its keyframes the path.
     Autocruise,
+    /// Size this orbit, swing, pan or fly-out to what the scene supports, once the scene for it
+    /// is built (the amplitude becomes the largest that keeps the path under the thresholds;
+    /// an amplitude set since wins).
+    SizePreset(crate::path::Preset),
     /// Start an export.
     Export {
         /// Target folder.

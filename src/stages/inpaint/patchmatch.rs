@@ -119,6 +119,15 @@ const CONFIDENCE_DECAY: f32 = 1.3;
 const OCCURRENCE: f32 = 0.1;
 /// Phases of a pass with the occurrence penalty on (see [`Occurrence`]).
 const OCCURRENCE_PHASES: usize = 4;
+/// The occurrence penalty a candidate pays is at most this multiple of its own matching cost
+/// (plus [`OCCURRENCE_FLOOR`]): the penalty only moves a match onto a source that matches
+/// nearly as well (at most `1 + OCCURRENCE_RELATIVE` times the cost), never from a
+/// near-perfect match (a flat grey margin continuing a flat grey wall) onto a clearly worse one
+/// (darker, glittering metal; `wild/grey.jpg`'s fly-out).
+const OCCURRENCE_RELATIVE: f32 = 3.0;
+/// The occurrence penalty a candidate always pays (when due), per patch pixel, whatever its
+/// cost: a little more than the cost of a 1 % grain in every colour channel.
+const OCCURRENCE_FLOOR: f32 = 3e-3;
 /// Occurrence penalty of `final`: duplication 1.11 / 11.65 / 22.13 → 0.50 / 1.37 / 1.60 for
 /// −0.10 / −0.07 / −0.27 dB (0.1 gives 0.52 / 1.16 / 1.49 for −0.09 / −0.16 / −0.27 dB: its
 /// k-NN vote averages the runner-up matches, which the penalty makes worse).
@@ -825,7 +834,8 @@ struct Field {
 /// A cell's *uses* are the target patches whose source centre lies in it divided by its area:
 /// a region copied once, as a whole, is used once. Its *fair share* is
 /// `max(1, targets / valid sources)`. A candidate pays
-/// `occurrence · patch area · (excess + memory)` for its cell, `excess = max(0, uses − fair)`.
+/// `occurrence · patch area · (excess + memory)` for its cell, `excess = max(0, uses − fair)`,
+/// capped by [`Occurrence::charge`] relative to its own matching cost.
 ///
 /// Every pass recounts the cells from the field; inside a band (processed in scan order) each
 /// change of match moves one count at once, so a band never sends more than its share to one
@@ -837,6 +847,8 @@ struct Field {
 struct Occurrence {
     /// Cost per patch pixel and excess use; 0 = off.
     per_use: f32,
+    /// [`OCCURRENCE_FLOOR`] for the whole patch.
+    floor: f32,
     side: usize,
     /// Cells per row.
     cw: usize,
@@ -855,6 +867,7 @@ impl Occurrence {
         let cells = if per_use > 0.0 { cw * ch } else { 0 };
         Occurrence {
             per_use,
+            floor: OCCURRENCE_FLOOR * problem.patch_pixels(),
             side,
             cw,
             fair: 1.0,
@@ -917,6 +930,23 @@ impl Occurrence {
         let cell = self.cell(s, w);
         let uses = (self.counts[cell] + delta[cell]) / self.area();
         self.per_use * ((uses - self.fair).max(0.0) + self.memory[cell])
+    }
+
+    /// What a candidate with matching cost `cost` pays of its `penalty`: at most
+    /// `OCCURRENCE_RELATIVE · cost + floor`. An uncrowded alternative of cost `c'` then wins
+    /// over a crowded candidate of cost `c` only when `c' < c + charge ≤ (1 + relative) · c +
+    /// floor`: the penalty spreads the fill over near-equal sources but never trades a good
+    /// match for a clearly worse one. Nondecreasing in `cost`.
+    #[inline]
+    fn charge(&self, penalty: f32, cost: f32) -> f32 {
+        penalty.min(OCCURRENCE_RELATIVE * cost.max(0.0) + self.floor)
+    }
+
+    /// The least [`Occurrence::charge`] of `penalty` whatever the cost: a bound for the early
+    /// exit of the patch distance.
+    #[inline]
+    fn least_charge(&self, penalty: f32) -> f32 {
+        penalty.min(self.floor)
     }
 }
 
@@ -1376,29 +1406,35 @@ fn patchmatch_pass(
                         let mut best = nnf[li] as usize;
                         let before = best;
                         let penalty = |s: usize, delta: &[f32]| occurrence.penalty(s, w, delta);
-                        let mut best_d = dist[li] + penalty(best, &delta);
-                        let consider = |cand: isize, best: &mut usize, best_d: &mut f32| {
-                            if cand < 0 || cand as usize >= n {
-                                return;
-                            }
-                            let cand = cand as usize;
-                            if cand == *best || !problem.valid[cand] {
-                                return;
-                            }
-                            let extra = penalty(cand, &delta);
-                            let d = extra + problem.cost(pixels, i, cand, *best_d - extra);
-                            if d < *best_d {
-                                *best_d = d;
-                                *best = cand;
-                            }
-                        };
+                        // The best candidate's cost and its cost with the charged penalty.
+                        let mut best_c = dist[li];
+                        let mut best_d = best_c + occurrence.charge(penalty(best, &delta), best_c);
+                        let consider =
+                            |cand: isize, best: &mut usize, best_c: &mut f32, best_d: &mut f32| {
+                                if cand < 0 || cand as usize >= n {
+                                    return;
+                                }
+                                let cand = cand as usize;
+                                if cand == *best || !problem.valid[cand] {
+                                    return;
+                                }
+                                let extra = penalty(cand, &delta);
+                                let bound = *best_d - occurrence.least_charge(extra);
+                                let c = problem.cost(pixels, i, cand, bound);
+                                let d = c + occurrence.charge(extra, c);
+                                if d < *best_d {
+                                    *best_d = d;
+                                    *best_c = c;
+                                    *best = cand;
+                                }
+                            };
                         // Propagation from the horizontal neighbour (same row, same band).
                         let nx = x as isize + step;
                         if nx >= 0 && (nx as usize) < w {
                             let j = (i as isize + step) as usize;
                             if problem.target[j] {
                                 let sj = nnf[j - base];
-                                consider(sj as isize - step, &mut best, &mut best_d);
+                                consider(sj as isize - step, &mut best, &mut best_c, &mut best_d);
                             }
                         }
                         // Propagation from the vertical neighbour (this band, else the field as it
@@ -1412,7 +1448,8 @@ fn patchmatch_pass(
                                 } else {
                                     before_nnf[j]
                                 };
-                                consider(sj as isize - step * w as isize, &mut best, &mut best_d);
+                                let cand = sj as isize - step * w as isize;
+                                consider(cand, &mut best, &mut best_c, &mut best_d);
                             }
                         }
                         // Random search around the current best, at halving radii.
@@ -1424,13 +1461,13 @@ fn patchmatch_pass(
                                 .clamp(r as isize, (w - 1 - r) as isize);
                             let cy = (sy + rng.symmetric(radius))
                                 .clamp(r as isize, (h - 1 - r) as isize);
-                            consider(cy * w as isize + cx, &mut best, &mut best_d);
+                            consider(cy * w as isize + cx, &mut best, &mut best_c, &mut best_d);
                             radius /= 2;
                         }
                         // One candidate from anywhere in the source (helps sparse sources).
                         let global = problem.random_source(&mut rng);
-                        consider(global as isize, &mut best, &mut best_d);
-                        dist[li] = best_d - penalty(best, &delta);
+                        consider(global as isize, &mut best, &mut best_c, &mut best_d);
+                        dist[li] = best_c;
                         nnf[li] = best as u32;
                         if best != before && occurrence.enabled() {
                             delta[occurrence.cell(before, w)] -= 1.0;
@@ -1588,7 +1625,8 @@ fn knn_candidates(
     for (t, &i) in targets.iter().enumerate() {
         let s = field.nnf[i as usize];
         src[t * k] = s;
-        dist[t * k] = field.dist[i as usize] + occurrence.penalty(s as usize, w, &no_change);
+        let c = field.dist[i as usize];
+        dist[t * k] = c + occurrence.charge(occurrence.penalty(s as usize, w, &no_change), c);
     }
     // The targets of each band of rows, for the occurrence counts a band updates as it goes.
     let bands: Vec<usize> = (0..=h.div_ceil(BAND_ROWS))
@@ -1653,7 +1691,9 @@ fn knn_candidates(
                                 return;
                             }
                             let extra = occurrence.penalty(cand, w, delta_ref);
-                            let d = extra + problem.cost(pixels, i, cand, dist[k - 1] - extra);
+                            let bound = dist[k - 1] - occurrence.least_charge(extra);
+                            let c = problem.cost(pixels, i, cand, bound);
+                            let d = c + occurrence.charge(extra, c);
                             insert_candidate(src, dist, cand as u32, d);
                         };
                         for (dx, dy) in [(-1isize, 0isize), (1, 0), (0, -1), (0, 1)] {
