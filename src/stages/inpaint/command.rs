@@ -10,7 +10,7 @@ use std::path::Path;
 
 /// Decodes a colour image file into an sRGB raster in `[0, 1]`.
 pub fn read_rgb(path: &Path) -> Result<RgbRaster> {
-    let decoded = image::open(path).map_err(|e| Error::file(path, e))?;
+    let decoded = crate::image_io::decode_image(path)?;
     rgb_from_image(&decoded).ok_or_else(|| Error::file(path, "the image has no pixels"))
 }
 
@@ -32,7 +32,7 @@ pub fn rgb_from_image(decoded: &image::DynamicImage) -> Option<RgbRaster> {
 /// Reads a hole mask for an image of `image_size` (`(width, height)`): white (luma ≥ 50 %) =
 /// fill this pixel. Errors name the file: unreadable, or not the image's size.
 pub fn read_hole_mask(path: &Path, image_size: (usize, usize)) -> Result<MaskRaster> {
-    let decoded = image::open(path).map_err(|e| Error::file(path, e))?;
+    let decoded = crate::image_io::decode_image(path)?;
     let mask = mask_from_image(&decoded);
     if mask.size() != image_size {
         return Err(Error::file(
@@ -58,25 +58,10 @@ pub fn mask_from_image(decoded: &image::DynamicImage) -> MaskRaster {
     MaskRaster::from_vec(w, h, data).unwrap_or_else(|| MaskRaster::new(0, 0, false))
 }
 
-/// Writes an sRGB raster as an 8-bit PNG (for the command and the benchmark's pictures).
+/// Writes an sRGB raster as an 8-bit PNG (for the command and the benchmark's pictures),
+/// atomically ([`crate::image_io::save_rgb_png`]).
 pub fn write_rgb_png(path: &Path, raster: &RgbRaster) -> Result<()> {
-    let (w, h) = raster.size();
-    let bytes: Vec<u8> = raster
-        .data()
-        .iter()
-        .flat_map(|c| c.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8))
-        .collect();
-    let w32 = u32::try_from(w).map_err(|_| Error::file(path, "image too wide"))?;
-    let h32 = u32::try_from(h).map_err(|_| Error::file(path, "image too tall"))?;
-    image::save_buffer_with_format(
-        path,
-        &bytes,
-        w32,
-        h32,
-        image::ExtendedColorType::Rgb8,
-        image::ImageFormat::Png,
-    )
-    .map_err(|e| Error::file(path, e))
+    crate::image_io::save_rgb_png(path, raster, false)
 }
 
 /// `makeit4d inpaint`: fills the `true` pixels of `hole` in `image` with the PatchMatch
