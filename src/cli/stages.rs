@@ -46,7 +46,7 @@ pub(crate) fn inpaint(args: InpaintArgs, cancel: Arc<AtomicBool>) -> anyhow::Res
     use makeit4d::stages::inpaint::{InpaintPreset, command};
     let preset: InpaintPreset = args.preset.parse()?;
     let image = makeit4d::image_io::load_image(&args.image)?;
-    let hole = read_hole_mask(&args.mask, image.rgb.size())?;
+    let hole = makeit4d::stages::inpaint::command::read_hole_mask(&args.mask, image.rgb.size())?;
     if let Some(model) = &args.model {
         use makeit4d::stages::inpaint::{InpaintRequest, Inpainter, onnx::OnnxInpainter};
         let inpainter = OnnxInpainter::from_manifest(model)?;
@@ -135,27 +135,4 @@ fn write_cues(
         e.depth.data().iter().copied().fold(0.0f32, f32::max),
     );
     Ok(())
-}
-
-/// The hole mask of `inpaint --mask`: decoded by `image_io` (size limits, EXIF orientation),
-/// white (grey ≥ 50 %) = fill; an error when its size is not the photo's.
-fn read_hole_mask(
-    path: &std::path::Path,
-    image_size: (usize, usize),
-) -> makeit4d::Result<makeit4d::raster::MaskRaster> {
-    use makeit4d::stages::inpaint::command::mask_from_image;
-    let mask = mask_from_image(&makeit4d::image_io::decode_image(path)?);
-    if mask.size() != image_size {
-        return Err(makeit4d::Error::file(
-            path,
-            format!(
-                "the mask is {}×{} but the image is {}×{}",
-                mask.width(),
-                mask.height(),
-                image_size.0,
-                image_size.1
-            ),
-        ));
-    }
-    Ok(mask)
 }
