@@ -1175,7 +1175,7 @@ impl std::fmt::Display for PresetSizing {
 
 /// Sizes an orbit, swing, pan or fly-out to what `scene` can support: the largest share of the
 /// preset's amplitude (down to [`MIN_SIZED_AMPLITUDE`]) whose quick diagnostics (at most
-/// [`SIZING_FRAMES`] frames at the quick resolution) keep every frame under [`SIZING_MARGIN`] of
+/// `SIZING_FRAMES` frames at the quick resolution) keep every frame under [`SIZING_MARGIN`] of
 /// the project's synthesised-share and hole thresholds, found by bisection. The requested amplitude is kept
 /// when it fits, and when even the smallest does not (the report says why). `None` for a path
 /// that is not one of those presets.

@@ -4,7 +4,7 @@
 //! - [`GpuPreview::new`] builds the splatter and the viewport pipeline once, from eframe's
 //!   `RenderState`, and stores them in egui_wgpu's `callback_resources` (egui's
 //!   `custom3d_wgpu` pattern); the UI keeps a cheap handle.
-//! - Each frame the preview panel adds a [`SplatCallback`] carrying only parameters: the cloud,
+//! - Each frame the preview panel adds a `SplatCallback` carrying only parameters: the cloud,
 //!   the displaced positions of the frame (for a moving scene), the camera at the viewport's
 //!   pixel size and the splat settings.
 //! - `prepare` uploads the cloud once per scene change and the positions once per motion

@@ -34,11 +34,16 @@
 //! continues across a layer threshold; a synthesised point of another layer is what that layer
 //! shows *behind* this one). The samples are averaged: colour `Σ ρ·w·c / Σ ρ·w` (`ρ = 1` for
 //! observed points, [`SYNTHESISED_COLOUR_WEIGHT`] for synthesised ones, so the photo's colour
-//! dominates where both reach a pixel), depth `Σ w_c·z / Σ w_c`, opacity `α_s = Σ w_c / Σ g·tent`,
-//! covered share `γ_s = min(1, Σ g·tent)`. The next surface is the nearest point behind, and so on
+//! dominates where both reach a pixel), depth `z₁·(1 + Σ w_c·δ / Σ w_c)` with `δ = (z − z₁)/z₁`
+//! clamped to ±[`MAX_DEPTH_OFFSET`], opacity `α_s = Σ w_c / Σ g·tent`, covered share
+//! `γ_s = min(1, Σ g·tent)`, or 1 where the samples surround the pixel along both source axes
+//! ([`sides_of`]; a footprint from central differences on a depth ramp falls short of its
+//! farther neighbour, and the shortfall would show what lies behind as a crack). The next surface is the nearest point behind, and so on
 //! for up to `k` surfaces (the ones behind the front surface, seen only through partial coverage,
 //! are averaged with the tent), front to back: each takes `a_s = α_s·min(γ_s, B)` of what is left of
-//! the pixel (`B` starts at 1 and loses `a_s`), `C = Σ a_s·c_s`, `A = Σ a_s`, and the written
+//! the pixel (`B` starts at 1 and loses `a_s`; a synthesised surface takes at most `B` less the
+//! coverage of the observed points behind it, so inpainted content fills disocclusions and never
+//! covers the photo's own pixels), `C = Σ a_s·c_s`, `A = Σ a_s`, and the written
 //! colour is `C / A`. Coverages of adjacent surfaces add (they are disjoint parts of the pixel;
 //! "over" would let what lies behind leak through between them), a nearer surface hides what it
 //! covers, an edge is anti-aliased over what lies behind it, and transparent points composite as
@@ -50,7 +55,9 @@
 //! supports apart in the source grid, so their depths differ by at most
 //! `2·R·ω·(|t_u,z| + |t_v,z|)` (`R` the kernel's support, `ω` the prefilter's widening, `t_z`
 //! the tangents' depth in the target camera). A point's tolerance is that, at most
-//! [`SAME_SURFACE_RELATIVE_DEPTH`]` · z` (a steeper step is an occlusion), plus 1 % of `z`.
+//! [`SAME_SURFACE_RELATIVE_DEPTH`]` · z` (a steeper step is an occlusion), plus 1 % of `z`, or,
+//! when larger, [`parallax_tolerance`]: a step that this view shows no parallax for (all of them
+//! in a pure zoom) is no occlusion, so it does not split the photo into separate surfaces.
 //!
 //! **Determinism.** Every per-pixel quantity is a minimum or a sum over a set that the minimum
 //! fixes, and the sums run in point order (tiles keep point order), so the output does not depend
@@ -95,7 +102,7 @@ pub const SYNTHESISED_COLOUR_WEIGHT: f32 = 1.0 / 16.0;
 pub const BASE_RELATIVE_TOLERANCE: f32 = 0.01;
 
 /// Smallest `Σ g·tent` with which a surface that surrounds a pixel covers it whole (see
-/// [`SurfaceSums::resolve`]).
+/// `SurfaceSums::resolve`).
 pub const SURROUNDED_MIN_GEOMETRY: f32 = 0.5;
 
 /// Largest relative depth offset of a sample from its surface's front that the surface's depth
@@ -602,8 +609,8 @@ struct SurfaceSums {
 }
 
 impl SurfaceSums {
-    /// The surface's colour, opacity `α = Σ w_c / Σ g·tent`, covered share `min(1, Σ g·tent)`
-    /// and depth.
+    /// The surface's colour, opacity `α = Σ w_c / Σ g·tent`, covered share (`min(1, Σ g·tent)`,
+    /// or 1 where its samples surround the pixel) and depth (`front` is its front point's).
     #[inline]
     fn resolve(&self, front: f32) -> ([f32; 3], f32, f32, f32) {
         if !(self.coverage > 0.0 && self.geometry > 0.0) {
