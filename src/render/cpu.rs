@@ -149,7 +149,12 @@ pub fn sharpness(m: f32, kernel: SplatKernel) -> f32 {
         SplatKernel::CatmullRom => {
             let g = (2.0 * m - 1.0).clamp(0.0, 1.0);
             if g.is_finite() {
-                (g * 1023.0).round() / 1023.0
+                // `(g·1023).round()` without the library call baseline x86-64 makes for it
+                // (see [`floor_to_i64`]); `x` is in [0, 1023], so the fraction is exact.
+                let x = g * 1023.0;
+                let i = x as u32;
+                let q = if x - i as f32 >= 0.5 { i + 1 } else { i };
+                q as f32 / 1023.0
             } else {
                 0.0
             }
@@ -684,10 +689,31 @@ impl SurfaceKey {
     /// continues across a layer threshold). A synthesised point of another layer is what that
     /// layer shows behind this one, never a sample of it.
     #[inline]
-    fn holds(&self, s: &Splat) -> bool {
-        (s.layer == self.layer || (s.observed && self.observed))
-            && s.z - s.tol <= self.z
-            && s.z + s.tol >= self.z
+    fn holds(&self, s: &Probe) -> bool {
+        (s.key.layer == self.layer || (s.key.observed && self.observed))
+            && s.lo <= self.z
+            && s.hi >= self.z
+    }
+}
+
+/// What [`SurfaceKey::holds`] and [`PixelState::classify`] need of a splat, computed once per
+/// splat and pass.
+#[derive(Clone, Copy, Debug)]
+struct Probe {
+    key: SurfaceKey,
+    /// `z − τ`, `z + τ`.
+    lo: f32,
+    hi: f32,
+}
+
+impl Probe {
+    #[inline]
+    fn of(s: &Splat) -> Self {
+        Self {
+            key: SurfaceKey::of(s),
+            lo: s.z - s.tol,
+            hi: s.z + s.tol,
+        }
     }
 }
 
@@ -705,6 +731,8 @@ struct PixelState {
     colour: [f32; 3],
     coverage: f32,
     depth: f32,
+    /// `1 / cur.z`, set when a surface pass starts.
+    inv_front: f32,
     sums: SurfaceSums,
 }
 
@@ -718,6 +746,7 @@ impl Default for PixelState {
             colour: [0.0; 3],
             coverage: 0.0,
             depth: 0.0,
+            inv_front: 0.0,
             sums: SurfaceSums::default(),
         }
     }
@@ -757,16 +786,16 @@ impl PixelState {
 
     /// What a splat is to the current surface: a sample, a candidate for the next surface, or
     /// neither (a sample of the previous surface, or in front of the current one).
+    /// `first`: this is the front surface's pass (nothing is in front of it).
     #[inline]
-    fn classify(&self, s: &Splat) -> Role {
-        if self.prev.holds(s) {
+    fn classify(&self, s: &Probe, first: bool) -> Role {
+        if !first && self.prev.holds(s) {
             return Role::None;
         }
         if self.cur.holds(s) {
             return Role::Member;
         }
-        let key = SurfaceKey::of(s);
-        if self.cur.before(&key) {
+        if self.cur.before(&s.key) {
             Role::Behind
         } else {
             Role::None
@@ -872,11 +901,7 @@ pub fn render_cpu_with(
                 pixels.fill(PixelState::default());
                 let t = ty * tiles_x + tx;
                 // Chunks in point order, each tile's splats in point order within a chunk.
-                let tile_splats = || {
-                    chunks
-                        .iter()
-                        .flat_map(|c| &c.splats[c.starts[t] as usize..c.starts[t + 1] as usize])
-                };
+                let tile_splats = || chunks.iter().flat_map(|c| c.tile(t));
                 let tile = TileRect {
                     x0: x_start,
                     y0: y_start,
@@ -885,11 +910,12 @@ pub fn render_cpu_with(
                 };
                 // Visibility: the nearest point that covers each pixel.
                 for s in tile_splats() {
-                    for_each_covered(s, &tile, width, height, None, |p, t, _, _| {
-                        let w_c = s.scale * t;
+                    let key = SurfaceKey::of(s);
+                    for_each_offset(s, &tile, width, height, s.tent_extent, |p, sx, sy| {
                         let px = &mut pixels[p];
-                        let key = SurfaceKey::of(s);
-                        if w_c >= MIN_VISIBLE_WEIGHT && key.before(&px.cur) {
+                        if key.before(&px.cur)
+                            && s.scale * tent(sx) * tent(sy) >= MIN_VISIBLE_WEIGHT
+                        {
                             px.cur = key;
                         }
                     });
@@ -905,31 +931,63 @@ pub fn render_cpu_with(
                     // every one (beyond its tolerance) plays no part, and one farther than every
                     // one can only be the next surface (its tent is enough). Neither changes
                     // the result, only the work.
-                    let (z_lo, z_hi) = pixels
-                        .iter()
-                        .filter(|px| px.open())
-                        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), px| {
-                            (lo.min(px.cur.z), hi.max(px.cur.z))
-                        });
+                    let mut z_lo = f32::INFINITY;
+                    let mut z_hi = f32::NEG_INFINITY;
+                    for px in pixels.iter_mut().filter(|px| px.open()) {
+                        z_lo = z_lo.min(px.cur.z);
+                        z_hi = z_hi.max(px.cur.z);
+                        px.inv_front = 1.0 / px.cur.z;
+                    }
                     for s in tile_splats() {
                         if s.z + s.tol < z_lo {
                             continue;
                         }
+                        // Only the front pass uses the kernel, and only for splats that can be
+                        // samples of a pixel's surface; elsewhere the tent is enough.
                         let shape = if s.z - s.tol > z_hi { None } else { shape };
+                        let extent = if shape.is_some() {
+                            s.extent
+                        } else {
+                            s.tent_extent
+                        };
                         let c = values[s.index as usize];
-                        for_each_covered(s, &tile, width, height, shape, |p, t, k, sides| {
-                            let (w_c, w) = (s.scale * t, s.scale * k);
+                        let probe = Probe::of(s);
+                        let first = surface == 0;
+                        let [su, sv] = s.sharpness.map(|g| support(g, kernel));
+                        let sharp = s.sharpness != [0.0; 2];
+                        let rho = if s.observed {
+                            1.0
+                        } else {
+                            SYNTHESISED_COLOUR_WEIGHT
+                        };
+                        for_each_offset(s, &tile, width, height, extent, |p, sx, sy| {
                             let px = &mut pixels[p];
                             if !px.open() {
                                 return;
                             }
-                            match px.classify(s) {
+                            match px.classify(&probe, first) {
                                 Role::Member => {
-                                    let rho = if s.observed {
-                                        1.0
-                                    } else {
-                                        SYNTHESISED_COLOUR_WEIGHT
+                                    // `kernel_weights`, with the splat's constants hoisted.
+                                    let (t, k) = match shape {
+                                        Some(kernel) if sharp => {
+                                            if !(sx.abs() < su && sy.abs() < sv) {
+                                                return;
+                                            }
+                                            (
+                                                tent(sx) * tent(sy),
+                                                kernel_1d(sx, s.sharpness[0], kernel)
+                                                    * kernel_1d(sy, s.sharpness[1], kernel),
+                                            )
+                                        }
+                                        _ => {
+                                            let t = tent(sx) * tent(sy);
+                                            (t, t)
+                                        }
                                     };
+                                    if t == 0.0 && k == 0.0 {
+                                        return;
+                                    }
+                                    let (w_c, w) = (s.scale * t, s.scale * k);
                                     let (cw, kw) = (rho * w_c, rho * w);
                                     let sums = &mut px.sums;
                                     sums.geometry += s.area * t;
@@ -940,21 +998,23 @@ pub fn render_cpu_with(
                                         sums.coverage_colour[i] += cw * v;
                                         sums.kernel_colour[i] += kw * v;
                                     }
-                                    let front = px.cur.z;
                                     if t > 0.0 {
-                                        sums.sides |= sides;
+                                        sums.sides |= sides_of(sx, sy);
                                     }
                                     sums.depth += w_c
-                                        * ((s.z - front) / front)
+                                        * (s.z * px.inv_front - 1.0)
                                             .clamp(-MAX_DEPTH_OFFSET, MAX_DEPTH_OFFSET);
                                 }
                                 Role::Behind => {
+                                    let w_c = s.scale * tent(sx) * tent(sy);
+                                    if w_c == 0.0 {
+                                        return;
+                                    }
                                     if s.observed && !px.cur.observed {
                                         px.sums.reserved += w_c;
                                     }
-                                    let key = SurfaceKey::of(s);
-                                    if w_c >= MIN_VISIBLE_WEIGHT && key.before(&px.next) {
-                                        px.next = key;
+                                    if w_c >= MIN_VISIBLE_WEIGHT && probe.key.before(&px.next) {
+                                        px.next = probe.key;
                                     }
                                 }
                                 Role::None => {}
@@ -976,6 +1036,7 @@ pub fn render_cpu_with(
                 }
             }
         });
+    recycle(chunks);
     Ok(Frame {
         colour,
         coverage,
@@ -991,23 +1052,18 @@ struct TileRect {
     h: usize,
 }
 
-/// Calls `f(pixel in tile, tent, kernel)` (the kernels' values, before the point's `α·g`) for
-/// every pixel of `tile` inside the splat's support where either is non-zero; with `kernel`
-/// `None` only the tent's support is visited and the kernel is the tent.
+/// Calls `f(pixel in tile, s_x, s_y)` for every pixel of `tile` strictly inside the box of
+/// half-extents `extent` around the splat's centre, with `(s_x, s_y)` the pixel's offset in the
+/// splat's source-pixel grid.
 #[inline]
-fn for_each_covered(
+fn for_each_offset(
     s: &Splat,
     tile: &TileRect,
     width: usize,
     height: usize,
-    kernel: Option<SplatKernel>,
-    mut f: impl FnMut(usize, f32, f32, u8),
+    extent: [f32; 2],
+    mut f: impl FnMut(usize, f32, f32),
 ) {
-    let extent = if kernel.is_some() {
-        s.extent
-    } else {
-        s.tent_extent
-    };
     let Some((x0, x1)) = pixel_span(s.u, extent[0], width) else {
         return;
     };
@@ -1021,26 +1077,10 @@ fn for_each_covered(
     let [m0, m1, m2, m3] = s.inverse;
     for y in y0..=y1 {
         let dy = y as f32 - s.v;
+        let row = (y - tile.y0) * TILE;
         for x in x0..=x1 {
             let dx = x as f32 - s.u;
-            let sx = m0 * dx + m1 * dy;
-            let sy = m2 * dx + m3 * dy;
-            let (w_c, w) = match kernel {
-                Some(kernel) => kernel_weights(sx, sy, s.sharpness, kernel),
-                None => {
-                    let t = tent(sx) * tent(sy);
-                    (t, t)
-                }
-            };
-            if w_c == 0.0 && w == 0.0 {
-                continue;
-            }
-            f(
-                (y - tile.y0) * TILE + (x - tile.x0),
-                w_c,
-                w,
-                sides_of(sx, sy),
-            );
+            f(row + (x - tile.x0), m0 * dx + m1 * dy, m2 * dx + m3 * dy);
         }
     }
 }
@@ -1082,18 +1122,35 @@ fn tile_range(s: &Splat, width: usize, height: usize) -> Option<(usize, usize, u
     Some((x0 / TILE, x1 / TILE, y0 / TILE, y1 / TILE))
 }
 
-/// The splats of one chunk of points, sorted by tile.
+/// The splats of one chunk of points, and their order by tile.
+#[derive(Default)]
 struct BinnedChunk {
-    /// Splats grouped by tile (a splat reaching several tiles appears in each), point order
-    /// inside a tile.
+    /// The chunk's splats, in point order.
     splats: Vec<Splat>,
-    /// Start of each tile's group in `splats`; one extra entry holds the total.
+    /// Indices into `splats` grouped by tile (a splat reaching several tiles appears in each),
+    /// point order inside a tile.
+    order: Vec<u32>,
+    /// Start of each tile's group in `order`; one extra entry holds the total.
     starts: Vec<u32>,
 }
 
+impl BinnedChunk {
+    /// Tile `t`'s splats, in point order.
+    #[inline]
+    fn tile(&self, t: usize) -> impl Iterator<Item = &Splat> + '_ {
+        self.order[self.starts[t] as usize..self.starts[t + 1] as usize]
+            .iter()
+            .map(|&i| &self.splats[i as usize])
+    }
+}
+
+/// Buffers of finished renders, reused by the next one: a frame's splats are hundreds of
+/// megabytes at a few million points, and fresh pages cost the kernel's zeroing every frame.
+static SPARE_CHUNKS: std::sync::Mutex<Vec<BinnedChunk>> = std::sync::Mutex::new(Vec::new());
+
 /// Projects the points in parallel chunks and sorts each chunk's splats into the tiles they reach
-/// (a counting sort that keeps point order). Reading the chunks in order gives every tile its
-/// splats in point order, as one global sort would, without any shared writes.
+/// (a counting sort of indices that keeps point order). Reading the chunks in order gives every
+/// tile its splats in point order, as one global sort would, without any shared writes.
 fn project_and_bin(
     projector: &Projector<'_>,
     width: usize,
@@ -1104,44 +1161,77 @@ fn project_and_bin(
     let n = projector.positions.len();
     let n_tiles = tiles_x * tiles_y;
     let chunk = n.div_ceil(4 * rayon::current_num_threads()).max(1 << 14);
-    (0..n.div_ceil(chunk))
-        .into_par_iter()
+    let count = n.div_ceil(chunk);
+    let mut chunks = std::mem::take(&mut *SPARE_CHUNKS.lock().unwrap_or_else(|e| e.into_inner()));
+    chunks.resize_with(count, BinnedChunk::default);
+    chunks.par_iter_mut().enumerate().for_each(|(c, binned)| {
+        let points = c * chunk..((c + 1) * chunk).min(n);
+        let BinnedChunk {
+            splats,
+            order,
+            starts,
+        } = binned;
+        splats.clear();
+        starts.clear();
+        starts.resize(n_tiles + 1, 0);
+        for i in points {
+            let Some(s) = projector.splat(i) else {
+                continue;
+            };
+            if let Some((tx0, tx1, ty0, ty1)) = tile_range(&s, width, height) {
+                for ty in ty0..=ty1 {
+                    for tx in tx0..=tx1 {
+                        starts[ty * tiles_x + tx + 1] += 1;
+                    }
+                }
+                splats.push(s);
+            }
+        }
+        for t in 0..n_tiles {
+            starts[t + 1] += starts[t];
+        }
+        order.clear();
+        order.resize(starts[n_tiles] as usize, 0);
+        // `starts[t]` serves as tile t's cursor, then is restored from its neighbour.
+        for (i, s) in splats.iter().enumerate() {
+            if let Some((tx0, tx1, ty0, ty1)) = tile_range(s, width, height) {
+                for ty in ty0..=ty1 {
+                    for tx in tx0..=tx1 {
+                        let t = ty * tiles_x + tx;
+                        order[starts[t] as usize] = i as u32;
+                        starts[t] += 1;
+                    }
+                }
+            }
+        }
+        for t in (1..=n_tiles).rev() {
+            starts[t] = starts[t - 1];
+        }
+        starts[0] = 0;
+    });
+    chunks
+}
+
+/// Largest total size of the buffers kept for the next render, bytes: a preview-sized cloud's
+/// splats fit, a one-off export of a huge cloud does not stay resident.
+const MAX_SPARE_BYTES: usize = 512 << 20;
+
+/// Hands a render's buffers back for the next one ([`SPARE_CHUNKS`]).
+fn recycle(chunks: Vec<BinnedChunk>) {
+    let bytes: usize = chunks
+        .iter()
         .map(|c| {
-            let points = c * chunk..((c + 1) * chunk).min(n);
-            let mut projected = Vec::with_capacity(points.len());
-            let mut starts = vec![0u32; n_tiles + 1];
-            for i in points {
-                let Some(s) = projector.splat(i) else {
-                    continue;
-                };
-                if let Some((tx0, tx1, ty0, ty1)) = tile_range(&s, width, height) {
-                    for ty in ty0..=ty1 {
-                        for tx in tx0..=tx1 {
-                            starts[ty * tiles_x + tx + 1] += 1;
-                        }
-                    }
-                    projected.push(s);
-                }
-            }
-            for t in 0..n_tiles {
-                starts[t + 1] += starts[t];
-            }
-            let mut cursor = starts.clone();
-            let mut splats = vec![Splat::default(); starts[n_tiles] as usize];
-            for s in projected {
-                if let Some((tx0, tx1, ty0, ty1)) = tile_range(&s, width, height) {
-                    for ty in ty0..=ty1 {
-                        for tx in tx0..=tx1 {
-                            let t = ty * tiles_x + tx;
-                            splats[cursor[t] as usize] = s;
-                            cursor[t] += 1;
-                        }
-                    }
-                }
-            }
-            BinnedChunk { splats, starts }
+            c.splats.capacity() * std::mem::size_of::<Splat>()
+                + (c.order.capacity() + c.starts.capacity()) * 4
         })
-        .collect()
+        .sum();
+    if bytes > MAX_SPARE_BYTES {
+        return;
+    }
+    let mut spare = SPARE_CHUNKS.lock().unwrap_or_else(|e| e.into_inner());
+    if spare.is_empty() {
+        *spare = chunks;
+    }
 }
 
 /// The CPU renderer behind the [`FrameRenderer`] trait.
