@@ -2,15 +2,15 @@
 //! the panels and the workers.
 
 use super::STORAGE_KEY;
+use super::context::{
+    CameraInfo, FlyCamera, PanelContext, PanelMessage, PreviewInfo, Probe, Request, TimelineState,
+};
 use super::gpu_preview::GpuPreview;
 use super::history::History;
 use super::images::Textures;
-use super::panels::{
-    CameraInfo, FlyCamera, PanelContext, PanelMessage, PreviewInfo, Probe, Request, StagePanel,
-    Tab, all_panels,
-};
+use super::panels::{StagePanel, Tab, all_panels};
 use super::recovery::{default_recovery_dir, find_recovery};
-use super::timeline::{TimelineState, timeline_ui};
+use super::timeline::timeline_ui;
 use super::viewport::{CpuPreview, PreviewRenderer};
 use super::worker::{
     Command, Event, JobKind, JobStatus, PreviewWorker, SceneSnapshot, SceneWorker,

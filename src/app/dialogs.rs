@@ -1,7 +1,7 @@
 //! File dialogs (native, or the typed-path prompt), the unsaved-changes confirmation.
 
 use super::app::*;
-use super::panels::PanelMessage;
+use super::context::PanelMessage;
 use eframe::egui::{self, Color32, Key, RichText};
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::sync_channel;

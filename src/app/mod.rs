@@ -19,6 +19,7 @@
 #[allow(clippy::module_inception)]
 mod app;
 pub mod bench;
+pub mod context;
 mod dialogs;
 pub mod gpu_preview;
 pub mod history;
