@@ -342,3 +342,38 @@ impl EditorApp {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn completions_list_the_folder_entries_that_match() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("alpha.json"), "{}").unwrap();
+        std::fs::write(dir.path().join("alps.jpg"), "").unwrap();
+        std::fs::write(dir.path().join(".hidden"), "").unwrap();
+        std::fs::create_dir(dir.path().join("album")).unwrap();
+        let base = format!("{}/", dir.path().display());
+        let got = path_completions(&format!("{base}al"), 10);
+        assert_eq!(
+            got,
+            vec![
+                format!("{base}album/"),
+                format!("{base}alpha.json"),
+                format!("{base}alps.jpg"),
+            ]
+        );
+        assert_eq!(
+            path_completions(&format!("{base}alps.jpg"), 10),
+            Vec::<String>::new()
+        );
+        assert_eq!(
+            path_completions(&base, 10).len(),
+            3,
+            "hidden entries only on a dot"
+        );
+        assert_eq!(path_completions(&format!("{base}.h"), 10).len(), 1);
+        assert!(path_completions("/no/such/folder/x", 10).is_empty());
+    }
+}
