@@ -58,11 +58,12 @@
 //! order, so the result is the same whatever the number of threads.
 //!
 //! Memory: a few buffers of the image's size per level (working pixels of 6 floats, the NNF,
-//! distances, weights, masks); about 500 MB peak for a 2560×1600 image with a 60 % hole, 743 MB
-//! with the k-NN vote of `final` (k source indices, costs and weights per target centre;
-//! `examples/inpaint_large` under `/usr/bin/time -v`, 2026-12-02: 741.5 MB before the occurrence
-//! penalty, whose cell counts are small). [`PatchMatchInpainter::inpaint_traced`] adds two
-//! `u32` per pixel for its copy map.
+//! distances, weights, masks); about 500 MB peak for a 2560×1600 image with a 60 % hole (one
+//! central ellipse), 743 MB with the k-NN vote of `final` (k source indices, costs and weights
+//! per target centre; `makeit4d inpaint PHOTO --mask ELLIPSE.png --out OUT.png --preset final`
+//! under `/usr/bin/time -v`, 2026-12-02: 741.5 MB before the occurrence penalty, whose cell
+//! counts are small). [`PatchMatchInpainter::inpaint_traced`] adds two `u32` per pixel for its
+//! copy map.
 //!
 //! Files: this module holds the presets, the parameters and the entry point; `features.rs` the
 //! texture features, `pyramid.rs` the levels, `cost.rs` a level's problem and the patch cost,
