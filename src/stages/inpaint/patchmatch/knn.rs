@@ -2,8 +2,8 @@
 
 use super::cost::{Field, Problem};
 use super::occurrence::Occurrence;
+use super::vote::{wexler_sigma2, wexler_weight};
 use super::{BAND_ROWS, CH, KNN_PASSES, KNN_SIGMA2_SCALE, NONE, OCCURRENCE_PHASES, Px};
-use crate::raster::quantile;
 use crate::stages::inpaint::common::KeyedRng;
 use rayon::prelude::*;
 
@@ -197,7 +197,7 @@ pub(super) fn candidate_weights(problem: &Problem, candidates: &Candidates) -> V
         .map(|d| d[0] / npix)
         .filter(|d| d.is_finite())
         .collect();
-    let sigma2 = KNN_SIGMA2_SCALE * quantile(&best, 0.75).unwrap_or(0.0).max(1e-6);
+    let sigma2 = KNN_SIGMA2_SCALE * wexler_sigma2(&best);
     let mut weights = vec![0.0f32; candidates.src.len()];
     for (i, &t) in candidates.slot.iter().enumerate() {
         if t == NONE {
@@ -209,8 +209,7 @@ pub(super) fn candidate_weights(problem: &Problem, candidates: &Candidates) -> V
             if candidates.src[t * k + c] == NONE || !d.is_finite() {
                 continue;
             }
-            weights[t * k + c] =
-                ((-(d / npix) / (2.0 * sigma2)).exp() * problem.confidence[i]).max(1e-30);
+            weights[t * k + c] = wexler_weight(d / npix, sigma2, problem.confidence[i]);
         }
     }
     weights

@@ -17,7 +17,7 @@ pub(super) fn vote_weights(problem: &Problem, field: &Field) -> Vec<f32> {
         .filter(|&(_, &s)| s != NONE)
         .map(|(&d, _)| d / npix)
         .collect();
-    let sigma2 = quantile(&mean_dists, 0.75).unwrap_or(0.0).max(1e-6);
+    let sigma2 = wexler_sigma2(&mean_dists);
     field
         .dist
         .par_iter()
@@ -25,9 +25,21 @@ pub(super) fn vote_weights(problem: &Problem, field: &Field) -> Vec<f32> {
         .with_min_len(4096)
         .map(|(&d, &confidence)| {
             let d = if d.is_finite() { d / npix } else { 0.0 };
-            ((-d / (2.0 * sigma2)).exp() * confidence).max(1e-30)
+            wexler_weight(d, sigma2, confidence)
         })
         .collect()
+}
+
+/// Wexler's `σ²`: the 75th percentile of the matches' mean squared distances (at least 10⁻⁶).
+pub(super) fn wexler_sigma2(mean_dists: &[f32]) -> f32 {
+    quantile(mean_dists, 0.75).unwrap_or(0.0).max(1e-6)
+}
+
+/// Wexler's weight of a match of mean squared distance `mean_d`: `exp(−mean_d / 2σ²) ·
+/// confidence` (at least 10⁻³⁰).
+#[inline]
+pub(super) fn wexler_weight(mean_d: f32, sigma2: f32, confidence: f32) -> f32 {
+    ((-mean_d / (2.0 * sigma2)).exp() * confidence).max(1e-30)
 }
 
 /// The weighted mean of what the target patches overlapping pixel `q` copy onto it; `None`
