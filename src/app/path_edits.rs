@@ -73,8 +73,9 @@ impl EditorApp {
         self.notify(report.trim_end().to_string());
     }
 
-    /// Sends the pending [`Request::SizePreset`] once the final scene on screen is the one
-    /// built for that preset; drops it when the path has changed since (the user's choice wins).
+    /// Sends the pending [`Request::SizePreset`](super::context::Request::SizePreset) once the
+    /// final scene on screen is the one built for that preset; drops it when the path has changed
+    /// since (the user's choice wins).
     pub(super) fn size_if_ready(&mut self) {
         let Some(preset) = self.pending_sizing else {
             return;

@@ -7,9 +7,9 @@
 //! right view `d` pixels further left.
 //!
 //! Protocol. The scene is built from the **left image only**, through
-//! [`SceneBuilder`] and a [`Project`] whose camera path has two keyframes: frame 0 the input
-//! camera, frame 1 the camera translated by `(B, 0, 0)`. Frame 1 is rendered and scored against
-//! the right image:
+//! [`SceneBuilder`](crate::scene::SceneBuilder) and a [`Project`] whose camera path has two
+//! keyframes: frame 0 the input camera, frame 1 the camera translated by `(B, 0, 0)`. Frame 1
+//! is rendered and scored against the right image:
 //!
 //! - on the **view**: every pixel except a strip of `border_px` columns on the left (40 px at
 //!   Middlebury's full size, the region the references below were measured on);
@@ -44,11 +44,11 @@
 //! - **no-op**: the left image as the right view (a floor).
 //!
 //! What a scene method's render leaves empty (coverage below
-//! [`HOLE_COVERAGE`]: the unseen border without outpainting, disocclusions without layer
-//! inpainting) is filled with the same harmonic fill before scoring, standing in for the
-//! papers' decoder network, which always outputs a full image; the `holes %` column says how
-//! much that was and `psnr_unfilled_db` (in the table as "PSNR unfilled") scores the render
-//! with its holes black.
+//! [`HOLE_COVERAGE`](crate::render::HOLE_COVERAGE): the unseen border without outpainting,
+//! disocclusions without layer inpainting) is filled with the same harmonic fill before scoring,
+//! standing in for the papers' decoder network, which always outputs a full image; the `holes %`
+//! column says how much that was and `psnr_unfilled_db` (in the table as "PSNR unfilled") scores
+//! the render with its holes black.
 //!
 //! **Consistency** (Make-It-4D Table 1, [`crate::metrics::consistency_error`]): the frame one
 //! camera step later — frame 1, the right view — warped back onto the first frame (frame 0, the

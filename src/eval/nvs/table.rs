@@ -72,7 +72,7 @@ impl NvsMethod {
     }
 }
 
-/// Settings of [`eval_nvs`].
+/// Settings of [`eval_nvs`](super::eval_nvs).
 #[derive(Clone, Debug, PartialEq)]
 pub struct NvsOptions {
     /// Oracle or estimated depth.

@@ -13,7 +13,7 @@
 //! largest canvas allowed. A still camera gives the photo itself, with no margin.
 //!
 //! Intrinsics: the focal length is kept and the principal point shifted by the padding
-//! (InfNat-Zero's rule, [`Intrinsics::padded`]).
+//! (InfNat-Zero's rule, [`Intrinsics::padded`](crate::geometry::Intrinsics::padded)).
 
 mod footprint;
 mod frame;

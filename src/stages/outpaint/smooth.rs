@@ -18,7 +18,7 @@ pub(super) const SMOOTH_TAPER_CELLS: f32 = 8.0;
 /// smear of the border's colours.
 ///
 /// On cells of [`SMOOTH_CELL_PX`]² pixels: every hole cell takes the nearest known cell `p`, fits
-/// a plane to the known cells within [`SMOOTH_FIT_CELLS`] of `p` (per channel, least squares) and
+/// a plane to the known cells within `SMOOTH_FIT_CELLS` of `p` (per channel, least squares) and
 /// extrapolates it, tapered (`SMOOTH_TAPER_CELLS`). Where that fit is smooth (RMS residual `r`
 /// below [`SMOOTH_RESIDUAL`]; weight `1 − r/SMOOTH_RESIDUAL`) the cell's mean of the fill is
 /// moved onto the extrapolation; the correction is interpolated bilinearly between cell centres

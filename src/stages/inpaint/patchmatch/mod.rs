@@ -20,7 +20,7 @@
 //! k-NN voting (`vote_candidates` > 1, the `final` preset): at the end of every level and at
 //! full resolution, k-nearest-neighbour PatchMatch (Barnes et al. 2010) finds several good
 //! source patches per target, and every pixel becomes the weighted mean over all of them
-//! (same weights, `σ²` widened by [`KNN_SIGMA2_SCALE`]). Where the matches agree (an edge, a
+//! (same weights, `σ²` widened by `KNN_SIGMA2_SCALE`). Where the matches agree (an edge, a
 //! periodic texture) the fill stays sharp; where the known pixels do not decide the texture's
 //! phase the fill tends to the mean of the plausible answers, which is what minimises the
 //! squared error. Each level then hands this mean, not a single-match vote, to the finer one.
@@ -32,7 +32,7 @@
 //! it, a sky border may be filled from a similar-looking lake far below).
 //!
 //! Occurrence penalty (Kaspar et al. 2015): every candidate also pays for how often its part of
-//! the source is already copied beyond a fair share ([`occurrence::Occurrence`]), in the
+//! the source is already copied beyond a fair share (`occurrence::Occurrence`), in the
 //! PatchMatch passes and the k-NN search. A unique region (a kite, a post) is then used about
 //! once instead of being pasted again and again, and a flat sky is filled from all of the sky
 //! rather than from its few smoothest spots; a repetitive texture has many equal sources and is

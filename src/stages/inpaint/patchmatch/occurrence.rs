@@ -15,9 +15,9 @@ use super::{NONE, OCCURRENCE_FLOOR, OCCURRENCE_RELATIVE};
 ///
 /// Every pass recounts the cells from the field; inside a band (processed in scan order) each
 /// change of match moves one count at once, so a band never sends more than its share to one
-/// spot. Bands that run at once start from the same counts and may all rush to the same best
-/// spot, so a pass runs the bands in [`OCCURRENCE_PHASES`] phases (band `b` in phase
-/// `b mod phases`), recounting between them: only the bands of one phase herd together.
+/// spot. Bands that run at once start from the same counts and may all rush to the same best spot,
+/// so a pass runs the bands in [`OCCURRENCE_PHASES`](super::OCCURRENCE_PHASES) phases (band `b` in
+/// phase `b mod phases`), recounting between them: only the bands of one phase herd together.
 /// `memory`, the excess of earlier passes halved per pass, keeps a spot that was crowded from
 /// drawing the crowd straight back.
 pub(super) struct Occurrence {
