@@ -19,6 +19,12 @@
 //! before it. [`SceneBuilder::build`] re-runs a stage only when its key changed, so moving a
 //! layer threshold re-runs layers onward and never depth. Every stage reports progress and stops
 //! when cancelled; the command line and the editor share this code.
+//!
+//! Files: this module holds the [`Scene`] and the stage outputs; `builder.rs` the
+//! [`SceneBuilder`], `cache.rs` the stage caches and keys, `canvas.rs` the canvas stage,
+//! `cloud.rs` the cloud stage's helpers, `tools.rs` the inpainter and layer-depth estimator a
+//! project asks for, `camera.rs` the output camera, scene scale and autocruise, `sizing.rs` the
+//! preset sizing.
 
 mod builder;
 mod cache;

@@ -62,6 +62,10 @@
 //! Reference points measured outside the project on full-size Aloe (whole view minus the left
 //! 40 px): the no-op scores 14.9 dB, a naive 1-pixel splat with the ground-truth disparity plus
 //! OpenCV's Telea fill 23.8 dB / SSIM 0.80.
+//!
+//! Files: this module holds [`eval_nvs`] and the scene's project and depth; `pair.rs` the stereo
+//! pair, `table.rs` the options and the results table, `methods.rs` the scene rows and the
+//! per-frame row, `naive.rs` the naive baseline.
 
 mod methods;
 mod naive;

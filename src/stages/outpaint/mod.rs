@@ -14,6 +14,10 @@
 //!
 //! Intrinsics: the focal length is kept and the principal point shifted by the padding
 //! (InfNat-Zero's rule, [`Intrinsics::padded`](crate::geometry::Intrinsics::padded)).
+//!
+//! Files: this module holds [`outpaint`]; `layout.rs` the canvas layout, depth slab and sizing
+//! rule, `footprint.rs` the sizing from the camera path, `frame.rs` the photo's flat frame,
+//! `smooth.rs` the smooth regions continued into the margin and `seam.rs` the seam blend.
 
 mod footprint;
 mod frame;
