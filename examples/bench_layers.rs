@@ -110,7 +110,8 @@ fn main() -> anyhow::Result<()> {
     let progress = Progress::none();
     // The parts of plan_layers.
     {
-        use makeit4d::stages::layers::{edges, interval_of, layer_thresholds, morph};
+        use makeit4d::raster::morph;
+        use makeit4d::stages::layers::{edges, interval_of, layer_thresholds};
         let t = layer_thresholds(&depth, &params)?;
         let labels = depth.map(|z| interval_of(z, &t) as u16);
         let ms = best_ms(runs, || {

@@ -452,6 +452,21 @@ fn download_and_install(
         "download {} by hand and run `makeit4d models install {} --file PATH`",
         entry.url, entry.name
     );
+    // The downloaded file checked and installed, or removed (a bad part is not resumed).
+    let verify_and_finish = || match verify(
+        entry,
+        &part,
+        url,
+        &folder.join("manifest.json"),
+        bytes,
+        check_graph,
+    ) {
+        Ok(()) => finish(dir, entry, &part),
+        Err(e) => {
+            let _ = std::fs::remove_file(&part);
+            Err(e)
+        }
+    };
     let mut config = ureq::Agent::config_builder()
         .timeout_connect(Some(std::time::Duration::from_secs(20)))
         .timeout_recv_response(Some(std::time::Duration::from_secs(60)))
@@ -474,20 +489,7 @@ fn download_and_install(
         200 => false,
         416 if have > 0 => {
             // The part is already whole (or the server will not resume): check it as it is.
-            return match verify(
-                entry,
-                &part,
-                url,
-                &folder.join("manifest.json"),
-                bytes,
-                check_graph,
-            ) {
-                Ok(()) => finish(dir, entry, &part),
-                Err(e) => {
-                    let _ = std::fs::remove_file(&part);
-                    Err(e)
-                }
-            };
+            return verify_and_finish();
         }
         code => {
             return Err(Error::invalid(format!(
@@ -544,20 +546,7 @@ fn download_and_install(
              command again to resume it, or {by_hand}"
         )));
     }
-    match verify(
-        entry,
-        &part,
-        url,
-        &folder.join("manifest.json"),
-        bytes,
-        check_graph,
-    ) {
-        Ok(()) => finish(dir, entry, &part),
-        Err(e) => {
-            let _ = std::fs::remove_file(&part);
-            Err(e)
-        }
-    }
+    verify_and_finish()
 }
 
 /// Removes `folder` when it is empty (a failed first install leaves nothing behind).

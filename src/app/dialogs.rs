@@ -1,7 +1,7 @@
 //! File dialogs (native, or the typed-path prompt), the unsaved-changes confirmation.
 
 use super::app::*;
-use super::panels::PanelMessage;
+use super::context::PanelMessage;
 use eframe::egui::{self, Color32, Key, RichText};
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::sync_channel;
@@ -340,5 +340,40 @@ impl EditorApp {
             }
             None => {}
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn completions_list_the_folder_entries_that_match() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("alpha.json"), "{}").unwrap();
+        std::fs::write(dir.path().join("alps.jpg"), "").unwrap();
+        std::fs::write(dir.path().join(".hidden"), "").unwrap();
+        std::fs::create_dir(dir.path().join("album")).unwrap();
+        let base = format!("{}/", dir.path().display());
+        let got = path_completions(&format!("{base}al"), 10);
+        assert_eq!(
+            got,
+            vec![
+                format!("{base}album/"),
+                format!("{base}alpha.json"),
+                format!("{base}alps.jpg"),
+            ]
+        );
+        assert_eq!(
+            path_completions(&format!("{base}alps.jpg"), 10),
+            Vec::<String>::new()
+        );
+        assert_eq!(
+            path_completions(&base, 10).len(),
+            3,
+            "hidden entries only on a dot"
+        );
+        assert_eq!(path_completions(&format!("{base}.h"), 10).len(), 1);
+        assert!(path_completions("/no/such/folder/x", 10).is_empty());
     }
 }

@@ -2,8 +2,9 @@
 //! editor.
 
 use super::app::*;
+use super::context::{PanelMessage, Probe};
 use super::gpu_preview::GpuPreview;
-use super::panels::{PanelMessage, Probe, Tab};
+use super::panels::Tab;
 use super::worker::{JobStatus, SceneSnapshot};
 use crate::geometry::View;
 use crate::project::Project;

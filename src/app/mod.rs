@@ -1,8 +1,9 @@
 //! The editor: an egui (eframe, wgpu back end) front end over the library.
 //!
-//! - [`EditorApp`] (app.rs) lays out the window: stage tabs, the central view, an inspector for
-//!   the selected stage, the timeline and the status bar. It owns the project, the undo history
-//!   and the worker handles, and turns every edit into a new project snapshot.
+//! - [`EditorApp`] (app.rs, its behaviour in `impl` blocks next to it) lays out the window
+//!   (frame.rs): stage tabs, the central view, an inspector for the selected stage, the timeline
+//!   and the status bar. It owns the project, the undo history (documents.rs) and the worker
+//!   handles, and turns every edit into a new project snapshot.
 //! - Each stage has one panel (panels/), all behind the [`panels::StagePanel`] trait.
 //! - Work never runs on the UI thread (worker.rs): a named scene thread owns the one
 //!   [`crate::scene::SceneBuilder`] (so editing a threshold re-runs layers onward only) and runs
@@ -19,7 +20,11 @@
 #[allow(clippy::module_inception)]
 mod app;
 pub mod bench;
+pub mod context;
 mod dialogs;
+mod documents;
+mod events;
+mod frame;
 pub mod gpu_preview;
 pub mod history;
 pub mod images;
@@ -28,6 +33,7 @@ mod inspect;
 mod menu;
 mod notices;
 pub mod panels;
+mod path_edits;
 mod preview;
 mod recovery;
 mod status_bar;

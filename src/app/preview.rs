@@ -2,8 +2,9 @@
 //! (CPU or GPU renderer, playback).
 
 use super::app::*;
+use super::context::CameraInfo;
 use super::gpu_preview::GpuPreview;
-use super::panels::{CameraInfo, Tab};
+use super::panels::Tab;
 use super::worker::{PreviewOutput, PreviewRequest, PreviewWork};
 use crate::geometry::View;
 use eframe::egui::{self};
@@ -190,7 +191,7 @@ impl EditorApp {
                 .as_ref()
                 .filter(|(_, cloud, _)| moving && Arc::ptr_eq(cloud, &scene.cloud));
             self.preview.frame_index = positions.map_or(frame, |p| p.0);
-            self.preview.gpu = Some(super::panels::GpuDraw {
+            self.preview.gpu = Some(super::context::GpuDraw {
                 preview: gpu.clone(),
                 cloud: scene.cloud.clone(),
                 positions: positions.map(|p| p.2.clone()),

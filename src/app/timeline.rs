@@ -2,74 +2,11 @@
 //! delete, interpolation and ease per key) and a strip coloured by each frame's hole fraction
 //! (upper half) and synthesised share (lower half).
 
-use super::panels::{PanelContext, Request};
-use crate::path::{CameraPath, Ease, Interpolation, PathDiagnostics};
+pub use super::context::TimelineState;
+
+use super::context::{PanelContext, Request};
+use crate::path::{CameraPath, Ease, Interpolation};
 use eframe::egui::{self, Color32, Sense, Stroke, Ui, pos2, vec2};
-use std::collections::BTreeMap;
-
-/// Playback and frame selection.
-#[derive(Clone, Debug, Default)]
-pub struct TimelineState {
-    /// The current output frame.
-    pub frame: usize,
-    /// Playing.
-    pub playing: bool,
-    /// Wrap around at the end while playing.
-    pub looping: bool,
-    /// Fractional frame clock while playing.
-    pub clock: f64,
-    /// The selected keyframe (index into the path's keys).
-    pub selected_key: Option<usize>,
-    /// Hole fraction of every rendered preview frame, by frame (reset with each new scene).
-    pub hole_fractions: BTreeMap<usize, f32>,
-    /// The path diagnostics of the newest scene checked (its generation): holes and
-    /// synthesised share of every frame, from the scene worker.
-    pub diagnostics: Option<(u64, PathDiagnostics)>,
-    /// While playing, [`TimelineState::frame`] is the frame the preview picture shows (set by
-    /// the app when a rendered frame arrives) and only the clock runs on: a preview slower
-    /// than the timeline drops frames instead of lagging behind the counter (the CPU
-    /// preview). Off: the frame follows the clock (the GPU preview draws every frame itself).
-    pub follows_preview: bool,
-}
-
-impl TimelineState {
-    /// Advances playback by `dt` seconds at `fps` over `frames` frames. Returns true when the
-    /// frame changed.
-    pub fn advance(&mut self, dt: f64, fps: f64, frames: usize) -> bool {
-        if !self.playing || frames == 0 {
-            return false;
-        }
-        let before = self.frame;
-        self.clock += dt * fps;
-        let mut f = self.clock.floor().max(0.0) as usize;
-        if f >= frames {
-            if self.looping {
-                self.clock %= frames as f64;
-                f = self.clock.floor() as usize % frames;
-            } else {
-                f = frames - 1;
-                self.clock = f as f64;
-                self.playing = false;
-            }
-        }
-        if !self.follows_preview || !self.playing {
-            self.frame = f;
-        }
-        self.frame != before
-    }
-
-    /// The frame the playback clock is at (equal to [`TimelineState::frame`] unless the frame
-    /// follows the preview).
-    pub fn clock_frame(&self, frames: usize) -> usize {
-        (self.clock.floor().max(0.0) as usize).min(frames.saturating_sub(1))
-    }
-
-    /// Jumps to `frame` (stops the clock there).
-    pub fn seek(&mut self, frame: usize) {
-        self.frame = frame;
-        self.clock = frame as f64;
-    }
-}
 
 /// Key frames of the path (none for a preset).
 pub fn key_frames(path: &CameraPath) -> Vec<f64> {

@@ -3,7 +3,7 @@
 //! keyframes in the inspector.
 
 use super::{PanelContext, Request, StagePanel, Tab, committed, placeholder_ui};
-use crate::app::timeline::TimelineState;
+use crate::app::context::TimelineState;
 use crate::geometry::View;
 use crate::path::{
     AutocruiseParams, CameraPath, CruiseDirection, Ease, Interpolation, Preset, PresetKind,

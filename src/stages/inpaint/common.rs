@@ -4,7 +4,7 @@
 
 use super::{InpaintRequest, InpaintResult};
 use crate::error::{Error, Result};
-use crate::raster::{GrayRaster, RgbRaster, quantile};
+use crate::raster::{GrayRaster, MaskRaster, RgbRaster, morph, quantile};
 
 /// What a validated request asks for.
 pub(crate) enum Plan {
@@ -268,59 +268,20 @@ pub(crate) fn chessboard_depth(inside: &[bool], w: usize, h: usize) -> Vec<u32> 
 }
 
 /// Square dilation by `radius` (a `(2·radius+1)²` window): true where any pixel in the window
-/// is true. Separable running counts, O(pixels).
+/// (clipped to the image) is true ([`morph::dilate`] on a slice).
 pub(crate) fn dilate(mask: &[bool], w: usize, h: usize, radius: usize) -> Vec<bool> {
-    box_any(mask, w, h, radius)
+    morph::dilate(&as_mask(mask, w, h), 2 * radius + 1).into_vec()
 }
 
 /// Square erosion by `radius`: true where every pixel of the window is true and the window lies
-/// inside the image.
+/// inside the image ([`morph::erode_with`], [`morph::Outside::Unset`], on a slice).
 pub(crate) fn erode_inside(mask: &[bool], w: usize, h: usize, radius: usize) -> Vec<bool> {
-    let outside: Vec<bool> = mask.iter().map(|&b| !b).collect();
-    let grown = box_any(&outside, w, h, radius);
-    let mut out: Vec<bool> = grown.iter().map(|&b| !b).collect();
-    for y in 0..h {
-        for x in 0..w {
-            if x < radius || y < radius || x + radius >= w || y + radius >= h {
-                out[y * w + x] = false;
-            }
-        }
-    }
-    out
+    morph::erode_with(&as_mask(mask, w, h), 2 * radius + 1, morph::Outside::Unset).into_vec()
 }
 
-/// True where some pixel in the `(2·radius+1)²` window (clipped to the image) is true.
-fn box_any(mask: &[bool], w: usize, h: usize, radius: usize) -> Vec<bool> {
-    if radius == 0 {
-        return mask.to_vec();
-    }
-    // Horizontal pass: count of matches within radius, by prefix sums per row.
-    let mut horizontal = vec![false; w * h];
-    let mut prefix = vec![0u32; w + 1];
-    for y in 0..h {
-        let row = &mask[y * w..(y + 1) * w];
-        for x in 0..w {
-            prefix[x + 1] = prefix[x] + u32::from(row[x]);
-        }
-        for x in 0..w {
-            let lo = x.saturating_sub(radius);
-            let hi = (x + radius + 1).min(w);
-            horizontal[y * w + x] = prefix[hi] > prefix[lo];
-        }
-    }
-    let mut out = vec![false; w * h];
-    let mut col_prefix = vec![0u32; h + 1];
-    for x in 0..w {
-        for y in 0..h {
-            col_prefix[y + 1] = col_prefix[y] + u32::from(horizontal[y * w + x]);
-        }
-        for y in 0..h {
-            let lo = y.saturating_sub(radius);
-            let hi = (y + radius + 1).min(h);
-            out[y * w + x] = col_prefix[hi] > col_prefix[lo];
-        }
-    }
-    out
+/// `mask` (`w × h`, row-major) as a raster.
+fn as_mask(mask: &[bool], w: usize, h: usize) -> MaskRaster {
+    MaskRaster::from_vec(w, h, mask.to_vec()).expect("mask of w × h pixels")
 }
 
 /// Number of true pixels.

@@ -246,13 +246,19 @@ mod tests {
             let (cx, cy) = (15.0 + (k % 4) as f32 * 40.0, 20.0 + (k / 4) as f32 * 40.0);
             paint_disc(&mut image, cx, cy, 4.0, [0.95, 0.05, 0.05]);
         }
-        assert_eq!(morph_count(&unique_objects(&image, None)), 0);
-        assert_eq!(morph_count(&unique_objects(&texture(100, 80), None)), 0);
+        assert_eq!(
+            crate::raster::morph::count(&unique_objects(&image, None)),
+            0
+        );
+        assert_eq!(
+            crate::raster::morph::count(&unique_objects(&texture(100, 80), None)),
+            0
+        );
         let flat = RgbRaster::new(50, 40, [0.4, 0.5, 0.9]);
-        assert_eq!(morph_count(&unique_objects(&flat, None)), 0);
+        assert_eq!(crate::raster::morph::count(&unique_objects(&flat, None)), 0);
         // A region too small to judge, and degenerate sizes.
         let tiny = RgbRaster::new(7, 7, [0.1, 0.2, 0.3]);
-        assert_eq!(morph_count(&unique_objects(&tiny, None)), 0);
+        assert_eq!(crate::raster::morph::count(&unique_objects(&tiny, None)), 0);
         let empty = RgbRaster::new(0, 0, [0.0; 3]);
         assert_eq!(unique_objects(&empty, None).len(), 0);
         // Non-finite colours read as black and do not panic.
@@ -295,14 +301,10 @@ mod tests {
                 c,
             );
         }
-        let count = morph_count(&unique_objects(&image, None));
+        let count = crate::raster::morph::count(&unique_objects(&image, None));
         assert!(
             count > 0 && count as f32 <= MAX_TOTAL_SHARE * 10_000.0 * 1.5,
             "{count}"
         );
-    }
-
-    fn morph_count(mask: &MaskRaster) -> usize {
-        mask.data().iter().filter(|&&b| b).count()
     }
 }

@@ -1,9 +1,9 @@
 //! The layered point cloud: every layer lifted through the canvas camera.
 
 use super::LayeredScene;
-use super::morph::bounding_box;
 use crate::error::{Error, Result};
 use crate::geometry::{Intrinsics, View};
+use crate::raster::morph::bounding_box;
 use crate::raster::{GrayRaster, MaskRaster, Raster, Rgb, RgbRaster};
 use crate::stages::points::{LiftOptions, PointCloud, SAME_SURFACE_RELATIVE_DEPTH};
 use rayon::prelude::*;

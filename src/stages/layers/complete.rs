@@ -133,7 +133,7 @@ fn kept_pixels(
                 .smaller_pixel(x, y)
                 .is_none_or(|(qx, qy)| !old.hole.at(qx, qy))
     });
-    let near_new = super::morph::dilate(&new_only, 2 * band + 1);
+    let near_new = crate::raster::morph::dilate(&new_only, 2 * band + 1);
     let mut any = false;
     let kept = crate::raster::Raster::from_fn(w, h, |x, y| {
         let Some((qx, qy)) = from.smaller_pixel(x, y) else {
@@ -169,7 +169,7 @@ fn feather_into_kept(
     let (w, _) = image.size();
     let pw = layer.image.width();
     let band = GROWN_BAND_PX as f32;
-    let distance = super::morph::chamfer_distance(kept);
+    let distance = crate::raster::morph::chamfer_distance(kept);
     for (i, &d) in distance.data().iter().enumerate() {
         if !(d > 0.0 && d < band && region.hole.data()[i]) {
             continue;

@@ -2,7 +2,7 @@
 //! discontinuities so that mixed pixels do not float between layers (3D Cinemagraphy's masked
 //! median, algorithms.md §4).
 
-use super::morph::{sliding_extreme, window_reach};
+use crate::raster::morph::{sliding_extreme, window_reach};
 use crate::raster::{GrayRaster, Raster};
 use rayon::prelude::*;
 

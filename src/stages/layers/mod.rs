@@ -23,7 +23,6 @@ mod cloud;
 pub mod cluster;
 mod complete;
 pub mod edges;
-pub mod morph;
 
 pub use cloud::{CloudOptions, MAX_DENSITY_STRIDE, density_strides};
 pub use complete::{
@@ -33,7 +32,7 @@ pub use complete::{
 
 use crate::error::{Error, Result};
 use crate::progress::Progress;
-use crate::raster::{GrayRaster, MaskRaster, Raster, RgbRaster};
+use crate::raster::{GrayRaster, MaskRaster, Raster, RgbRaster, morph};
 use cluster::{
     OptimalPartitions, WardTree, disparity_atoms, thresholds_from_boundaries, thresholds_from_tree,
 };

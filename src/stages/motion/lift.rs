@@ -265,7 +265,7 @@ pub fn layer_flows(
             flows.push(None);
             continue;
         }
-        let mut seeds = crate::stages::layers::morph::erode(&visible, 2 * SEED_EROSION_PX + 1);
+        let mut seeds = crate::raster::morph::erode(&visible, 2 * SEED_EROSION_PX + 1);
         if !seeds.data().iter().any(|&s| s) {
             seeds = visible.clone();
         }
@@ -650,7 +650,7 @@ mod tests {
     fn erosion_known_answer() {
         let m = Raster::from_fn(7, 7, |x, y| (1..6).contains(&x) && (1..6).contains(&y));
         // The seed erosion's rule: radius r is the (2r + 1)² square of `morph::erode`.
-        let erode = |m: &MaskRaster, r: usize| crate::stages::layers::morph::erode(m, 2 * r + 1);
+        let erode = |m: &MaskRaster, r: usize| crate::raster::morph::erode(m, 2 * r + 1);
         let e = erode(&m, 1);
         let count = e.data().iter().filter(|&&v| v).count();
         assert_eq!(count, 9);

@@ -57,7 +57,7 @@ pub(super) fn drop_small_parts(mask: &MaskRaster, min_area: usize) -> MaskRaster
 
 /// `mask` eroded by a `(2r + 1)²` square (the canvas edge does not erode).
 pub(super) fn erode(mask: &MaskRaster, r: usize) -> MaskRaster {
-    crate::stages::layers::morph::erode(mask, 2 * r + 1)
+    crate::raster::morph::erode(mask, 2 * r + 1)
 }
 
 /// Vectorises a hard mask into horizontal strokes of radius `r` and hardness ½ that paint

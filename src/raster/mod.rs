@@ -5,6 +5,8 @@
 //! renderer blends in the same encoding the photo came in, as the papers do). Masks are `f32` in
 //! `[0, 1]` (soft) or `bool` (hard).
 
+pub mod morph;
+
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 

@@ -3,8 +3,10 @@
 //!
 //! A window of `size` pixels around pixel `i` covers `[i − size/2, i + size − 1 − size/2]`
 //! (centred for odd sizes; one more pixel before than after for even sizes). Pixels outside the
-//! raster are *ignored*: erosion treats them as set and dilation as unset, so a mask that touches
-//! the border is not eaten away from the border.
+//! raster are *ignored* by default: erosion treats them as set and dilation as unset, so a mask
+//! that touches the border is not eaten away from the border. [`erode_with`] takes the other
+//! rule, [`Outside::Unset`], where a window must lie wholly inside the raster (the inpainters'
+//! source patches).
 
 use crate::raster::{MaskRaster, Raster};
 use rayon::prelude::*;
@@ -166,10 +168,25 @@ pub fn sliding_extreme<T: Copy + Send + Sync>(
     columns_pass(&rows, height, pad, &pick)
 }
 
+/// What an erosion assumes beyond the raster's border.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Outside {
+    /// Set: the border does not erode (a window is judged by its pixels inside the raster).
+    Set,
+    /// Unset: a pixel whose window reaches beyond the border is cleared (the window must lie
+    /// wholly inside the raster).
+    Unset,
+}
+
 /// Erosion by a `size × size` square: a pixel stays set when every pixel of its window inside
-/// the raster is set.
+/// the raster is set ([`Outside::Set`]).
 pub fn erode(mask: &MaskRaster, size: usize) -> MaskRaster {
-    sliding_extreme(mask, size, size, true, |a, b| a && b)
+    erode_with(mask, size, Outside::Set)
+}
+
+/// Erosion by a `size × size` square with the border rule `outside`.
+pub fn erode_with(mask: &MaskRaster, size: usize, outside: Outside) -> MaskRaster {
+    sliding_extreme(mask, size, size, outside == Outside::Set, |a, b| a && b)
 }
 
 /// Dilation by a `size × size` square: a pixel becomes set when any pixel of its window is set.

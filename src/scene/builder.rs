@@ -1,0 +1,564 @@
+//! [`SceneBuilder`]: runs the stages in order, re-using every cached output whose key is
+//! unchanged (the exact canvas, the growing canvas of the editor, sketches and dry runs).
+
+use super::cache::{
+    CACHE_ENTRIES, GrownCanvas, StageCache, Stats, built, cached, key_of, remembered,
+};
+use super::camera::{OutputCamera, scene_scale};
+use super::canvas::{build_canvas, canvas_layout, grow_canvas, layout_covers, layout_union};
+use super::cloud::{make_cloud, uninpainted_layers};
+use super::tools::{layer_depth_estimator, make_inpainter};
+use super::{Canvas, PreparedMotion, SKETCH_STRIDE, Scene, Stage};
+use crate::error::Result;
+use crate::geometry::Intrinsics;
+use crate::image_io::{LoadedImage, load_image};
+use crate::path::SceneScale;
+use crate::progress::Progress;
+use crate::project::Project;
+use crate::stages::depth::{DepthStageOutput, run_depth_stage};
+use crate::stages::inpaint::Inpainter;
+use crate::stages::layers::{
+    GrownFrom, LayerDepthParams, LayeredScene, density_strides, inpaint_grown_layers,
+    inpaint_layers, layer_based_depth, plan_canvas_layers,
+};
+use crate::stages::motion::prepare_motion;
+use crate::stages::outpaint::DepthRange;
+use crate::stages::points::PointCloud;
+use std::sync::Arc;
+
+/// Builds scenes and keeps each stage's recent outputs for reuse ([`CACHE_ENTRIES`] per stage).
+#[derive(Default)]
+pub struct SceneBuilder {
+    load: StageCache<LoadedImage>,
+    depth: StageCache<DepthStageOutput>,
+    canvas: StageCache<Canvas>,
+    layers: StageCache<crate::stages::layers::LayerPlan>,
+    inpaint: StageCache<LayeredScene>,
+    layer_depth: StageCache<LayeredScene>,
+    cloud: StageCache<PointCloud>,
+    motion: StageCache<Option<Arc<PreparedMotion>>>,
+    stats: Stats,
+    /// The scene scale and depth range of the depths of these keys (as many as the depth
+    /// stage keeps, least recently used first: undoing a stroke finds them too).
+    depth_stats: Vec<(u64, (SceneScale, DepthRange))>,
+    /// The cloud's density strides by layers and camera path, least recently used first.
+    strides: Vec<(u64, Vec<usize>)>,
+    grow_canvas: bool,
+    /// Grown canvases by key, newest last; the layer inpainting keeps what it can of the smaller
+    /// canvas's layers ([`crate::stages::layers::inpaint_grown_layers`]).
+    grown_from: Vec<(u64, GrownCanvas)>,
+    /// The inpainter of the last build with its name, by the settings it was made for (an
+    /// ONNX model's session loads once, not on every build and dry run).
+    inpainter: Option<(
+        crate::stages::inpaint::InpaintSettings,
+        Arc<dyn Inpainter>,
+        String,
+    )>,
+}
+
+impl SceneBuilder {
+    /// An empty cache. Every build gets exactly the canvas its path needs (the command line's
+    /// and the evaluations' rule: the same project always gives the same frames).
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// An empty cache whose canvas only grows (the editor's rule): a camera path that fits the
+    /// canvas of an earlier build reuses it and every stage after it, and one that needs more
+    /// outpaints only the new margin around it. [`SceneBuilder::build_exact`] still builds the
+    /// exact canvas (exports).
+    pub fn growing() -> Self {
+        Self {
+            grow_canvas: true,
+            ..Self::default()
+        }
+    }
+
+    /// How many times each stage has run in this builder (stages that never ran are absent).
+    pub fn runs(&self) -> &std::collections::BTreeMap<Stage, usize> {
+        &self.stats.runs
+    }
+
+    /// Wall time of each stage's most recent run, seconds (stages that never ran are absent;
+    /// a stage re-used from the cache keeps the time of the run that made its output).
+    pub fn last_run_seconds(&self) -> &std::collections::BTreeMap<Stage, f64> {
+        &self.stats.seconds
+    }
+
+    /// Builds (or re-uses) every stage for `project`.
+    pub fn build(&mut self, project: &Project, progress: &Progress) -> Result<Scene> {
+        let grow = self.grow_canvas;
+        built(self.build_inner(project, progress, grow, false, false)?)
+    }
+
+    /// Builds with exactly the canvas `project`'s path needs, whatever the builder's rule (what
+    /// the command line renders for the same project).
+    pub fn build_exact(&mut self, project: &Project, progress: &Progress) -> Result<Scene> {
+        built(self.build_inner(project, progress, false, false, false)?)
+    }
+
+    /// The first stage a [`SceneBuilder::build`] of `project` would run, without running any
+    /// (`None`: every stage is cached). Errors as the build would on a bad project.
+    pub fn first_stale_stage(&mut self, project: &Project) -> Result<Option<Stage>> {
+        let grow = self.grow_canvas;
+        Ok(self
+            .build_inner(project, &Progress::none(), grow, true, false)?
+            .err())
+    }
+
+    /// A sketch of `project`'s scene: every stage as [`SceneBuilder::build`] runs it, except
+    /// that the canvas margin and the layers' hidden regions are filled by the harmonic
+    /// (membrane) fill solved down to half resolution and prolonged
+    /// ([`crate::stages::inpaint::SketchInpainter`], every layer at once) instead of the
+    /// project's inpainter: blurred where the inpainter would synthesise texture, but many
+    /// times faster; the layers skip the few-pixel refinement of their depth edges, and the
+    /// cloud keeps one point per 4 × 4 block ([`SKETCH_STRIDE`]). The editor shows it first
+    /// while the project's inpainter refines the scene. Sketch outputs are cached apart from
+    /// the others.
+    pub fn build_sketch(&mut self, project: &Project, progress: &Progress) -> Result<Scene> {
+        let grow = self.grow_canvas;
+        built(self.build_inner(project, progress, grow, false, true)?)
+    }
+
+    /// The inpainter `settings` ask for, made once per settings; a model that falls back to
+    /// PatchMatch adds its warning to `warnings` and is tried again on the next build.
+    fn inpainter_for(
+        &mut self,
+        settings: &crate::stages::inpaint::InpaintSettings,
+        warnings: &mut Vec<String>,
+    ) -> (Arc<dyn Inpainter>, String) {
+        if let Some((_, inpainter, name)) = self.inpainter.as_ref().filter(|c| &c.0 == settings) {
+            return (inpainter.clone(), name.clone());
+        }
+        let mut notes = Vec::new();
+        let (inpainter, name) = make_inpainter(settings, &mut notes);
+        let inpainter: Arc<dyn Inpainter> = Arc::from(inpainter);
+        warnings.extend(notes.iter().cloned());
+        // A model that could not load is tried again next time (it may have been fixed).
+        let fell_back = settings.model.is_some() && !name.starts_with("onnx ");
+        self.inpainter = (!fell_back).then(|| (settings.clone(), inpainter.clone(), name.clone()));
+        (inpainter, name)
+    }
+
+    /// The depth stage's output for `project` (load and depth only, cached like a build's):
+    /// the editor shows a depth edit with it before the stages after it have run.
+    pub fn depth_output(
+        &mut self,
+        project: &Project,
+        progress: &Progress,
+    ) -> Result<Arc<DepthStageOutput>> {
+        project.validate()?;
+        let (_, _, _, depth) = built(self.load_and_depth(
+            project,
+            &progress.sub(0.0, 0.2),
+            &progress.sub(0.2, 1.0),
+            false,
+        )?)?;
+        Ok(depth)
+    }
+
+    /// Stages 1 and 2: `(depth key, photo, input camera, depth)`, or the stage a dry run would
+    /// have to run.
+    #[allow(clippy::type_complexity)]
+    fn load_and_depth(
+        &mut self,
+        project: &Project,
+        p_load: &Progress,
+        p_depth: &Progress,
+        dry: bool,
+    ) -> Result<
+        std::result::Result<(u64, Arc<LoadedImage>, Intrinsics, Arc<DepthStageOutput>), Stage>,
+    > {
+        let stats = &mut self.stats;
+        let key = key_of(0, &project.input);
+        let input = match cached(
+            &mut self.load,
+            stats,
+            Stage::Load,
+            (key, 0),
+            dry,
+            p_load,
+            |_| load_image(&project.input),
+        )? {
+            Ok(v) => v,
+            Err(stage) => return Ok(Err(stage)),
+        };
+        p_load.check()?;
+        let (w, h) = input.rgb.size();
+        let intrinsics = Intrinsics::from_hfov(w, h, project.camera.hfov_deg);
+        // A stroke paints over the estimate without strokes, which is the depth stage's own
+        // output for the same settings without strokes: found cached under that key, or
+        // estimated once and cached there too.
+        let unpainted_settings = crate::stages::depth::DepthSettings {
+            strokes: Vec::new(),
+            ..project.depth.clone()
+        };
+        let unpainted_key = key_of(key, &(&unpainted_settings, project.camera.hfov_deg));
+        let key = key_of(key, &(&project.depth, project.camera.hfov_deg));
+        let strokes = &project.depth.strokes;
+        let unpainted = if strokes.is_empty() {
+            None
+        } else {
+            self.depth.get(unpainted_key)
+        };
+        let mut estimated = None;
+        let depth = match cached(
+            &mut self.depth,
+            stats,
+            Stage::Depth,
+            (key, 0),
+            dry,
+            p_depth,
+            |p| {
+                if strokes.is_empty() {
+                    return run_depth_stage(&project.depth, &input.rgb, &intrinsics, p);
+                }
+                let bare = match unpainted {
+                    Some(v) => v,
+                    None => {
+                        let v = Arc::new(run_depth_stage(
+                            &unpainted_settings,
+                            &input.rgb,
+                            &intrinsics,
+                            p,
+                        )?);
+                        estimated = Some(v.clone());
+                        v
+                    }
+                };
+                let mut out = (*bare).clone();
+                out.estimate.depth =
+                    crate::stages::depth::paint::apply_strokes(&out.estimate.depth, strokes)?;
+                Ok(out)
+            },
+        )? {
+            Ok(v) => v,
+            Err(stage) => return Ok(Err(stage)),
+        };
+        if let Some(bare) = estimated {
+            self.depth.put(unpainted_key, 0, bare);
+        }
+        Ok(Ok((key, input, intrinsics, depth)))
+    }
+
+    fn build_inner(
+        &mut self,
+        project: &Project,
+        progress: &Progress,
+        grow: bool,
+        dry: bool,
+        sketch: bool,
+    ) -> Result<std::result::Result<Scene, Stage>> {
+        project.validate()?;
+        let mut warnings = Vec::new();
+        let mut done = 0.0f32;
+        let mut step = |stage: Stage| {
+            let p = progress.sub(done, (done + stage.weight()).min(1.0));
+            done += stage.weight();
+            p
+        };
+        macro_rules! stage {
+            ($e:expr) => {
+                match $e? {
+                    Ok(v) => v,
+                    Err(stage) => return Ok(Err(stage)),
+                }
+            };
+        }
+
+        // 1–2. Load and depth.
+        let (p_load, p_depth) = (step(Stage::Load), step(Stage::Depth));
+        let (key, input, intrinsics, depth) =
+            match self.load_and_depth(project, &p_load, &p_depth, dry)? {
+                Ok(v) => v,
+                Err(stage) => return Ok(Err(stage)),
+            };
+        let (w, h) = input.rgb.size();
+        warnings.extend(depth.warnings.iter().cloned());
+        // The depth's statistics, once per depth (every build and dry run needs them).
+        let (scale, depth_range) = remembered(&mut self.depth_stats, key, CACHE_ENTRIES, || {
+            Ok((
+                scene_scale(&depth.estimate.depth, &depth.estimate.sky)?,
+                DepthRange::from_depth(&depth.estimate.depth)?,
+            ))
+        })?;
+
+        // The inpainter serves the canvas and the layers.
+        let (inpainter, inpainter_name) = if sketch {
+            let fill: Arc<dyn Inpainter> = Arc::new(crate::stages::inpaint::SketchInpainter);
+            (fill, "harmonic sketch".to_string())
+        } else {
+            self.inpainter_for(&project.inpaint, &mut warnings)
+        };
+        let stats = &mut self.stats;
+
+        // 3. Canvas: the layout the path needs, then a cached canvas that covers it, one grown
+        // from a cached canvas, or a new one.
+        let p = step(Stage::Canvas);
+        let needed = canvas_layout(project, (w, h), &intrinsics, depth_range, &scale)?;
+        let base = key_of(key, &(&project.canvas, &project.inpaint, sketch));
+        let exact_key = key_of(base, &(needed, 0u64));
+        let reused = match self.canvas.get(exact_key) {
+            Some(v) => Some((exact_key, v)),
+            None if grow => self
+                .canvas
+                .newest(|s| s.base == base && layout_covers(&s.value.layout, &needed, (w, h))),
+            None => None,
+        };
+        let (canvas_key, canvas) = match reused {
+            Some((k, v)) => {
+                // Mark it as used.
+                self.canvas.get(k);
+                (k, v)
+            }
+            None if dry => return Ok(Err(Stage::Canvas)),
+            None => {
+                let started = std::time::Instant::now();
+                p.report(0.0, Stage::Canvas.name());
+                let parent = if grow {
+                    self.canvas.newest(|s| s.base == base)
+                } else {
+                    None
+                };
+                let (k, v) = match parent {
+                    Some((parent_key, parent)) => {
+                        let layout = layout_union(&parent.layout, &needed, (w, h));
+                        let v = grow_canvas(
+                            &parent,
+                            layout,
+                            (w, h),
+                            &intrinsics,
+                            inpainter.as_ref(),
+                            project.inpaint.seed,
+                            &p,
+                        )?;
+                        let k = key_of(base, &(layout, parent_key));
+                        let offset = (
+                            layout.left_pad - parent.layout.left_pad,
+                            layout.top_pad - parent.layout.top_pad,
+                        );
+                        remembered(&mut self.grown_from, k, 4 * CACHE_ENTRIES, || {
+                            Ok((parent_key, offset))
+                        })?;
+                        (k, v)
+                    }
+                    None => (
+                        exact_key,
+                        build_canvas(
+                            project,
+                            needed,
+                            &input.rgb,
+                            &intrinsics,
+                            &depth.estimate.depth,
+                            &depth.estimate.sky,
+                            inpainter.as_ref(),
+                            &p,
+                        )?,
+                    ),
+                };
+                let v = Arc::new(v);
+                stats.ran(Stage::Canvas, started);
+                self.canvas.put(k, base, v.clone());
+                (k, v)
+            }
+        };
+
+        // 4. Layers.
+        let p = step(Stage::Layers);
+        let mut params = if project.layers.enabled {
+            project.layers.params.clone()
+        } else {
+            crate::stages::layers::LayerParams {
+                mode: crate::stages::layers::LayerCount::Count(1),
+                ..project.layers.params.clone()
+            }
+        };
+        if sketch {
+            // The few-pixel refinement of the layers' depth edges cannot be seen at the
+            // sketch's density (one point per 4 × 4 block) and costs half the stage.
+            params.edge_window_px = 1;
+        }
+        let key = key_of(canvas_key, &(&params, project.layers.enabled));
+        let plan = stage!(cached(
+            &mut self.layers,
+            stats,
+            Stage::Layers,
+            (key, 0),
+            dry,
+            &p,
+            |p| {
+                let photo = [canvas.layout.left_pad, canvas.layout.top_pad, w, h];
+                plan_canvas_layers(&canvas.depth, Some(&canvas.sky), Some(photo), &params, p)
+            }
+        ));
+
+        // 5. Layer inpainting: on a grown canvas, the smaller canvas's layers (when still
+        // cached) keep their fill away from the new margin. The key says which layers were kept,
+        // so a state rebuilt without them is not mistaken for one built with them.
+        let p = step(Stage::Inpaint);
+        let plan_key = key;
+        let settings = (project.layers.inpaint, &project.inpaint, sketch);
+        let inpaint_base = key_of(plan_key, &settings);
+        let grown = self
+            .grown_from
+            .iter()
+            .rev()
+            .find(|e| e.0 == canvas_key)
+            .and_then(|&(_, (parent_canvas, offset))| {
+                let parent_plan = key_of(parent_canvas, &(&params, project.layers.enabled));
+                let plan = self.layers.peek(parent_plan)?;
+                let parent_base = key_of(parent_plan, &settings);
+                let (kept_key, layers) = self.inpaint.newest(|s| s.base == parent_base)?;
+                Some((kept_key, plan, layers, offset))
+            });
+        let key = key_of(inpaint_base, &grown.as_ref().map_or(0, |g| g.0));
+        let inpainted = stage!(cached(
+            &mut self.inpaint,
+            stats,
+            Stage::Inpaint,
+            (key, inpaint_base),
+            dry,
+            &p,
+            |p| {
+                if !(project.layers.inpaint && plan.regions.len() > 1) {
+                    return Ok(uninpainted_layers(&canvas.image, &plan));
+                }
+                match &grown {
+                    Some((_, parent_plan, parent_layers, offset)) => inpaint_grown_layers(
+                        &canvas.image,
+                        &plan,
+                        &GrownFrom {
+                            plan: parent_plan,
+                            layers: parent_layers,
+                            offset: *offset,
+                        },
+                        inpainter.as_ref(),
+                        project.inpaint.seed,
+                        p,
+                    ),
+                    None => inpaint_layers(
+                        &canvas.image,
+                        &plan,
+                        inpainter.as_ref(),
+                        project.inpaint.seed,
+                        p,
+                    ),
+                }
+            }
+        ));
+
+        // 6. Layer-based depth.
+        let p = step(Stage::LayerDepth);
+        let key = key_of(key, &project.layers.layer_depth);
+        let run_layer_depth =
+            project.layers.layer_depth && project.layers.inpaint && inpainted.layers.len() > 1;
+        let layered = if run_layer_depth {
+            stage!(cached(
+                &mut self.layer_depth,
+                stats,
+                Stage::LayerDepth,
+                (key, 0),
+                dry,
+                &p,
+                |p| {
+                    let estimator = layer_depth_estimator(project);
+                    layer_based_depth(
+                        &inpainted,
+                        &canvas.image,
+                        estimator.as_ref(),
+                        &canvas.intrinsics,
+                        &LayerDepthParams::default(),
+                        p,
+                    )
+                }
+            ))
+        } else {
+            inpainted.clone()
+        };
+
+        // 7. Cloud: keyed by the density strides the path asks for, so a camera edit that keeps
+        // them keeps the cloud.
+        let p = step(Stage::Cloud);
+        let mut strides = if project.layers.adaptive_density {
+            // Every build and dry run needs them, and they cost a pass over the layers per
+            // view: once per layers and path.
+            let output = &project.output;
+            let memo_key = key_of(
+                key,
+                &(&project.camera, output.width, output.height, output.frames),
+            );
+            remembered(&mut self.strides, memo_key, 4 * CACHE_ENTRIES, || {
+                let views = OutputCamera::of(project, (w, h)).views(project, &scale)?;
+                Ok(density_strides(&layered, &canvas.intrinsics, &views))
+            })?
+        } else {
+            Vec::new()
+        };
+        if sketch {
+            // A sketch is seen in the preview, a fraction of the output size: one point per
+            // 4 × 4 block is plenty there (and the cloud is quick to make).
+            strides.resize(layered.layers.len(), 1);
+            for s in &mut strides {
+                *s = (*s).max(SKETCH_STRIDE);
+            }
+        }
+        let mut cloud_strides = strides.clone();
+        cloud_strides.resize(layered.layers.len(), 1);
+        let key = key_of(key, &(project.layers.adaptive_density, &strides));
+        let cloud = stage!(cached(
+            &mut self.cloud,
+            stats,
+            Stage::Cloud,
+            (key, 0),
+            dry,
+            &p,
+            |_| { make_cloud(&layered, &canvas, input.alpha.as_ref(), strides) }
+        ));
+
+        // 8. Motion.
+        let p = step(Stage::Motion);
+        let key = key_of(key, &project.motion);
+        let motion = stage!(cached(
+            &mut self.motion,
+            stats,
+            Stage::Motion,
+            (key, 0),
+            dry,
+            &p,
+            |p| {
+                if project.motion.is_still() {
+                    return Ok(None);
+                }
+                let (field, motion_loop) = prepare_motion(
+                    &project.motion,
+                    &cloud,
+                    canvas.image.width(),
+                    canvas.image.height(),
+                    p,
+                )?;
+                Ok(Some(Arc::new(PreparedMotion { field, motion_loop })))
+            }
+        ));
+        let motion = (*motion).clone();
+        progress.report(1.0, "scene");
+        Ok(Ok(Scene {
+            input,
+            intrinsics,
+            depth_estimator: depth.estimator.clone(),
+            depth,
+            scale,
+            canvas,
+            layers: layered,
+            cloud,
+            cloud_strides,
+            motion,
+            inpainter: inpainter_name,
+            warnings,
+        }))
+    }
+}
+
+/// Builds a scene with a fresh cache (the command line's one-shot path).
+pub fn build_scene(project: &Project, progress: &Progress) -> Result<Scene> {
+    SceneBuilder::new().build(project, progress)
+}

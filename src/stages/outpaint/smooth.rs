@@ -1,0 +1,319 @@
+//! Smooth regions continued into the margin: where the known pixels near the hole are a
+//! plane in colour, the fill follows that plane (per cell, tapered away from the border).
+
+use crate::raster::{MaskRaster, Raster, RgbRaster};
+
+/// Coarse cell side of [`continue_smooth_regions`], pixels.
+pub const SMOOTH_CELL_PX: usize = 8;
+/// Radius of the plane fit of [`continue_smooth_regions`], cells.
+pub(super) const SMOOTH_FIT_CELLS: usize = 3;
+/// A plane fit whose RMS residual reaches this (colour units) is not smooth: no correction.
+pub const SMOOTH_RESIDUAL: f32 = 0.04;
+/// Distance, cells, at which an extrapolated gradient has covered half its linear course:
+/// `offset = g·d · D/(D + |d|)`, so a far margin levels off instead of running to black or white.
+pub(super) const SMOOTH_TAPER_CELLS: f32 = 8.0;
+
+/// Continues the low frequencies of smooth regions (a sky's colour ramp, fog, calm water) into a
+/// filled hole: exemplar synthesis copies patches, and a ramp outpainted from copies turns into a
+/// smear of the border's colours.
+///
+/// On cells of [`SMOOTH_CELL_PX`]² pixels: every hole cell takes the nearest known cell `p`, fits
+/// a plane to the known cells within `SMOOTH_FIT_CELLS` of `p` (per channel, least squares) and
+/// extrapolates it, tapered (`SMOOTH_TAPER_CELLS`). Where that fit is smooth (RMS residual `r`
+/// below [`SMOOTH_RESIDUAL`]; weight `1 − r/SMOOTH_RESIDUAL`) the cell's mean of the fill is
+/// moved onto the extrapolation; the correction is interpolated bilinearly between cell centres
+/// and added to the hole pixels, so the fill keeps its texture (its high frequencies) and known
+/// pixels are unchanged. Textured borders (foliage, rocks) get no correction.
+pub fn continue_smooth_regions(filled: &mut RgbRaster, hole: &MaskRaster) {
+    let (w, h) = filled.size();
+    if !filled.same_size(hole) || w == 0 || h == 0 {
+        return;
+    }
+    let c = SMOOTH_CELL_PX;
+    let (cw, ch) = (w.div_ceil(c), h.div_ceil(c));
+    // Per cell: mean of the known pixels (known when at least half are) and mean of the fill.
+    let mut known_mean = vec![[0.0f32; 3]; cw * ch];
+    let mut is_known = vec![false; cw * ch];
+    let mut fill_mean = vec![[0.0f32; 3]; cw * ch];
+    for cy in 0..ch {
+        for cx in 0..cw {
+            let (mut ks, mut kn, mut fs, mut n) = ([0.0f32; 3], 0usize, [0.0f32; 3], 0usize);
+            for y in cy * c..((cy + 1) * c).min(h) {
+                for x in cx * c..((cx + 1) * c).min(w) {
+                    let v = filled.at(x, y).map(|v| if v.is_finite() { v } else { 0.0 });
+                    for k in 0..3 {
+                        fs[k] += v[k];
+                    }
+                    n += 1;
+                    if !hole.at(x, y) {
+                        for k in 0..3 {
+                            ks[k] += v[k];
+                        }
+                        kn += 1;
+                    }
+                }
+            }
+            let i = cy * cw + cx;
+            fill_mean[i] = fs.map(|v| v / n.max(1) as f32);
+            if 2 * kn >= n && kn > 0 {
+                is_known[i] = true;
+                known_mean[i] = ks.map(|v| v / kn as f32);
+            }
+        }
+    }
+    if !is_known.iter().any(|&k| k) || is_known.iter().all(|&k| k) {
+        return;
+    }
+    // Nearest known cell of every cell (breadth first, 8-neighbours).
+    let mut nearest = vec![u32::MAX; cw * ch];
+    let mut queue = std::collections::VecDeque::new();
+    for (i, &k) in is_known.iter().enumerate() {
+        if k {
+            nearest[i] = i as u32;
+            queue.push_back(i);
+        }
+    }
+    while let Some(i) = queue.pop_front() {
+        let (x, y) = (i % cw, i / cw);
+        for ny in y.saturating_sub(1)..(y + 2).min(ch) {
+            for nx in x.saturating_sub(1)..(x + 2).min(cw) {
+                let j = ny * cw + nx;
+                if nearest[j] == u32::MAX {
+                    nearest[j] = nearest[i];
+                    queue.push_back(j);
+                }
+            }
+        }
+    }
+    // Plane fits, memoised per source cell: (value, gradient x, gradient y, weight).
+    let mut fits: std::collections::HashMap<u32, Option<PlaneFit>> =
+        std::collections::HashMap::new();
+    let mut correction = vec![[0.0f32; 3]; cw * ch];
+    for q in 0..cw * ch {
+        if is_known[q] || nearest[q] == u32::MAX {
+            continue;
+        }
+        let p = nearest[q];
+        let fit = *fits
+            .entry(p)
+            .or_insert_with(|| plane_fit(&known_mean, &is_known, cw, ch, p as usize));
+        let Some((value, gx, gy, weight)) = fit else {
+            continue;
+        };
+        let (px, py) = ((p as usize % cw) as f32, (p as usize / cw) as f32);
+        let (dx, dy) = ((q % cw) as f32 - px, (q / cw) as f32 - py);
+        let taper = SMOOTH_TAPER_CELLS / (SMOOTH_TAPER_CELLS + dx.hypot(dy));
+        for k in 0..3 {
+            let target = (value[k] + (gx[k] * dx + gy[k] * dy) * taper).clamp(0.0, 1.0);
+            correction[q][k] = weight * (target - fill_mean[q][k]);
+        }
+    }
+    // Bilinear between cell centres, added to the hole pixels.
+    let Some(correction) = Raster::from_vec(cw, ch, correction) else {
+        return;
+    };
+    for y in 0..h {
+        for x in 0..w {
+            if !hole.at(x, y) {
+                continue;
+            }
+            let fx = (x as f32 + 0.5) / c as f32 - 0.5;
+            let fy = (y as f32 + 0.5) / c as f32 - 0.5;
+            let dv = correction.sample_bilinear(fx, fy);
+            let px = &mut filled.data_mut()[y * w + x];
+            for k in 0..3 {
+                px[k] = (px[k] + dv[k]).clamp(0.0, 1.0);
+            }
+        }
+    }
+}
+
+/// A plane fit per channel: value at its centre, gradients along x and y (per cell), and the
+/// smoothness weight.
+pub(super) type PlaneFit = ([f32; 3], [f32; 3], [f32; 3], f32);
+
+/// Least-squares plane through the known cells within [`SMOOTH_FIT_CELLS`] of cell `p`, per
+/// channel, centred on `p`: its value there, its gradients and its smoothness weight; `None`
+/// with fewer than 6 cells or a degenerate spread.
+fn plane_fit(
+    mean: &[[f32; 3]],
+    known: &[bool],
+    cw: usize,
+    ch: usize,
+    p: usize,
+) -> Option<PlaneFit> {
+    let (px, py) = ((p % cw) as isize, (p / cw) as isize);
+    let r = SMOOTH_FIT_CELLS as isize;
+    let mut samples = Vec::new();
+    for y in (py - r).max(0)..=(py + r).min(ch as isize - 1) {
+        for x in (px - r).max(0)..=(px + r).min(cw as isize - 1) {
+            let i = y as usize * cw + x as usize;
+            if known[i] {
+                samples.push(((x - px) as f64, (y - py) as f64, mean[i]));
+            }
+        }
+    }
+    if samples.len() < 6 {
+        return None;
+    }
+    // Normal equations of v = a + b·x + c·y.
+    let n = samples.len() as f64;
+    let (mut sx, mut sy, mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for &(x, y, _) in &samples {
+        sx += x;
+        sy += y;
+        sxx += x * x;
+        syy += y * y;
+        sxy += x * y;
+    }
+    let m = glam::DMat3::from_cols_array(&[n, sx, sy, sx, sxx, sxy, sy, sxy, syy]);
+    if m.determinant().abs() < 1e-9 {
+        return None;
+    }
+    let inv = m.inverse();
+    let (mut value, mut gx, mut gy) = ([0.0f32; 3], [0.0f32; 3], [0.0f32; 3]);
+    let mut squared = 0.0f64;
+    for k in 0..3 {
+        let (mut sv, mut sxv, mut syv) = (0.0, 0.0, 0.0);
+        for &(x, y, v) in &samples {
+            let v = v[k] as f64;
+            sv += v;
+            sxv += x * v;
+            syv += y * v;
+        }
+        let coef = inv * glam::DVec3::new(sv, sxv, syv);
+        for &(x, y, v) in &samples {
+            let e = v[k] as f64 - (coef.x + coef.y * x + coef.z * y);
+            squared += e * e;
+        }
+        (value[k], gx[k], gy[k]) = (coef.x as f32, coef.y as f32, coef.z as f32);
+    }
+    let rms = (squared / (3.0 * n)).sqrt() as f32;
+    let weight = (1.0 - rms / SMOOTH_RESIDUAL).clamp(0.0, 1.0);
+    (weight > 0.0).then_some((value, gx, gy, weight))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{CanvasLayout, Placement, outpaint};
+    use super::*;
+    use crate::progress::Progress;
+    use crate::stages::inpaint::{InpaintRequest, Inpainter};
+
+    #[test]
+    fn a_linear_ramp_outpainted_stays_a_linear_ramp() {
+        use crate::stages::inpaint::{InpaintPreset, PatchMatchInpainter};
+        // A sky ramp: bluer upwards, a little warmer to the right, with a faint grain.
+        let ramp = |x: f32, y: f32| [0.35 + 0.0008 * x, 0.5 + 0.0006 * y, 0.9 - 0.0012 * y];
+        let photo = RgbRaster::from_fn(160, 100, |x, y| {
+            let grain = 0.004 * ((x * 7 + y * 13) % 5) as f32;
+            ramp(x as f32, y as f32).map(|v| v + grain)
+        });
+        let layout = CanvasLayout::fixed((160, 100), 1.5, Placement::BottomCentre).unwrap();
+        let (l, t) = (layout.left_pad as f32, layout.top_pad as f32);
+        let truth = |x: usize, y: usize| ramp(x as f32 - l, y as f32 - t);
+        let worst = |canvas: &RgbRaster, mask: &MaskRaster| {
+            let mut worst = 0.0f32;
+            for y in 0..canvas.height() {
+                for x in 0..canvas.width() {
+                    // Within 24 px of the photo, where the taper has barely begun.
+                    let inside = x + 24 >= layout.left_pad
+                        && x < layout.left_pad + 160 + 24
+                        && y + 24 >= layout.top_pad;
+                    if mask.at(x, y) && inside {
+                        let (c, e) = (canvas.at(x, y), truth(x, y));
+                        for k in 0..3 {
+                            worst = worst.max((c[k] - e[k]).abs());
+                        }
+                    }
+                }
+            }
+            worst
+        };
+        let inpainter = PatchMatchInpainter::preset(InpaintPreset::Preview);
+        let (canvas, mask) = outpaint(&photo, &layout, &inpainter, 1, &Progress::none()).unwrap();
+        let with = worst(&canvas, &mask);
+        // The same fill without the continuation: the margin smears the border's colours.
+        let mut plain_canvas = RgbRaster::new(layout.width, layout.height, [0.0; 3]);
+        for y in 0..100 {
+            for x in 0..160 {
+                plain_canvas.set(x + layout.left_pad, y + layout.top_pad, photo.at(x, y));
+            }
+        }
+        let plain = inpainter
+            .inpaint(
+                &InpaintRequest {
+                    image: &plain_canvas,
+                    hole: &mask,
+                    allowed_source: None,
+                    guide: None,
+                    seed: 1,
+                },
+                &Progress::none(),
+            )
+            .unwrap();
+        let without = worst(&plain.image, &mask);
+        // The photo's grain spans 0.016 and is copied with the texture; the taper has taken a
+        // quarter of the gradient's course 24 px out.
+        assert!(
+            with < 0.04,
+            "ramp error {with} (without the continuation {without})"
+        );
+        assert!(with < 0.6 * without, "{without} → {with}");
+        // Photo pixels are untouched.
+        for y in 0..100 {
+            for x in 0..160 {
+                assert_eq!(
+                    canvas.at(x + layout.left_pad, y + layout.top_pad),
+                    photo.at(x, y)
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn textured_borders_get_no_correction_and_extremes_are_safe() {
+        // A checkerboard: no plane fits, nothing moves.
+        let mut image = RgbRaster::from_fn(64, 48, |x, y| {
+            if (x / 4 + y / 4) % 2 == 0 {
+                [0.9; 3]
+            } else {
+                [0.1; 3]
+            }
+        });
+        let hole = MaskRaster::from_fn(64, 48, |_, y| y < 16);
+        for y in 0..16 {
+            for x in 0..64 {
+                image.set(x, y, [0.5; 3]);
+            }
+        }
+        let before = image.clone();
+        continue_smooth_regions(&mut image, &hole);
+        assert_eq!(image, before);
+        // Empty, all-hole, no-hole, mismatched and non-finite inputs do not panic.
+        let mut empty = RgbRaster::new(0, 0, [0.0; 3]);
+        continue_smooth_regions(&mut empty, &MaskRaster::new(0, 0, false));
+        let mut all = RgbRaster::new(20, 20, [0.3; 3]);
+        continue_smooth_regions(&mut all, &MaskRaster::new(20, 20, true));
+        continue_smooth_regions(&mut all, &MaskRaster::new(20, 20, false));
+        continue_smooth_regions(&mut all, &MaskRaster::new(3, 3, true));
+        assert_eq!(all, RgbRaster::new(20, 20, [0.3; 3]));
+        let mut nan = RgbRaster::from_fn(40, 40, |x, _| [x as f32 / 40.0, f32::NAN, 0.5]);
+        continue_smooth_regions(&mut nan, &MaskRaster::from_fn(40, 40, |x, _| x > 30));
+        // A steep ramp far into a wide margin levels off inside [0, 1].
+        let mut steep = RgbRaster::from_fn(400, 40, |x, _| [x as f32 / 100.0, 0.5, 0.5]);
+        let margin = MaskRaster::from_fn(400, 40, |x, _| x >= 100);
+        for y in 0..40 {
+            for x in 100..400 {
+                steep.set(x, y, [1.0, 0.5, 0.5]);
+            }
+        }
+        continue_smooth_regions(&mut steep, &margin);
+        assert!(
+            steep
+                .data()
+                .iter()
+                .all(|c| c.iter().all(|v| (0.0..=1.0).contains(v)))
+        );
+    }
+}
