@@ -11,7 +11,7 @@ use crate::export::{ExportOptions, RenderSummary, render_sequence};
 use crate::path::{CameraPath, Preset, PresetKind};
 use crate::progress::Progress;
 use crate::project::Project;
-use crate::render::gpu::{RendererChoice, select_renderer};
+use crate::render::{RendererChoice, select_renderer};
 use crate::scene::{Scene, SceneBuilder};
 use crate::{Error, Result};
 use std::path::{Path, PathBuf};

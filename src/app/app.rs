@@ -17,7 +17,7 @@ use super::viewport::{CpuPreview, PreviewRenderer};
 use super::worker::{JobStatus, PreviewWorker, SceneSnapshot, SceneWorker};
 use crate::geometry::View;
 use crate::project::Project;
-use crate::render::gpu::RendererChoice;
+use crate::render::RendererChoice;
 use crate::scene::{FramePositions, Stage};
 use crate::stages::points::PointCloud;
 use eframe::egui::{self};

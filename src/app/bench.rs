@@ -18,7 +18,7 @@ use super::panels::Tab;
 use super::{EditorApp, EditorOptions};
 use crate::path::{CameraPath, Preset, PresetKind};
 use crate::project::Project;
-use crate::render::gpu::RendererChoice;
+use crate::render::RendererChoice;
 use crate::scene::Stage;
 use crate::stages::depth::paint::{DepthStroke, DepthStrokeKind};
 use eframe::egui;

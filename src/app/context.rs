@@ -186,7 +186,7 @@ pub struct PreviewInfo {
     /// Set when the GPU draws the preview this frame: what its paint callback needs.
     pub gpu: Option<GpuDraw>,
     /// The preview renderer the user chose (the panel may change it).
-    pub choice: crate::render::gpu::RendererChoice,
+    pub choice: crate::render::RendererChoice,
 }
 
 /// What the preview panel hands the GPU preview's paint callback (besides the view and size).

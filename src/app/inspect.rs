@@ -8,7 +8,7 @@ use super::panels::Tab;
 use super::worker::{JobStatus, SceneSnapshot};
 use crate::geometry::View;
 use crate::project::Project;
-use crate::render::gpu::RendererChoice;
+use crate::render::RendererChoice;
 use crate::scene::Stage;
 use std::path::Path;
 use std::sync::Arc;

@@ -2,7 +2,7 @@
 
 use clap::{Args, Parser, Subcommand};
 use makeit4d::export::Pass;
-use makeit4d::render::gpu::RendererChoice;
+use makeit4d::render::RendererChoice;
 use std::path::PathBuf;
 
 #[derive(Parser, Debug)]

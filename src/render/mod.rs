@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod blend;
+mod choice;
 pub mod cpu;
 pub mod gpu;
 
@@ -12,6 +13,8 @@ use crate::stages::points::PointCloud;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
+
+pub use choice::{RendererChoice, select_renderer};
 
 /// One rendered view. All rasters have the output size.
 #[derive(Clone, Debug, PartialEq)]

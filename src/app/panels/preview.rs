@@ -4,8 +4,8 @@
 use super::{FlyCamera, PanelContext, StagePanel, Tab, committed, placeholder_ui};
 use crate::app::gpu_preview::{GpuFrame, pixel_size};
 use crate::app::viewport::{ViewTransform, image_layout_ui};
+use crate::render::RendererChoice;
 use crate::render::SplatKernel;
-use crate::render::gpu::RendererChoice;
 use eframe::egui::{self, Key, Sense, Ui};
 
 /// Fly speed of the preview camera (WASD/QE), in the scene's near depths per second.
