@@ -11,7 +11,7 @@ use makeit4d::app::panels::Tab;
 use makeit4d::app::{EditorApp, EditorOptions};
 use makeit4d::path::CameraPath;
 use makeit4d::project::Project;
-use makeit4d::render::gpu::RendererChoice;
+use makeit4d::render::RendererChoice;
 use makeit4d::scene::Stage;
 use makeit4d::stages::inpaint::InpaintPreset;
 use makeit4d::stages::layers::LayerCount;

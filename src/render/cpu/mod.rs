@@ -1014,6 +1014,46 @@ mod tests {
     }
 
     #[test]
+    fn reused_buffers_never_leak_into_the_next_render() {
+        // Renders of different clouds and sizes in turn (several chunks each, so every buffer
+        // of the spare set is reused with another length and tile count) give the bytes of a
+        // render on its own.
+        let lift = |w: usize, h: usize, slope: f32| {
+            let k = Intrinsics::from_hfov(w, h, 60.0);
+            let image = Raster::from_fn(w, h, |x, y| {
+                [
+                    x as f32 / w as f32,
+                    y as f32 / h as f32,
+                    ((x ^ y) % 7) as f32 / 7.0,
+                ]
+            });
+            let depth = Raster::from_fn(w, h, |x, y| 1.0 + slope * (x + y) as f32);
+            let cloud =
+                PointCloud::lift(&image, &depth, &k, None, None, LiftOptions::default()).unwrap();
+            (cloud, k)
+        };
+        let (big, kb) = lift(240, 160, 0.004);
+        let (small, ks) = lift(90, 70, 0.02);
+        let view = |k: Intrinsics| View {
+            intrinsics: k,
+            world_from_camera: Pose::new(
+                glam::Quat::from_rotation_y(0.03),
+                Vec3::new(0.02, -0.01, 0.2),
+            ),
+        };
+        let settings = SplatSettings::default();
+        let first = render_cpu(&big, None, &view(kb), 240, 160, &settings).unwrap();
+        for _ in 0..2 {
+            let other = render_cpu(&small, None, &view(ks), 90, 70, &settings).unwrap();
+            assert_eq!(other.colour.size(), (90, 70));
+            let wide = render_cpu(&big, None, &view(kb.scaled(1.5, 1.5)), 360, 240, &settings);
+            assert_eq!(wide.unwrap().colour.size(), (360, 240));
+            let again = render_cpu(&big, None, &view(kb), 240, 160, &settings).unwrap();
+            assert_eq!(first, again);
+        }
+    }
+
+    #[test]
     fn integer_floor_and_ceil_match_the_float_ones() {
         let mut values = vec![
             0.0f32,
