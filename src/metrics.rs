@@ -438,6 +438,21 @@ pub fn consistency_error(first: &ViewImage<'_>, later: &ViewImage<'_>) -> Result
     })
 }
 
+/// The process's peak resident set size (`VmHWM` of `/proc/self/status`), MiB, a resource
+/// figure the benchmarks print next to the scores; `None` off Linux.
+pub fn peak_memory_mib() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line
+        .trim_start_matches("VmHWM:")
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse()
+        .ok()?;
+    Some(kib / 1024.0)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -17,7 +17,9 @@ pub(crate) fn doctor(args: DoctorArgs) -> anyhow::Result<()> {
             let project = Project::load(p)?;
             match (&project.depth.method, &project.depth.model) {
                 (makeit4d::stages::depth::DepthMethod::Onnx, Some(m)) => {
-                    match makeit4d::ml::ModelManifest::load(m) {
+                    match makeit4d::models::resolve(m)
+                        .and_then(|p| makeit4d::ml::ModelManifest::load(&p))
+                    {
                         Ok(manifest) => {
                             println!("depth model: {} ({})", manifest.display_name(), m.display())
                         }

@@ -53,20 +53,7 @@ pub struct SceneBenchCase {
     pub frame: PathBuf,
 }
 
-/// The process's peak resident set size (`VmHWM` of `/proc/self/status`), MiB; `None` off
-/// Linux.
-pub fn peak_memory_mib() -> Option<f64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kib: f64 = line
-        .trim_start_matches("VmHWM:")
-        .trim()
-        .trim_end_matches("kB")
-        .trim()
-        .parse()
-        .ok()?;
-    Some(kib / 1024.0)
-}
+pub use crate::metrics::peak_memory_mib;
 
 /// The benchmark project for `image` at `preset`: every setting at its default.
 pub fn bench_project(image: &Path, preset: InpaintPreset) -> Project {

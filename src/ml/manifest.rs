@@ -341,11 +341,10 @@ pub struct ModelManifest {
 }
 
 impl ModelManifest {
-    /// Reads and checks a manifest file; a catalogue model's name (`lama`) stands for its
-    /// installed manifest ([`crate::models::resolve`]).
+    /// Reads and checks a manifest file. (A catalogue model's name, `lama`, is resolved to its
+    /// installed manifest by the callers, through `models::resolve`: the catalogue sits above
+    /// this module.)
     pub fn load(path: &Path) -> Result<Self> {
-        let resolved = crate::models::resolve(path)?;
-        let path = resolved.as_path();
         let text = std::fs::read_to_string(path).map_err(|err| Error::Model {
             path: path.to_path_buf(),
             message: format!("cannot read the manifest: {err}"),

@@ -44,10 +44,11 @@ pub struct OnnxDepth {
 }
 
 impl OnnxDepth {
-    /// Loads the manifest at `path` and its model, and checks the model's real inputs and
+    /// Loads the manifest at `path` (or of the installed catalogue model of that name,
+    /// [`crate::models::resolve`]) and its model, and checks the model's real inputs and
     /// outputs against the manifest.
     pub fn from_manifest(path: &Path) -> Result<Self> {
-        Self::new(ModelManifest::load(path)?)
+        Self::new(ModelManifest::load(&crate::models::resolve(path)?)?)
     }
 
     /// Like [`OnnxDepth::from_manifest`] for an already parsed manifest.
