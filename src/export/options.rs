@@ -143,7 +143,8 @@ pub struct Passes {
     pub coverage: bool,
     /// Each depth layer alone as RGBA ([`passes::render_layer`](super::passes::render_layer)).
     pub layers: bool,
-    /// Forward motion vectors, 16-bit with a scale sidecar ([`passes::render_flow`](super::passes::render_flow)).
+    /// Forward motion vectors, 16-bit with a scale sidecar
+    /// ([`passes::render_flow`](super::passes::render_flow)).
     pub motion: bool,
     /// Per-frame camera JSON and a Blender script ([`crate::path::export`]).
     pub camera: bool,
