@@ -162,8 +162,9 @@ pub struct SceneSnapshot {
     pub scene: Scene,
     /// Display images.
     pub display: Arc<DisplayImages>,
-    /// A sketch (the harmonic fill, [`SceneBuilder::build_sketch`]) while the project's
-    /// inpainter refines it.
+    /// A sketch (the harmonic fill,
+    /// [`SceneBuilder::build_sketch`](crate::scene::SceneBuilder::build_sketch)) while the
+    /// project's inpainter refines it.
     pub draft: bool,
 }
 

@@ -7,7 +7,7 @@ use std::fmt;
 /// What one frame's diagnostic render shows.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FrameDiagnostics {
-    /// Fraction of pixels with coverage below [`HOLE_COVERAGE`].
+    /// Fraction of pixels with coverage below [`HOLE_COVERAGE`](crate::render::HOLE_COVERAGE).
     pub hole_fraction: f32,
     /// Fraction of pixels that are covered and whose front-most content is synthesised.
     pub inpainted_fraction: f32,

@@ -43,17 +43,19 @@ impl Default for LayerCount {
 #[serde(rename_all = "snake_case")]
 pub enum ClusterMethod {
     /// The exact minimum for the chosen count (optimal 1-D k-means by dynamic programming,
-    /// [`cluster::OptimalPartitions`]). Its boundaries stay put when the resolution changes.
+    /// [`cluster::OptimalPartitions`](super::cluster::OptimalPartitions)). Its boundaries stay put
+    /// when the resolution changes.
     #[default]
     Optimal,
-    /// Greedy Ward agglomeration by adjacent merges ([`cluster::WardTree`]), as 3D Photography,
-    /// 3D Cinemagraphy and Make-It-4D do with scikit-learn. On continuous disparity
-    /// distributions its boundaries move with the resolution (early merges are made on
-    /// histogram noise and never undone).
+    /// Greedy Ward agglomeration by adjacent merges
+    /// ([`cluster::WardTree`](super::cluster::WardTree)), as 3D Photography, 3D Cinemagraphy and
+    /// Make-It-4D do with scikit-learn. On continuous disparity distributions its boundaries move
+    /// with the resolution (early merges are made on histogram noise and never undone).
     Ward,
 }
 
-/// Parameters of the layering (everything [`plan_layers`] needs besides the depth).
+/// Parameters of the layering (everything [`plan_layers`](super::plan_layers) needs besides the
+/// depth).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct LayerParams {
@@ -83,11 +85,12 @@ pub struct LayerParams {
     pub edge_depth_ratio: f32,
     /// Bins of the disparity histogram the clustering runs on.
     pub histogram_bins: usize,
-    /// With a sky mask ([`plan_layers_with_sky`]), the sky is a layer of its own, the farthest:
-    /// the rest of the scene is clustered without it and one cut is added between the farthest
-    /// non-sky depth and the sky (see [`sky_thresholds`]). Clustered together in disparity, the
-    /// sky and distant mountains share a layer, and the ridge between them tears open with
-    /// nothing behind it as soon as the camera moves.
+    /// With a sky mask ([`plan_layers_with_sky`](super::plan_layers_with_sky)), the sky is a layer
+    /// of its own, the farthest: the rest of the scene is clustered without it and one cut is added
+    /// between the farthest non-sky depth and the sky (see
+    /// [`sky_thresholds`](super::sky_thresholds)). Clustered together in disparity, the sky and
+    /// distant mountains share a layer, and the ridge between them tears open with nothing behind
+    /// it as soon as the camera moves.
     pub sky_layer: bool,
 }
 
