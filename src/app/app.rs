@@ -200,7 +200,7 @@ pub struct EditorApp {
     pub(super) last_build_stages: Vec<Stage>,
     pub(super) last_export: Option<String>,
     /// A preset to size to the scene once the scene built for it is on screen
-    /// ([`Request::SizePreset`]).
+    /// ([`Request::SizePreset`](super::context::Request::SizePreset)).
     pub(super) pending_sizing: Option<crate::path::Preset>,
     /// The view of each preview request in flight (by id), to know what an arriving frame shows.
     pub(super) requested_views: std::collections::BTreeMap<u64, View>,

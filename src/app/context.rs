@@ -6,7 +6,7 @@
 use super::images::Textures;
 use super::viewport::ImageView;
 use super::worker::{JobStatus, SceneSnapshot};
-use crate::export::ExportOptions;
+use crate::export::{ExportOptions, RenderSummary};
 use crate::geometry::View;
 use crate::path::PathDiagnostics;
 use crate::project::Project;
@@ -80,6 +80,41 @@ impl TimelineState {
     }
 }
 
+/// The stage tabs, in pipeline order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+pub enum Tab {
+    /// The photo and the global settings.
+    Input,
+    /// The outpainted canvas.
+    Canvas,
+    /// Depth, sky, horizon, depth brush.
+    Depth,
+    /// Layer thresholds and layers.
+    Layers,
+    /// Motion painting.
+    Motion,
+    /// The camera path.
+    Camera,
+    /// The rendered preview.
+    Preview,
+    /// Export.
+    Export,
+}
+
+impl Tab {
+    /// Every tab, in order.
+    pub const ALL: [Tab; 8] = [
+        Tab::Input,
+        Tab::Canvas,
+        Tab::Depth,
+        Tab::Layers,
+        Tab::Motion,
+        Tab::Camera,
+        Tab::Preview,
+        Tab::Export,
+    ];
+}
+
 /// Something a panel asks the app to do.
 #[derive(Debug)]
 pub enum Request {
@@ -110,14 +145,32 @@ pub enum Request {
     Notify(String),
 }
 
-/// A message from the app to the panels.
+/// A message from the app to a panel. The app routes each to the panel of its
+/// [`PanelMessage::tab`], which reacts to it in its `on_message`.
 pub enum PanelMessage {
     /// The automatic motion suggestion arrived.
     Suggestion(MotionSpec),
     /// A folder was picked for the export.
     ExportFolder(PathBuf),
-    /// An export ended: a one-line summary (or why it failed).
-    ExportResult(String),
+    /// An export finished.
+    ExportFinished(RenderSummary),
+    /// An export failed: why.
+    ExportFailed(String),
+    /// An export was cancelled.
+    ExportCancelled,
+}
+
+impl PanelMessage {
+    /// The tab of the panel the message is for.
+    pub fn tab(&self) -> Tab {
+        match self {
+            PanelMessage::Suggestion(_) => Tab::Motion,
+            PanelMessage::ExportFolder(_)
+            | PanelMessage::ExportFinished(_)
+            | PanelMessage::ExportFailed(_)
+            | PanelMessage::ExportCancelled => Tab::Export,
+        }
+    }
 }
 
 /// What the camera path looks like now (computed by the app when the path changes).

@@ -158,10 +158,7 @@ impl EditorApp {
                         path.display()
                     ));
                 }
-                let message = PanelMessage::ExportFolder(path);
-                for p in &mut self.panels {
-                    p.on_message(&message);
-                }
+                self.route(PanelMessage::ExportFolder(path));
             }
         }
         Ok(())

@@ -1,5 +1,5 @@
-//! Event routing: the scene worker's events, the panels' requests and the commands sent to the
-//! worker.
+//! Event routing: the scene worker's events, the messages routed to the panel each is for, the
+//! panels' requests and the commands sent to the worker.
 
 use super::app::*;
 use super::context::{PanelMessage, Request};
@@ -64,19 +64,7 @@ impl EditorApp {
                     self.error(format!("the scene could not be built: {message}"));
                     self.build_error = Some((generation, message));
                 }
-                Event::Suggestion(spec) => {
-                    if spec.regions.is_empty() {
-                        self.notify("no sky or water found to suggest motion for");
-                    } else {
-                        self.notify(
-                            "motion suggested (magenta): accept or reject it in the inspector",
-                        );
-                    }
-                    let m = PanelMessage::Suggestion(spec);
-                    for p in &mut self.panels {
-                        p.on_message(&m);
-                    }
-                }
+                Event::Suggestion(spec) => self.route(PanelMessage::Suggestion(spec)),
                 Event::Cruise {
                     generation,
                     keyframes,
@@ -98,41 +86,39 @@ impl EditorApp {
                     }
                 }
                 Event::ExportDone(summary) => {
-                    let mut text = summary.to_string();
-                    for w in &summary.warnings {
-                        text.push_str(&format!("\nwarning: {w}"));
-                    }
                     for &(f, h) in &summary.hole_fractions {
                         self.timeline.hole_fractions.insert(f, h);
                     }
                     self.notify(format!("export finished: {}", summary));
                     self.last_export = Some(summary.to_string());
-                    let m = PanelMessage::ExportResult(text);
-                    for p in &mut self.panels {
-                        p.on_message(&m);
-                    }
+                    self.route(PanelMessage::ExportFinished(summary));
                 }
                 Event::ExportFailed(message) => {
                     self.last_export = Some(format!("failed: {message}"));
                     self.error(format!("export failed: {message}"));
-                    let m = PanelMessage::ExportResult(format!("export failed: {message}"));
-                    for p in &mut self.panels {
-                        p.on_message(&m);
-                    }
+                    self.route(PanelMessage::ExportFailed(message));
                 }
                 Event::Cancelled(kind) => {
                     self.notify(format!("{} cancelled", kind.name()));
                     if kind == JobKind::Export {
-                        let m = PanelMessage::ExportResult(
-                            "export cancelled: the frames written so far are complete".into(),
-                        );
-                        for p in &mut self.panels {
-                            p.on_message(&m);
-                        }
+                        self.route(PanelMessage::ExportCancelled);
                     }
                 }
                 Event::Error(message) => self.error(message),
             }
+        }
+    }
+
+    /// Routes `message` to the panel it is for ([`PanelMessage::tab`]), and handles what the
+    /// panel asks in return.
+    pub(super) fn route(&mut self, message: PanelMessage) {
+        let tab = message.tab();
+        let mut requests = Vec::new();
+        for p in self.panels.iter_mut().filter(|p| p.tab() == tab) {
+            p.on_message(&message, &mut requests);
+        }
+        for r in requests {
+            self.handle_request(r);
         }
     }
 

@@ -165,10 +165,7 @@ impl EditorApp {
 
     /// Sets the export folder (what the Browse… dialog does).
     pub fn set_export_folder(&mut self, dir: &Path) {
-        let m = PanelMessage::ExportFolder(dir.to_path_buf());
-        for p in &mut self.panels {
-            p.on_message(&m);
-        }
+        self.route(PanelMessage::ExportFolder(dir.to_path_buf()));
     }
 
     /// The newest generation whose depth the depth view can show (the scene on screen's, or a

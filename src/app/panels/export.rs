@@ -66,10 +66,23 @@ impl StagePanel for ExportPanel {
         "Export"
     }
 
-    fn on_message(&mut self, message: &PanelMessage) {
+    fn on_message(&mut self, message: &PanelMessage, _requests: &mut Vec<Request>) {
         match message {
             PanelMessage::ExportFolder(dir) => self.out_dir = dir.display().to_string(),
-            PanelMessage::ExportResult(text) => self.last_result = Some(text.clone()),
+            PanelMessage::ExportFinished(summary) => {
+                let mut text = summary.to_string();
+                for w in &summary.warnings {
+                    text.push_str(&format!("\nwarning: {w}"));
+                }
+                self.last_result = Some(text);
+            }
+            PanelMessage::ExportFailed(message) => {
+                self.last_result = Some(format!("export failed: {message}"));
+            }
+            PanelMessage::ExportCancelled => {
+                self.last_result =
+                    Some("export cancelled: the frames written so far are complete".into());
+            }
             PanelMessage::Suggestion(_) => {}
         }
     }

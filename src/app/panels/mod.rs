@@ -1,5 +1,5 @@
 //! One panel per stage, each behind [`StagePanel`]: a title, the central view, the inspector,
-//! and messages from the worker.
+//! and its reaction to the messages the app routes to it (the app routes, the panel reacts).
 //!
 //! Panels never change the project in place: they propose edits through
 //! [`PanelContext::edit`], and the app records each one for undo and sends the new project to
@@ -15,48 +15,13 @@ pub mod motion;
 pub mod preview;
 
 pub use super::context::{
-    CameraInfo, FlyCamera, GpuDraw, PanelContext, PanelMessage, PreviewInfo, Probe, Request,
+    CameraInfo, FlyCamera, GpuDraw, PanelContext, PanelMessage, PreviewInfo, Probe, Request, Tab,
 };
 
 use super::viewport::{ImageView, ViewTransform, image_view_ui};
 use super::worker::SceneSnapshot;
 use eframe::egui::{self, ColorImage, Response, Sense, Ui};
 use std::path::PathBuf;
-
-/// The stage tabs, in pipeline order.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
-pub enum Tab {
-    /// The photo and the global settings.
-    Input,
-    /// The outpainted canvas.
-    Canvas,
-    /// Depth, sky, horizon, depth brush.
-    Depth,
-    /// Layer thresholds and layers.
-    Layers,
-    /// Motion painting.
-    Motion,
-    /// The camera path.
-    Camera,
-    /// The rendered preview.
-    Preview,
-    /// Export.
-    Export,
-}
-
-impl Tab {
-    /// Every tab, in order.
-    pub const ALL: [Tab; 8] = [
-        Tab::Input,
-        Tab::Canvas,
-        Tab::Depth,
-        Tab::Layers,
-        Tab::Motion,
-        Tab::Camera,
-        Tab::Preview,
-        Tab::Export,
-    ];
-}
 
 /// A stage panel.
 pub trait StagePanel {
@@ -72,8 +37,9 @@ pub trait StagePanel {
     /// The inspector: the stage's parameters.
     fn inspector_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>);
 
-    /// A message from the app.
-    fn on_message(&mut self, _message: &PanelMessage) {}
+    /// Reacts to a message the app routed to this panel (one of its [`PanelMessage::tab`]);
+    /// what it asks of the app in return goes in `requests`, which the app handles at once.
+    fn on_message(&mut self, _message: &PanelMessage, _requests: &mut Vec<Request>) {}
 }
 
 /// All panels, in tab order.

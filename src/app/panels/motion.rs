@@ -159,8 +159,13 @@ impl StagePanel for MotionPanel {
         "Motion"
     }
 
-    fn on_message(&mut self, message: &PanelMessage) {
+    fn on_message(&mut self, message: &PanelMessage, requests: &mut Vec<Request>) {
         if let PanelMessage::Suggestion(spec) = message {
+            requests.push(Request::Notify(if spec.regions.is_empty() {
+                "no sky or water found to suggest motion for".into()
+            } else {
+                "motion suggested (magenta): accept or reject it in the inspector".into()
+            }));
             self.suggestion = Some(spec.clone());
         }
     }

@@ -2,7 +2,9 @@
 
 use super::testing::{GradientDepth, LumaDepth, MeanInpainter, load_gray, load_rgb};
 use super::*;
+use crate::error::{Error, Result};
 use crate::geometry::Intrinsics;
+use crate::progress::Progress;
 
 const W: usize = 60;
 const H: usize = 50;

@@ -1,0 +1,347 @@
+use super::*;
+use crate::error::{Error, Result};
+use crate::ml::{ModelKind, ModelManifest};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+#[test]
+fn every_catalogue_manifest_parses_and_names_its_file() {
+    for e in CATALOGUE {
+        let m = ModelManifest::parse(e.manifest, Path::new("/m/manifest.json"))
+            .unwrap_or_else(|err| panic!("{}: {err}", e.name));
+        assert_eq!(m.kind(), e.kind, "{}", e.name);
+        assert_eq!(m.model_path, Path::new("/m").join(e.file), "{}", e.name);
+        assert!(looks_like_name(Path::new(e.name)), "{}", e.name);
+        assert_eq!(find(e.name), Some(e));
+    }
+    assert_eq!(find("nope"), None);
+}
+
+#[test]
+fn names_and_paths_are_told_apart() {
+    assert!(looks_like_name(Path::new("lama")));
+    assert!(!looks_like_name(Path::new("models/lama.json")));
+    assert!(!looks_like_name(Path::new("lama.json")));
+    // A catalogue name with a dot is still a name; another dotted word is a file.
+    assert!(looks_like_name(Path::new("midas-v2.1-small")));
+    assert!(!looks_like_name(Path::new("midas-v2.1-large")));
+    // A path is passed through untouched, existing or not.
+    assert_eq!(
+        resolve(Path::new("x/y.json")).unwrap(),
+        Path::new("x/y.json")
+    );
+    let e = resolve(Path::new("no-such-model")).unwrap_err().to_string();
+    assert!(e.contains("depth-anything-v2-small"), "{e}");
+    assert!(is_loopback("http://127.0.0.1:8080/a"));
+    assert!(is_loopback("http://localhost/a"));
+    assert!(!is_loopback("https://huggingface.co/x"));
+}
+
+use std::io::{BufRead, BufReader};
+use std::net::TcpListener;
+
+/// What the test server answers to one request (its text, headers included).
+type Reply = Box<dyn Fn(&str) -> Vec<u8> + Send>;
+
+/// A server on 127.0.0.1 answering one connection per reply, in order; its base URL.
+fn serve(replies: Vec<Reply>) -> (String, std::thread::JoinHandle<()>) {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let url = format!("http://{}", listener.local_addr().unwrap());
+    let handle = std::thread::spawn(move || {
+        for reply in replies {
+            let Ok((mut stream, _)) = listener.accept() else {
+                return;
+            };
+            let mut reader = BufReader::new(stream.try_clone().unwrap());
+            let mut request = String::new();
+            loop {
+                let mut line = String::new();
+                if reader.read_line(&mut line).unwrap_or(0) == 0 || line == "\r\n" {
+                    break;
+                }
+                request.push_str(&line);
+            }
+            let _ = stream.write_all(&reply(&request));
+        }
+    });
+    (url, handle)
+}
+
+fn ok(body: &[u8]) -> Vec<u8> {
+    let mut r = format!(
+        "HTTP/1.1 200 OK\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+        body.len()
+    )
+    .into_bytes();
+    r.extend_from_slice(body);
+    r
+}
+
+/// The payload, and a reply that honours `Range: bytes=N-` with 206.
+fn payload() -> Vec<u8> {
+    (0..200_000u32).map(|i| (i * 7 % 251) as u8).collect()
+}
+
+fn ranged(body: Vec<u8>) -> Reply {
+    Box::new(move |request: &str| {
+        let from = request
+            .lines()
+            .find_map(|l| {
+                l.to_ascii_lowercase()
+                    .strip_prefix("range: bytes=")
+                    .map(str::to_string)
+            })
+            .and_then(|r| r.trim_end_matches('-').trim().parse::<usize>().ok());
+        match from {
+            Some(from) => {
+                let rest = &body[from..];
+                let mut r = format!(
+                    "HTTP/1.1 206 Partial Content\r\nContent-Length: {}\r\nContent-Range: \
+                     bytes {from}-{}/{}\r\nConnection: close\r\n\r\n",
+                    rest.len(),
+                    body.len() - 1,
+                    body.len()
+                )
+                .into_bytes();
+                r.extend_from_slice(rest);
+                r
+            }
+            None => ok(&body),
+        }
+    })
+}
+
+static TEST_ENTRY: CatalogueEntry = CatalogueEntry {
+    name: "test-model",
+    kind: ModelKind::Inpaint,
+    description: "a test",
+    file: "test.onnx",
+    url: "http://127.0.0.1:9/unused",
+    published_size: "0.2 MB",
+    size_bytes: None,
+    sha256: None,
+    licence: "none",
+    non_commercial: false,
+    manifest: r#"{ "kind": "inpaint", "file": "test.onnx", "image_input": "image",
+        "mask_input": "mask", "size": { "fixed": { "width": 8, "height": 8 } },
+        "output_range": [0, 1] }"#,
+};
+
+fn no_graph_check(_: &ModelManifest) -> Result<()> {
+    Ok(())
+}
+
+/// `install_from_url` of `entry` from `url` into `dir`, no progress, no graph check.
+fn fetch(dir: &Path, entry: &'static CatalogueEntry, url: &str) -> Result<InstalledModel> {
+    install_from_url(
+        dir,
+        entry,
+        Some(url),
+        &|_, _| {},
+        ByteCheck::Catalogue,
+        &no_graph_check,
+    )
+}
+
+fn files_in(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = walk(dir)
+        .into_iter()
+        .map(|p| p.strip_prefix(dir).unwrap().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+fn walk(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for e in entries.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                out.push(p.clone());
+                out.extend(walk(&p));
+            } else {
+                out.push(p);
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn a_download_installs_the_file_and_its_manifest() {
+    let dir = tempfile::tempdir().unwrap();
+    let body = payload();
+    let (url, server) = serve(vec![ranged(body.clone())]);
+    let seen = std::sync::Mutex::new(0u64);
+    let progress = |done: u64, _: Option<u64>| *seen.lock().unwrap() = done;
+    let m = install_from_url(
+        dir.path(),
+        &TEST_ENTRY,
+        Some(&format!("{url}/test.onnx")),
+        &progress,
+        ByteCheck::Catalogue,
+        &no_graph_check,
+    )
+    .unwrap();
+    server.join().unwrap();
+    assert_eq!(std::fs::read(&m.model_path).unwrap(), body);
+    assert_eq!(*seen.lock().unwrap(), body.len() as u64);
+    assert_eq!(
+        files_in(dir.path()),
+        [
+            "test-model",
+            "test-model/manifest.json",
+            "test-model/test.onnx"
+        ]
+    );
+    assert_eq!(installed(dir.path(), &TEST_ENTRY), Some(m));
+    assert!(remove(dir.path(), &TEST_ENTRY).unwrap());
+    assert!(files_in(dir.path()).is_empty());
+}
+
+#[test]
+fn a_broken_download_resumes_to_the_same_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let body = payload();
+    let half = body.len() / 2;
+    let full = body.clone();
+    // First answer: the whole length announced, half sent, the connection dropped.
+    let broken: Reply = Box::new(move |_| {
+        let mut r = ok(&full);
+        r.truncate(r.len() - (full.len() - half));
+        r
+    });
+    let (url, server) = serve(vec![broken, ranged(body.clone())]);
+    let url = format!("{url}/test.onnx");
+    let err = fetch(dir.path(), &TEST_ENTRY, &url)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("broke off") && err.contains("resume"), "{err}");
+    let part = dir.path().join("test-model/test.onnx.part");
+    assert_eq!(std::fs::metadata(&part).unwrap().len(), half as u64);
+    assert!(installed(dir.path(), &TEST_ENTRY).is_none());
+    let m = fetch(dir.path(), &TEST_ENTRY, &url).unwrap();
+    server.join().unwrap();
+    assert_eq!(std::fs::read(&m.model_path).unwrap(), body);
+    assert!(!part.exists());
+}
+
+#[test]
+fn bad_downloads_leave_nothing_behind() {
+    static CHECKED: CatalogueEntry = CatalogueEntry {
+        sha256: Some("0000000000000000000000000000000000000000000000000000000000000000"),
+        ..TEST_ENTRY
+    };
+    static SIZED: CatalogueEntry = CatalogueEntry {
+        size_bytes: Some(5),
+        ..TEST_ENTRY
+    };
+    let cases: Vec<(&'static CatalogueEntry, Reply, &str)> = vec![
+        (
+            &TEST_ENTRY,
+            Box::new(|_: &str| {
+                b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\nConnection: close\r\n\r\n".to_vec()
+            }),
+            "HTTP 404",
+        ),
+        (&CHECKED, ranged(payload()), "SHA-256"),
+        (&SIZED, ranged(payload()), "bytes"),
+    ];
+    for (entry, reply, needle) in cases {
+        let dir = tempfile::tempdir().unwrap();
+        let (url, server) = serve(vec![reply]);
+        let err = fetch(dir.path(), entry, &format!("{url}/m.onnx"))
+            .unwrap_err()
+            .to_string();
+        server.join().unwrap();
+        assert!(err.contains(needle), "{needle}: {err}");
+        assert!(err.lines().count() == 1, "{err}");
+        assert!(
+            files_in(dir.path()).is_empty(),
+            "{needle}: {:?}",
+            files_in(dir.path())
+        );
+    }
+    // Nobody listening: a clear line that says how to install by hand.
+    let dir = tempfile::tempdir().unwrap();
+    let closed = TcpListener::bind("127.0.0.1:0").unwrap();
+    let url = format!("http://{}/m.onnx", closed.local_addr().unwrap());
+    drop(closed);
+    let err = fetch(dir.path(), &TEST_ENTRY, &url)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("--file"), "{err}");
+    assert!(files_in(dir.path()).is_empty());
+}
+
+#[test]
+fn a_file_by_hand_is_checked_like_a_download() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("downloaded.onnx");
+    std::fs::write(&src, payload()).unwrap();
+    let models = dir.path().join("models");
+    // A graph that does not match the manifest is refused and leaves nothing.
+    let refuse = |_: &ModelManifest| Err(Error::invalid("input 'image' is missing"));
+    let err = install_from_file(&models, &TEST_ENTRY, &src, ByteCheck::Catalogue, &refuse)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("input 'image'"), "{err}");
+    assert!(files_in(&models).is_empty());
+    // Bytes that differ from the catalogue's checksum are refused, with the way out...
+    static CHECKED: CatalogueEntry = CatalogueEntry {
+        sha256: Some("0000000000000000000000000000000000000000000000000000000000000000"),
+        ..TEST_ENTRY
+    };
+    let err = install_from_file(
+        &models,
+        &CHECKED,
+        &src,
+        ByteCheck::Catalogue,
+        &no_graph_check,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("SHA-256") && err.contains("--skip-checksum"),
+        "{err}"
+    );
+    assert!(files_in(&models).is_empty());
+    // ... which still checks the graph,
+    let err = install_from_file(&models, &CHECKED, &src, ByteCheck::Skip, &refuse)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("input 'image'"), "{err}");
+    // and installs a file whose graph matches.
+    let m = install_from_file(&models, &CHECKED, &src, ByteCheck::Skip, &no_graph_check).unwrap();
+    assert!(remove(&models, &CHECKED).unwrap(), "{m:?}");
+    let m = install_from_file(
+        &models,
+        &TEST_ENTRY,
+        &src,
+        ByteCheck::Catalogue,
+        &no_graph_check,
+    )
+    .unwrap();
+    assert_eq!(std::fs::read(&m.model_path).unwrap(), payload());
+    assert!(src.exists(), "the user's file is copied, not moved");
+    let missing = install_from_file(
+        &models,
+        &TEST_ENTRY,
+        &dir.path().join("nope"),
+        ByteCheck::Catalogue,
+        &no_graph_check,
+    );
+    assert!(missing.unwrap_err().to_string().contains("no such file"));
+}
+
+#[test]
+fn sha256_known_answer() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("abc");
+    std::fs::write(&p, b"abc").unwrap();
+    assert_eq!(
+        sha256_file(&p).unwrap(),
+        "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+    );
+}
