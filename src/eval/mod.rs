@@ -1,6 +1,6 @@
 //! Measured quality of the whole method: novel-view synthesis against a real stereo pair with
 //! ground truth ([`nvs`]), and the speed/quality benchmark of every stage over the quality
-//! presets ([`bench`], with its chart drawn by [`plot`]).
+//! presets ([`bench`](mod@bench), with its chart drawn by [`plot`]).
 //!
 //! Both sit above the stage graph ([`crate::scene`]): they build scenes from projects exactly as
 //! the command line and the editor do, and score frames with [`crate::metrics`].

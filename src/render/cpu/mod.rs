@@ -6,8 +6,8 @@
 //! `M = r0·J·[t_u t_v]`, the point's source-pixel grid as seen in the target view. A pixel at
 //! offset `d` from the point's centre is at `s = M'⁻¹·d` in that grid, and the point weighs
 //! `w = α·g·k_γu(s_x)·k_γv(s_y)` there, `k_γ = tent + γ·(k − tent)` with `k` the
-//! [`SplatKernel`]. Where the footprint is magnified (`γ = 1` from one pixel per source pixel on)
-//! this is plain interpolation: a pure zoom of a photo is exactly bicubic (Catmull-Rom) or
+//! [`SplatKernel`](crate::render::SplatKernel). Where the footprint is magnified (`γ = 1` from
+//! one pixel per source pixel on) this is plain interpolation: a pure zoom of a photo is exactly bicubic (Catmull-Rom) or
 //! bilinear (tent) interpolation, and in the input view (`M = I`) every pixel receives only its own
 //! point, so the photo is reproduced exactly. Under minification (`γ = 0` below ½ pixel per source
 //! pixel, linear between) the tent is used: at ½× it is exactly the 2×2 area average, where
@@ -55,9 +55,10 @@
 //! supports apart in the source grid, so their depths differ by at most
 //! `2·R·ω·(|t_u,z| + |t_v,z|)` (`R` the kernel's support, `ω` the prefilter's widening, `t_z`
 //! the tangents' depth in the target camera). A point's tolerance is that, at most
-//! [`SAME_SURFACE_RELATIVE_DEPTH`]` · z` (a steeper step is an occlusion), plus 1 % of `z`, or,
-//! when larger, [`parallax_tolerance`]: a step that this view shows no parallax for (all of them
-//! in a pure zoom) is no occlusion, so it does not split the photo into separate surfaces.
+//! [`SAME_SURFACE_RELATIVE_DEPTH`](crate::stages::points::SAME_SURFACE_RELATIVE_DEPTH)` · z`
+//! (a steeper step is an occlusion), plus 1 % of `z`, or, when larger, [`parallax_tolerance`]:
+//! a step that this view shows no parallax for (all of them in a pure zoom) is no occlusion, so
+//! it does not split the photo into separate surfaces.
 //!
 //! **Determinism.** Every per-pixel quantity is a minimum or a sum over a set that the minimum
 //! fixes, and the sums run in point order (tiles keep point order), so the output does not depend

@@ -24,7 +24,7 @@ impl FrameSlot {
 pub enum Positions {
     /// The cloud's own positions (uploaded by `set_cloud`).
     Cloud,
-    /// The positions last uploaded into the slot with [`GpuSplatter::upload_positions`].
+    /// The positions last uploaded into the slot with [`GpuSplatter::upload_positions`](super::GpuSplatter::upload_positions).
     Uploaded,
 }
 

@@ -16,7 +16,7 @@ pub struct GpuRenderer {
 }
 
 impl GpuRenderer {
-    /// Opens the best adapter and builds the pipelines; [`Error::Gpu`] when there is no adapter.
+    /// Opens the best adapter and builds the pipelines; [`Error::Gpu`](crate::error::Error::Gpu) when there is no adapter.
     pub fn new(settings: SplatSettings) -> Result<Self> {
         Self::with_context(GpuContext::new()?, settings)
     }

@@ -81,7 +81,7 @@ impl Sweeps {
     };
 }
 
-/// The membrane fill with few sweeps on the fine levels ([`Sweeps::SKETCH`]): the editor's
+/// The membrane fill with few sweeps on the fine levels (`Sweeps::SKETCH`): the editor's
 /// first answer to an edit ([`crate::scene::SceneBuilder::build_sketch`]), several times as
 /// fast as [`HarmonicInpainter`] and as smooth.
 #[derive(Clone, Copy, Debug, Default)]
