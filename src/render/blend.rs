@@ -18,19 +18,8 @@ use rayon::prelude::*;
 /// Default sharpness `a` of the depth preference (3D Cinemagraphy uses about 4 for RGB).
 pub const DEFAULT_SHARPNESS: f32 = 4.0;
 
-/// Blends the forward and backward renders of one loop frame at time `t ∈ [0, 1]` with depth
-/// sharpness `a` (see the module documentation).
-///
-/// Per pixel: where the two inputs are identical, or one weight is zero, the other input's
-/// pixel is copied exactly (so `t = 0` gives the forward frame and `t = 1` the backward frame,
-/// bit for bit); where both weights are zero (holes in both, or a hole on the only weighted
-/// side) the pixel of the side that time favours (forward for `t < ½`) is copied. Otherwise
-/// colour, coverage and depth are the `w`-weighted means of the two sides, so a hole on one
-/// side is filled with the other side's colour at its full coverage.
-///
-/// Errors when the six rasters do not share one size or `t`, `a` are not finite; `t` is
-/// clamped to `[0, 1]`.
-pub fn symmetric_blend(forward: &Frame, backward: &Frame, t: f32, a: f32) -> Result<Frame> {
+/// The one size of the six rasters of a forward and a backward frame; an error when they differ.
+pub fn pair_size(forward: &Frame, backward: &Frame) -> Result<(usize, usize)> {
     let size = forward.colour.size();
     let sizes = [
         forward.coverage.size(),
@@ -44,6 +33,23 @@ pub fn symmetric_blend(forward: &Frame, backward: &Frame, t: f32, a: f32) -> Res
             "blend: forward and backward frames must have equal sizes",
         ));
     }
+    Ok(size)
+}
+
+/// Blends the forward and backward renders of one loop frame at time `t ∈ [0, 1]` with depth
+/// sharpness `a` (see the module documentation).
+///
+/// Per pixel: where the two inputs are identical, or one weight is zero, the other input's
+/// pixel is copied exactly (so `t = 0` gives the forward frame and `t = 1` the backward frame,
+/// bit for bit); where both weights are zero (holes in both, or a hole on the only weighted
+/// side) the pixel of the side that time favours (forward for `t < ½`) is copied. Otherwise
+/// colour, coverage and depth are the `w`-weighted means of the two sides, so a hole on one
+/// side is filled with the other side's colour at its full coverage.
+///
+/// Errors when the six rasters do not share one size or `t`, `a` are not finite; `t` is
+/// clamped to `[0, 1]`.
+pub fn symmetric_blend(forward: &Frame, backward: &Frame, t: f32, a: f32) -> Result<Frame> {
+    let size = pair_size(forward, backward)?;
     if !(t.is_finite() && a.is_finite()) {
         return Err(Error::invalid(format!(
             "blend: t = {t} and a = {a} must be finite"

@@ -258,10 +258,17 @@ pub fn sides_of(sx: f32, sy: f32) -> u8 {
 /// [`sides_of`] of a pixel that a surface's samples surround.
 pub const SURROUNDED: u8 = 15;
 
-/// `(tent(s_x)·tent(s_y), k_γu(s_x)·k_γv(s_y))` at a source-grid offset ([`kernel_1d`]).
+/// `(tent(s_x)·tent(s_y), k_γu(s_x)·k_γv(s_y))` at a source-grid offset ([`kernel_1d`]);
+/// `supports` are `support(γ_u)`, `support(γ_v)` ([`support`]), computed once per splat.
 #[inline]
-pub fn kernel_weights(sx: f32, sy: f32, gamma: [f32; 2], kernel: SplatKernel) -> (f32, f32) {
-    if !(sx.abs() < support(gamma[0], kernel) && sy.abs() < support(gamma[1], kernel)) {
+pub fn kernel_weights(
+    sx: f32,
+    sy: f32,
+    gamma: [f32; 2],
+    supports: [f32; 2],
+    kernel: SplatKernel,
+) -> (f32, f32) {
+    if !(sx.abs() < supports[0] && sy.abs() < supports[1]) {
         return (0.0, 0.0);
     }
     let w_c = tent(sx) * tent(sy);

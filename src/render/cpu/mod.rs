@@ -292,8 +292,7 @@ pub fn render_cpu_with(
                         let c = values[s.index as usize];
                         let probe = Probe::of(s);
                         let first = surface == 0;
-                        let [su, sv] = s.sharpness.map(|g| support(g, kernel));
-                        let sharp = s.sharpness != [0.0; 2];
+                        let supports = s.sharpness.map(|g| support(g, kernel));
                         let rho = if s.observed {
                             1.0
                         } else {
@@ -306,19 +305,11 @@ pub fn render_cpu_with(
                             }
                             match px.classify(&probe, first) {
                                 Role::Member => {
-                                    // `kernel_weights`, with the splat's constants hoisted.
                                     let (t, k) = match shape {
-                                        Some(kernel) if sharp => {
-                                            if !(sx.abs() < su && sy.abs() < sv) {
-                                                return;
-                                            }
-                                            (
-                                                tent(sx) * tent(sy),
-                                                kernel_1d(sx, s.sharpness[0], kernel)
-                                                    * kernel_1d(sy, s.sharpness[1], kernel),
-                                            )
+                                        Some(kernel) => {
+                                            kernel_weights(sx, sy, s.sharpness, supports, kernel)
                                         }
-                                        _ => {
+                                        None => {
                                             let t = tent(sx) * tent(sy);
                                             (t, t)
                                         }

@@ -391,19 +391,7 @@ impl GpuSplatter {
         t: f32,
         sharpness: f32,
     ) -> Result<Frame> {
-        let size = forward.colour.size();
-        let sizes = [
-            forward.coverage.size(),
-            forward.depth.size(),
-            backward.colour.size(),
-            backward.coverage.size(),
-            backward.depth.size(),
-        ];
-        if sizes.iter().any(|&s| s != size) {
-            return Err(Error::invalid(
-                "blend: forward and backward frames must have equal sizes",
-            ));
-        }
+        let size = crate::render::blend::pair_size(forward, backward)?;
         let (width, height) = size;
         self.check_binding("frame", frame_bytes(width, height))?;
         let device = self.context.device.clone();
