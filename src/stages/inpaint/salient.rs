@@ -15,11 +15,16 @@
 //!    least [`MIN_AREA`] pixels, at most [`MAX_SHARE`] of the region, filling at least
 //!    [`MIN_FILL`] of their bounding box, and standing out: the mean colour differs from that of
 //!    the surroundings (the box grown by [`SURROUND_PX`]) by at least [`MIN_CONTRAST`].
-//! 4. The kept parts grow back by 1 + [`RIM_PX`] pixels (the erosion and their rims) and are returned as a
-//!    mask, at most [`MAX_TOTAL_SHARE`] of the region (the largest parts first): a region that is
+//! 4. Colour rarity misses a unique object whose colours recur elsewhere (a red rocket before a
+//!    red tree). The parts of the region whose patches have no look-alike elsewhere in it
+//!    ([`super::distinct`]) are candidates too, under the same fill test, at most
+//!    [`MAX_DISTINCT_SHARE`] of the region (their mark holds their interior and a rim), and
+//!    without the colour contrast test (they stand out by arrangement).
+//! 5. The kept parts grow back by 1 + [`RIM_PX`] pixels (the erosion and their rims) and are
+//!    returned as a mask, at most [`MAX_TOTAL_SHARE`] of the region (the largest parts first): a region that is
 //!    mostly "objects" keeps its sources.
 
-use super::common;
+use super::{common, distinct};
 use crate::raster::{MaskRaster, RgbRaster, connected_components};
 
 /// Quantisation levels per colour channel.
@@ -30,6 +35,9 @@ pub const RARE_SHARE: f32 = 0.02;
 pub const MIN_AREA: usize = 6;
 /// Largest object, as a share of the region.
 pub const MAX_SHARE: f32 = 0.05;
+/// Largest object found by its arrangement ([`super::distinct`]), as a share of the region:
+/// its mark includes its interior and a rim.
+pub const MAX_DISTINCT_SHARE: f32 = 0.08;
 /// Smallest share of its bounding box an object fills (rejects long thin diagonals, which are
 /// structure rather than an object).
 pub const MIN_FILL: f32 = 0.2;
@@ -86,11 +94,27 @@ pub fn unique_objects(image: &RgbRaster, within: Option<&MaskRaster>) -> MaskRas
     // survives a 3×3 erosion counts, grown back below.
     let core = MaskRaster::from_vec(w, h, common::erode_inside(own_colour.data(), w, h, 1))
         .unwrap_or_else(|| MaskRaster::new(w, h, false));
-    let mut kept: Vec<(usize, Vec<usize>)> = connected_components(&core)
+    // Arrangements no other part of the region repeats, whatever their colours
+    // ([`distinct::distinctive`]): they stand out by shape, not by colour, so they skip the
+    // colour contrast test below.
+    let inside_mask: Vec<bool> = (0..w * h).map(inside).collect();
+    let distinct = distinct::distinctive(image.data(), &inside_mask, w, h);
+    let distinct_parts = connected_components(
+        &MaskRaster::from_vec(w, h, distinct).unwrap_or_else(|| MaskRaster::new(w, h, false)),
+    );
+    let candidates = connected_components(&core)
         .into_iter()
-        .filter_map(|part| {
+        .map(|part| (part, true))
+        .chain(distinct_parts.into_iter().map(|part| (part, false)));
+    let mut kept: Vec<(usize, Vec<usize>, bool)> = candidates
+        .filter_map(|(part, by_colour)| {
             let area = part.len();
-            if area < MIN_AREA || area as f32 > MAX_SHARE * n as f32 {
+            let max_share = if by_colour {
+                MAX_SHARE
+            } else {
+                MAX_DISTINCT_SHARE
+            };
+            if area < MIN_AREA || area as f32 > max_share * n as f32 {
                 return None;
             }
             let (mut x0, mut y0, mut x1, mut y1) = (w, h, 0, 0);
@@ -101,6 +125,11 @@ pub fn unique_objects(image: &RgbRaster, within: Option<&MaskRaster>) -> MaskRas
             let box_area = ((x1 - x0 + 1) * (y1 - y0 + 1)) as f32;
             if (area as f32) < MIN_FILL * box_area {
                 return None;
+            }
+            if !by_colour {
+                // Its mark already holds a rim (see `distinct`): it is not grown, and it
+                // takes its own area.
+                return Some((area, part, false));
             }
             // It must stand out from what surrounds it (a glint on a cloud's edge does not).
             let mean = |pixels: &mut dyn Iterator<Item = usize>| {
@@ -132,26 +161,32 @@ pub fn unique_objects(image: &RgbRaster, within: Option<&MaskRaster>) -> MaskRas
             }
             // What the part takes once grown, at most: its box with the rim around it.
             let grown = (x1 - x0 + 3 + 2 * RIM_PX) * (y1 - y0 + 3 + 2 * RIM_PX);
-            Some((grown, part))
+            Some((grown, part, true))
         })
         .collect();
     // The largest objects first: they are the ones a viewer would see twice.
-    kept.sort_by_key(|(_, part)| std::cmp::Reverse(part.len()));
+    kept.sort_by_key(|(_, part, _)| std::cmp::Reverse(part.len()));
     let budget = (MAX_TOTAL_SHARE * n as f32) as usize;
     let mut objects = vec![false; w * h];
     let mut used = 0usize;
-    for (cost, part) in kept {
+    let mut distinct_objects = vec![false; w * h];
+    for (cost, part, grow) in kept {
         if used + cost > budget {
             continue;
         }
         used += cost;
+        let target = if grow {
+            &mut objects
+        } else {
+            &mut distinct_objects
+        };
         for i in part {
-            objects[i] = true;
+            target[i] = true;
         }
     }
     let grown = common::dilate(&objects, w, h, RIM_PX + 1);
-    for (o, g) in out.data_mut().iter_mut().zip(grown) {
-        *o = g;
+    for ((o, g), d) in out.data_mut().iter_mut().zip(grown).zip(distinct_objects) {
+        *o = g || d;
     }
     out
 }
@@ -268,19 +303,49 @@ mod tests {
     }
 
     #[test]
-    fn only_the_region_counts() {
-        // Left half red, right half texture with one red disc: in the whole image red is
-        // common, within the right half the disc is unique.
-        let mut image = texture(120, 80);
-        for y in 0..80 {
-            for x in 0..60 {
-                image.set(x, y, [0.95, 0.05, 0.05]);
+    fn an_object_of_common_colours_is_found_by_its_arrangement() {
+        // A red band on top and a blue band below make both colours common; one red square
+        // with a blue core (a rocket and its window) is unique only as an arrangement.
+        let mut image = texture(128, 96);
+        for y in 0..96 {
+            for x in 0..128 {
+                if y < 16 {
+                    image.set(x, y, [0.95, 0.05, 0.05]);
+                } else if y >= 80 {
+                    image.set(x, y, [0.05, 0.05, 0.95]);
+                }
             }
         }
-        paint_disc(&mut image, 90.0, 40.0, 5.0, [0.95, 0.05, 0.05]);
-        assert!(!unique_objects(&image, None).at(90, 40));
-        let right = MaskRaster::from_fn(120, 80, |x, _| x >= 60);
-        assert!(unique_objects(&image, Some(&right)).at(90, 40));
+        for y in 40..56 {
+            for x in 60..76 {
+                let core = (65..71).contains(&x) && (45..51).contains(&y);
+                let c = if core {
+                    [0.05, 0.05, 0.95]
+                } else {
+                    [0.95, 0.05, 0.05]
+                };
+                image.set(x, y, c);
+            }
+        }
+        let mask = unique_objects(&image, None);
+        assert!(mask.at(67, 47) && mask.at(61, 41) && mask.at(74, 54));
+        for (x, y) in [(10, 8), (120, 88), (10, 48), (118, 30)] {
+            assert!(!mask.at(x, y), "({x}, {y}) is not the object");
+        }
+    }
+
+    #[test]
+    fn only_the_region_counts() {
+        // Three red discs on the left half, one on the right: in the whole image the disc
+        // recurs, within the right half it is unique.
+        let mut image = texture(128, 80);
+        for cy in [16.0, 40.0, 64.0] {
+            paint_disc(&mut image, 24.0, cy, 5.0, [0.95, 0.05, 0.05]);
+        }
+        paint_disc(&mut image, 96.0, 40.0, 5.0, [0.95, 0.05, 0.05]);
+        assert!(!unique_objects(&image, None).at(96, 40));
+        let right = MaskRaster::from_fn(128, 80, |x, _| x >= 64);
+        assert!(unique_objects(&image, Some(&right)).at(96, 40));
     }
 
     #[test]
