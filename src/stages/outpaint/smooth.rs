@@ -13,15 +13,24 @@ pub const SMOOTH_RESIDUAL: f32 = 0.04;
 /// `offset = g·d · D/(D + |d|)`, so a far margin levels off instead of running to black or white.
 pub(super) const SMOOTH_TAPER_CELLS: f32 = 8.0;
 
+/// Half-width of the window of source planes a hole cell blends, per cell of distance from
+/// its nearest known cell.
+pub(super) const SMOOTH_SPREAD: f32 = 0.5;
+/// Largest half-width of that window, cells.
+pub(super) const SMOOTH_SPREAD_MAX_CELLS: isize = 12;
+
 /// Continues the low frequencies of smooth regions (a sky's colour ramp, fog, calm water) into a
 /// filled hole: exemplar synthesis copies patches, and a ramp outpainted from copies turns into a
 /// smear of the border's colours.
 ///
-/// On cells of [`SMOOTH_CELL_PX`]² pixels: every hole cell takes the nearest known cell `p`, fits
-/// a plane to the known cells within `SMOOTH_FIT_CELLS` of `p` (per channel, least squares) and
-/// extrapolates it, tapered (`SMOOTH_TAPER_CELLS`). Where that fit is smooth (RMS residual `r`
-/// below [`SMOOTH_RESIDUAL`]; weight `1 − r/SMOOTH_RESIDUAL`) the cell's mean of the fill is
-/// moved onto the extrapolation; the correction is interpolated bilinearly between cell centres
+/// On cells of [`SMOOTH_CELL_PX`]² pixels: every hole cell's nearest known cell `p` gets a plane
+/// fitted to the known cells within `SMOOTH_FIT_CELLS` of it (per channel, least squares), with
+/// a smoothness weight (RMS residual `r` below [`SMOOTH_RESIDUAL`]: `1 − r/SMOOTH_RESIDUAL`, else
+/// 0). A hole cell `q` blends, weighted, the planes of the source cells of the hole cells within
+/// `SMOOTH_SPREAD` × its distance from its own source (at most `SMOOTH_SPREAD_MAX_CELLS`), each
+/// extrapolated to `q` and tapered (`SMOOTH_TAPER_CELLS`): one column following one source
+/// would carry that source's slope out, and columns with different slopes would drift apart into
+/// streaks. The cell's mean of the fill is moved onto that target by the window's mean weight; the correction is interpolated bilinearly between cell centres
 /// and added to the hole pixels, so the fill keeps its texture (its high frequencies) and known
 /// pixels are unchanged. Textured borders (foliage, rocks) get no correction.
 pub fn continue_smooth_regions(filled: &mut RgbRaster, hole: &MaskRaster) {
@@ -86,25 +95,50 @@ pub fn continue_smooth_regions(filled: &mut RgbRaster, hole: &MaskRaster) {
         }
     }
     // Plane fits, memoised per source cell: (value, gradient x, gradient y, weight).
-    let mut fits: std::collections::HashMap<u32, Option<PlaneFit>> =
-        std::collections::HashMap::new();
+    let mut fits: Vec<Option<Option<PlaneFit>>> = vec![None; cw * ch];
+    let mut fit_of =
+        |p: usize| *fits[p].get_or_insert_with(|| plane_fit(&known_mean, &is_known, cw, ch, p));
+    // Each hole cell blends the planes of the source cells of the hole cells around it, every
+    // one evaluated at the cell itself, over a window that widens with the distance from the
+    // border (`SMOOTH_SPREAD`): a column that followed only its own nearest cell would carry
+    // that cell's slope into the margin, and neighbouring columns with different slopes drift
+    // apart into streaks. A plane that is the same everywhere (a linear ramp) is unchanged.
     let mut correction = vec![[0.0f32; 3]; cw * ch];
     for q in 0..cw * ch {
         if is_known[q] || nearest[q] == u32::MAX {
             continue;
         }
-        let p = nearest[q];
-        let fit = *fits
-            .entry(p)
-            .or_insert_with(|| plane_fit(&known_mean, &is_known, cw, ch, p as usize));
-        let Some((value, gx, gy, weight)) = fit else {
+        let (qx, qy) = ((q % cw) as isize, (q / cw) as isize);
+        let own = nearest[q] as usize;
+        let distance = ((own % cw) as f32 - qx as f32).hypot((own / cw) as f32 - qy as f32);
+        let radius = ((distance * SMOOTH_SPREAD).round() as isize).min(SMOOTH_SPREAD_MAX_CELLS);
+        let (mut sum, mut total, mut count) = ([0.0f32; 3], 0.0f32, 0usize);
+        for y in (qy - radius).max(0)..=(qy + radius).min(ch as isize - 1) {
+            for x in (qx - radius).max(0)..=(qx + radius).min(cw as isize - 1) {
+                let r = y as usize * cw + x as usize;
+                if is_known[r] || nearest[r] == u32::MAX {
+                    continue;
+                }
+                let p = nearest[r] as usize;
+                count += 1;
+                let Some((value, gx, gy, weight)) = fit_of(p) else {
+                    continue;
+                };
+                let (dx, dy) = (qx as f32 - (p % cw) as f32, qy as f32 - (p / cw) as f32);
+                let taper = SMOOTH_TAPER_CELLS / (SMOOTH_TAPER_CELLS + dx.hypot(dy));
+                for k in 0..3 {
+                    sum[k] += weight * (value[k] + (gx[k] * dx + gy[k] * dy) * taper);
+                }
+                total += weight;
+            }
+        }
+        if total <= 0.0 {
             continue;
-        };
-        let (px, py) = ((p as usize % cw) as f32, (p as usize / cw) as f32);
-        let (dx, dy) = ((q % cw) as f32 - px, (q / cw) as f32 - py);
-        let taper = SMOOTH_TAPER_CELLS / (SMOOTH_TAPER_CELLS + dx.hypot(dy));
+        }
+        // The window's mean smoothness weight (a rough source counts 0) scales the move.
+        let weight = total / count.max(1) as f32;
         for k in 0..3 {
-            let target = (value[k] + (gx[k] * dx + gy[k] * dy) * taper).clamp(0.0, 1.0);
+            let target = (sum[k] / total).clamp(0.0, 1.0);
             correction[q][k] = weight * (target - fill_mean[q][k]);
         }
     }
@@ -269,6 +303,38 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn the_margin_does_not_amplify_how_the_border_varies_along_it() {
+        // Above: a smooth ramp whose vertical slope varies along x (one period per 80 px).
+        // Below: a margin filled with the bottom row's colours (a smear). Each column following
+        // its own slope would fan the colours apart into streaks further out.
+        let (w, h, known_rows) = (320, 160, 64);
+        let slope = |x: usize| (x as f32 * std::f32::consts::TAU / 80.0).sin();
+        let value = |x: usize, y: usize| 0.5 + 0.05 * slope(x) * y as f32 / known_rows as f32;
+        let mut image = RgbRaster::from_fn(w, h, |x, y| {
+            let v = value(x, y.min(known_rows - 1));
+            [v, v, v]
+        });
+        let hole = MaskRaster::from_fn(w, h, |_, y| y >= known_rows);
+        continue_smooth_regions(&mut image, &hole);
+        let spread = |y: usize| {
+            let row: Vec<f32> = (0..w).map(|x| image.at(x, y)[0]).collect();
+            let mean = row.iter().sum::<f32>() / w as f32;
+            (row.iter().map(|v| (v - mean).powi(2)).sum::<f32>() / w as f32).sqrt()
+        };
+        let border = spread(known_rows - 1);
+        for y in [known_rows + 40, known_rows + 80, h - 1] {
+            assert!(
+                spread(y) <= border * 1.05,
+                "row {y}: spread {} against the border's {border}",
+                spread(y)
+            );
+        }
+        // And the continuation did act: the mean level follows the ramp's mean (flat here).
+        let mean: f32 = (0..w).map(|x| image.at(x, h - 1)[0]).sum::<f32>() / w as f32;
+        assert!((mean - 0.5).abs() < 0.02, "{mean}");
     }
 
     #[test]
