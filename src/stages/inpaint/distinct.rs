@@ -239,8 +239,12 @@ impl Coarse {
     }
 
     /// RMS colour difference of the patches centred on `a` and `b`, over the offsets where both
-    /// lie inside the region; infinite when fewer than half of the patch do.
-    fn distance(&self, a: usize, b: usize) -> f32 {
+    /// lie inside the region; infinite when fewer than half of the patch do, or as soon as the
+    /// partial sum proves the distance above `bound` (at most a full patch divides the sum, so
+    /// the answer is then above `bound` whatever the remaining rows hold).
+    fn distance(&self, a: usize, b: usize, bound: f32) -> f32 {
+        let side = 2 * PATCH_RADIUS + 1;
+        let limit = bound * bound * (3 * side * side) as f32;
         let (w, h) = (self.w as isize, self.h as isize);
         let (ax, ay) = ((a % self.w) as isize, (a / self.w) as isize);
         let (bx, by) = ((b % self.w) as isize, (b / self.w) as isize);
@@ -264,8 +268,10 @@ impl Coarse {
                 sum += (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2);
                 n += 1;
             }
+            if sum > limit {
+                return f32::INFINITY;
+            }
         }
-        let side = 2 * PATCH_RADIUS + 1;
         if 2 * n < side * side {
             return f32::INFINITY;
         }
@@ -284,7 +290,7 @@ impl Coarse {
             for _ in 0..8 {
                 let b = centres[rng.below(centres.len())];
                 if self.allowed(a, b) {
-                    let d = self.distance(a, b);
+                    let d = self.distance(a, b, dist[a]);
                     if d < dist[a] {
                         (best[a], dist[a]) = (b, d);
                     }
@@ -308,7 +314,7 @@ impl Coarse {
                     }
                     let b = b as usize;
                     if b != best[a] && self.allowed(a, b) {
-                        let d = self.distance(a, b);
+                        let d = self.distance(a, b, dist[a]);
                         if d < dist[a] {
                             (best[a], dist[a]) = (b, d);
                         }
