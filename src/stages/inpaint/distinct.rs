@@ -46,8 +46,9 @@ pub const CLOSE_RADIUS: usize = 2;
 /// Largest enclosed part that is marked with its outline, as a share of the region.
 pub const MAX_ENCLOSED_SHARE: f32 = 0.05;
 
-/// The pixels of `image` (row-major `w × h`, `inside` selecting the region) covered by a
-/// distinctive patch; see the module docs. Nothing for a region too small to hold two patches
+/// The pixels of `image` (row-major `w × h`, `inside` selecting the region) that belong to a
+/// distinctive part: the centres of distinctive patches, closed and filled (see the module
+/// docs). Nothing for a region too small to hold two patches
 /// [`EXCLUSION`] apart.
 pub fn distinctive(image: &[[f32; 3]], inside: &[bool], w: usize, h: usize) -> Vec<bool> {
     let mut out = vec![false; w * h];
@@ -107,42 +108,14 @@ pub fn distinctive(image: &[[f32; 3]], inside: &[bool], w: usize, h: usize) -> V
 /// unique object's plain interior matches itself, only its outline and details are distinctive.
 fn fill_enclosed(marked: &mut [bool], inside: &[bool], w: usize, h: usize) {
     let limit = (MAX_ENCLOSED_SHARE * inside.iter().filter(|&&b| b).count() as f32) as usize;
-    let mut seen = vec![false; w * h];
-    let mut stack = Vec::new();
-    let mut part = Vec::new();
-    for start in 0..w * h {
-        if seen[start] || marked[start] {
-            continue;
-        }
-        seen[start] = true;
-        stack.push(start);
-        part.clear();
-        let mut open = false;
-        while let Some(i) = stack.pop() {
-            part.push(i);
+    let unmarked = MaskRaster::from_fn(w, h, |x, y| !marked[y * w + x]);
+    for part in crate::raster::connected_components(&unmarked) {
+        let open = part.iter().any(|&i| {
             let (x, y) = (i % w, i / w);
-            open |= !inside[i] || x == 0 || y == 0 || x + 1 == w || y + 1 == h;
-            let mut visit = |j: usize| {
-                if !seen[j] && !marked[j] {
-                    seen[j] = true;
-                    stack.push(j);
-                }
-            };
-            if x > 0 {
-                visit(i - 1);
-            }
-            if x + 1 < w {
-                visit(i + 1);
-            }
-            if y > 0 {
-                visit(i - w);
-            }
-            if y + 1 < h {
-                visit(i + w);
-            }
-        }
+            !inside[i] || x == 0 || y == 0 || x + 1 == w || y + 1 == h
+        });
         if !open && part.len() <= limit {
-            for &i in &part {
+            for i in part {
                 marked[i] = true;
             }
         }

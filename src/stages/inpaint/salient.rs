@@ -20,9 +20,10 @@
 //!    ([`super::distinct`]) are candidates too, under the same fill test, at most
 //!    [`MAX_DISTINCT_SHARE`] of the region (their mark holds their interior and a rim), and
 //!    without the colour contrast test (they stand out by arrangement).
-//! 5. The kept parts grow back by 1 + [`RIM_PX`] pixels (the erosion and their rims) and are
-//!    returned as a mask, at most [`MAX_TOTAL_SHARE`] of the region (the largest parts first): a region that is
-//!    mostly "objects" keeps its sources.
+//! 5. The colour parts grow back by 1 + [`RIM_PX`] pixels (the erosion and their rims; the
+//!    arrangement parts already hold a rim) and all are returned as a mask, at most
+//!    [`MAX_TOTAL_SHARE`] of the region (the largest parts first): a region that is mostly
+//!    "objects" keeps its sources.
 
 use super::{common, distinct};
 use crate::raster::{MaskRaster, RgbRaster, connected_components};

@@ -30,9 +30,10 @@ pub(super) const SMOOTH_SPREAD_MAX_CELLS: isize = 12;
 /// `SMOOTH_SPREAD` × its distance from its own source (at most `SMOOTH_SPREAD_MAX_CELLS`), each
 /// extrapolated to `q` and tapered (`SMOOTH_TAPER_CELLS`): one column following one source
 /// would carry that source's slope out, and columns with different slopes would drift apart into
-/// streaks. The cell's mean of the fill is moved onto that target by the window's mean weight; the correction is interpolated bilinearly between cell centres
-/// and added to the hole pixels, so the fill keeps its texture (its high frequencies) and known
-/// pixels are unchanged. Textured borders (foliage, rocks) get no correction.
+/// streaks. The cell's mean of the fill is moved onto that target by the window's mean weight;
+/// the correction is interpolated bilinearly between cell centres and added to the hole pixels,
+/// so the fill keeps its texture (its high frequencies) and known pixels are unchanged. Textured
+/// borders (foliage, rocks) get no correction.
 pub fn continue_smooth_regions(filled: &mut RgbRaster, hole: &MaskRaster) {
     let (w, h) = filled.size();
     if !filled.same_size(hole) || w == 0 || h == 0 {
