@@ -650,8 +650,9 @@ mod tests {
         colour.map(|c| c.map(|v| v.clamp(0.0, 1.0)))
     }
 
-    /// The callback's prepare path (upload, splat passes, time blend, present) against the CPU
-    /// renderer at a viewport-like size, still and moving: PSNR ≥ 40 dB.
+    /// The callback's prepare path (upload, splat passes, time blend, present with the rim fill
+    /// of holes) against the CPU renderer's output frame at a viewport-like size, still and
+    /// moving: PSNR ≥ 40 dB.
     #[test]
     fn prepare_path_matches_the_cpu_renderer() {
         let Some(context) = context() else {
@@ -687,6 +688,14 @@ mod tests {
             let b = render_cpu(&cloud, moving.backward.as_deref(), &view, vw, vh, &settings);
             symmetric_blend(&f.unwrap(), &b.unwrap(), moving.t, DEFAULT_SHARPNESS).unwrap()
         };
+        // The move opens holes, so the present pass's rim fill is compared too.
+        let holes = cpu_still.hole_fraction();
+        assert!(holes > 0.001, "the scene must open holes: {holes}");
+        let filled = |mut frame: crate::render::Frame| {
+            crate::render::fill::fill_holes(&mut frame, settings.hole_fill_px);
+            frame
+        };
+        let (cpu_still, cpu_moving) = (filled(cpu_still), filled(cpu_moving));
         for (what, positions, cpu) in [
             ("still", None, cpu_still),
             ("moving", Some(Arc::new(moving)), cpu_moving),

@@ -4,6 +4,7 @@ pub mod bench;
 pub mod blend;
 mod choice;
 pub mod cpu;
+pub mod fill;
 pub mod gpu;
 
 use crate::error::{Error, Result};
@@ -20,6 +21,8 @@ pub use choice::{RendererChoice, select_renderer};
 #[derive(Clone, Debug, PartialEq)]
 pub struct Frame {
     /// Composited colour `C / A` (normalised by coverage; black where `A = 0`), sRGB `[0, 1]`.
+    /// In a [`FrameRenderer::render_frame`] output, pixels with `A <` [`HOLE_COVERAGE`] are
+    /// composited over the background-biased fill of their hole's rim ([`fill`]).
     pub colour: RgbRaster,
     /// Coverage `A = Σ_s a_s·Π_{j<s}(1 − a_j)` over the pixel's surfaces `s` (front to back, `a_s` the
     /// surface's accumulated kernel weight, at most 1) in `[0, 1]`; pixels with `A < 0.5` count as holes.
@@ -97,6 +100,12 @@ pub fn tent(x: f32) -> f32 {
     (1.0 - x.abs()).max(0.0)
 }
 
+/// Default [`SplatSettings::hole_fill_px`].
+pub const DEFAULT_HOLE_FILL_PX: u32 = 16;
+
+/// Largest [`SplatSettings::hole_fill_px`].
+pub const MAX_HOLE_FILL_PX: u32 = 256;
+
 /// Splatting quality settings, shared by the CPU and GPU renderers.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -119,6 +128,9 @@ pub struct SplatSettings {
     pub max_stretch: f32,
     /// The reconstruction kernel.
     pub kernel: SplatKernel,
+    /// How far, in pixels, a hole pixel of an output frame looks for its hole's rim
+    /// ([`fill`]); 0 leaves holes black.
+    pub hole_fill_px: u32,
 }
 
 impl Default for SplatSettings {
@@ -130,6 +142,7 @@ impl Default for SplatSettings {
             max_radius_px: 32.0,
             max_stretch: 3.0,
             kernel: SplatKernel::default(),
+            hole_fill_px: DEFAULT_HOLE_FILL_PX,
         }
     }
 }
@@ -155,6 +168,12 @@ impl SplatSettings {
             return Err(Error::invalid(format!(
                 "splat footprint settings are out of range: radius_scale {}, min_radius_px {}, max_radius_px {}, max_stretch {}",
                 self.radius_scale, self.min_radius_px, self.max_radius_px, self.max_stretch
+            )));
+        }
+        if self.hole_fill_px > MAX_HOLE_FILL_PX {
+            return Err(Error::invalid(format!(
+                "splat hole_fill_px = {} is above {MAX_HOLE_FILL_PX}",
+                self.hole_fill_px
             )));
         }
         Ok(())
@@ -246,12 +265,14 @@ pub trait FrameRenderer {
         positions: Option<&[Vec3]>,
     ) -> Result<Frame>;
 
-    /// Renders a whole output frame of the current cloud: the cloud's own positions, one
+    /// The splat settings every render uses.
+    fn settings(&self) -> &SplatSettings;
+
+    /// The current cloud's frame before its holes are filled: the cloud's own positions, one
     /// displaced cloud, or the symmetric blend of the forward and backward clouds at time
-    /// `positions.t` with [`blend::DEFAULT_SHARPNESS`] (what every export, preview and
-    /// evaluation frame is). The default renders each cloud with [`FrameRenderer::render`] and
-    /// blends on the CPU; the GPU renderer blends on the GPU.
-    fn render_frame(
+    /// `positions.t` with [`blend::DEFAULT_SHARPNESS`]. The default renders each cloud with
+    /// [`FrameRenderer::render`] and blends on the CPU; the GPU renderer blends on the GPU.
+    fn render_unfilled(
         &mut self,
         view: &View,
         width: usize,
@@ -259,5 +280,21 @@ pub trait FrameRenderer {
         positions: &FramePositions,
     ) -> Result<Frame> {
         positions.render_with(|p| self.render(view, width, height, p))
+    }
+
+    /// Renders a whole output frame of the current cloud (what every export, preview and
+    /// evaluation frame is): [`FrameRenderer::render_unfilled`], then its holes filled from
+    /// their rims ([`fill::fill_holes`], [`SplatSettings::hole_fill_px`]). Coverage and depth
+    /// are the unfilled frame's.
+    fn render_frame(
+        &mut self,
+        view: &View,
+        width: usize,
+        height: usize,
+        positions: &FramePositions,
+    ) -> Result<Frame> {
+        let mut frame = self.render_unfilled(view, width, height, positions)?;
+        fill::fill_holes(&mut frame, self.settings().hole_fill_px);
+        Ok(frame)
     }
 }

@@ -97,7 +97,12 @@ pub(super) fn run_scene_method(
             .camera
             .path
             .evaluator(&scene.intrinsics, w, &scene.scale, project.output.frames)?;
-    let mut renderer = CpuRenderer::new(project.render);
+    // Holes are filled below, the same way for every row; *PSNR unfilled* scores them black,
+    // so the renderer's own rim fill stays off here.
+    let mut renderer = CpuRenderer::new(SplatSettings {
+        hole_fill_px: 0,
+        ..project.render
+    });
     renderer.set_cloud(scene.cloud.clone())?;
     let right_view = evaluator.view_at(1.0);
     let right = scene.render_frame(&mut renderer, &right_view, 1, w, h)?;

@@ -397,6 +397,10 @@ impl FrameRenderer for CpuRenderer {
         format!("cpu ({} threads)", rayon::current_num_threads())
     }
 
+    fn settings(&self) -> &SplatSettings {
+        &self.settings
+    }
+
     fn set_cloud(&mut self, cloud: Arc<PointCloud>) -> Result<()> {
         self.cloud = Some(cloud);
         Ok(())

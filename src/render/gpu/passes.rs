@@ -295,7 +295,9 @@ impl GpuSplatter {
     }
 
     /// Records a copy of `slot`'s frame into `target`, a view of an `Rgba8Unorm` texture with
-    /// `STORAGE_BINDING` usage and the frame's size: colour `C/A` in rgb, coverage in alpha.
+    /// `STORAGE_BINDING` usage and the frame's size: colour `C/A` in rgb (holes composited over
+    /// the rim fill of [`crate::render::fill`], radius `settings.hole_fill_px`), coverage in
+    /// alpha.
     pub fn encode_present(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
@@ -309,7 +311,8 @@ impl GpuSplatter {
         let params = PresentUniform {
             width: width as u32,
             height: height as u32,
-            pad: [0; 2],
+            fill_radius: self.settings.hole_fill_px,
+            pad: 0,
         };
         self.context
             .queue

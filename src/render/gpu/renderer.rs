@@ -58,9 +58,13 @@ impl FrameRenderer for GpuRenderer {
         self.splatter.render(view, width, height, positions)
     }
 
+    fn settings(&self) -> &SplatSettings {
+        &self.splatter.settings
+    }
+
     /// The symmetric animation's two clouds are rendered and blended on the GPU, with one
     /// readback.
-    fn render_frame(
+    fn render_unfilled(
         &mut self,
         view: &View,
         width: usize,

@@ -52,6 +52,8 @@ const _: () = assert!(std::mem::size_of::<BlendUniform>() == 32);
 pub(super) struct PresentUniform {
     pub(super) width: u32,
     pub(super) height: u32,
-    pub(super) pad: [u32; 2],
+    /// `SplatSettings::hole_fill_px` (the rim fill of holes, `render::fill`).
+    pub(super) fill_radius: u32,
+    pub(super) pad: u32,
 }
 const _: () = assert!(std::mem::size_of::<PresentUniform>() == 16);
