@@ -215,6 +215,73 @@ mod tests {
         assert_eq!(f.colour.at(39, 0), [0.0; 3]);
     }
 
+    /// `render_frame` is the unfilled frame with its holes filled (coverage and depth kept),
+    /// `hole_fill_px = 0` turns it off, and the setting is range-checked.
+    #[test]
+    fn output_frames_are_filled_and_the_setting_turns_it_off() {
+        use crate::geometry::{Intrinsics, Pose, View};
+        use crate::render::cpu::CpuRenderer;
+        use crate::render::{FramePositions, FrameRenderer, SplatSettings};
+        use crate::stages::points::PointCloud;
+        use glam::Vec3;
+        use std::sync::Arc;
+        // An 8×4 photo seen from its own camera, its column 4 missing: a 1-px crack.
+        let (w, h, z) = (8usize, 4usize, 2.0f32);
+        let k = Intrinsics::from_hfov(w, h, 60.0);
+        let mut cloud = PointCloud::default();
+        for y in 0..h {
+            for x in (0..w).filter(|&x| x != 4) {
+                let colour = if x < 4 {
+                    [1.0, 0.0, 0.0]
+                } else {
+                    [0.0, 0.0, 1.0]
+                };
+                cloud.positions.push(k.unproject(x as f32, y as f32, z));
+                cloud.colours.push(colour);
+                cloud.alphas.push(1.0);
+                cloud.tangent_u.push(Vec3::new(z / k.fx, 0.0, 0.0));
+                cloud.tangent_v.push(Vec3::new(0.0, z / k.fy, 0.0));
+                cloud.source_depth.push(z);
+                cloud.source_pixel.push([x as f32, y as f32]);
+                cloud.layer.push(0);
+                cloud.inpainted.push(false);
+            }
+        }
+        let view = View {
+            intrinsics: k,
+            world_from_camera: Pose::IDENTITY,
+        };
+        let still = FramePositions::still();
+        let mut renderer = CpuRenderer::new(SplatSettings::default());
+        renderer.set_cloud(Arc::new(cloud)).unwrap();
+        let unfilled = renderer.render_unfilled(&view, w, h, &still).unwrap();
+        let filled = renderer.render_frame(&view, w, h, &still).unwrap();
+        assert_eq!(unfilled.coverage.at(4, 1), 0.0);
+        assert_eq!(unfilled.colour.at(4, 1), [0.0; 3]);
+        // Both sides at one depth and one step away: half red, half blue.
+        let c = filled.colour.at(4, 1);
+        assert!(
+            (c[0] - 0.5).abs() < 1e-6 && c[1] == 0.0 && (c[2] - 0.5).abs() < 1e-6,
+            "{c:?}"
+        );
+        assert_eq!(filled.colour.at(3, 1), unfilled.colour.at(3, 1));
+        assert_eq!(
+            (&filled.coverage, &filled.depth),
+            (&unfilled.coverage, &unfilled.depth)
+        );
+        renderer.settings.hole_fill_px = 0;
+        assert_eq!(
+            renderer.render_frame(&view, w, h, &still).unwrap(),
+            unfilled
+        );
+        let too_far = SplatSettings {
+            hole_fill_px: crate::render::MAX_HOLE_FILL_PX + 1,
+            ..SplatSettings::default()
+        };
+        let message = too_far.validate().unwrap_err().to_string();
+        assert!(message.contains("hole_fill_px"), "{message}");
+    }
+
     #[test]
     fn degenerate_frames_stay_finite() {
         // All hole, 1×1, radius 0, and rim samples with NaN or infinite depth and colour.
