@@ -1,0 +1,368 @@
+//! The front surface's pass over a tile, four pixels at a time: the same sums as the general
+//! per-pixel pass (`super::render_cpu_with`), held as structure-of-arrays in 4-lane vectors
+//! ([`Vec4`]: SSE2 on x86-64) so that a row of a splat evaluates its kernel and adds its samples
+//! to four pixels with one instruction per term.
+//!
+//! The front pass is where the time goes: every splat adds its kernel (Catmull-Rom: 4×4 source
+//! pixels) to every pixel of its surface. Each lane does exactly the general pass's arithmetic
+//! (the same expressions in the same order per pixel, IEEE operations lane by lane), and a lane
+//! that is no sample adds zero, which leaves a sum unchanged (a sum is never −0: it starts at +0
+//! and an exact cancellation rounds to +0), so the output does not change by a bit. A pixel
+//! that a splat is *behind* (a candidate for the next surface) is rare inside a tile and is
+//! handled one pixel at a time on the tile's [`PixelState`]s.
+
+use super::splats::{Splat, TileRect, pixel_span};
+use super::surface::{PixelState, Probe};
+use super::{MAX_DEPTH_OFFSET, MIN_VISIBLE_WEIGHT, TILE};
+use crate::render::{SplatKernel, tent};
+use glam::{BVec4A, Vec4};
+
+/// Pixels of a tile.
+const N: usize = TILE * TILE;
+/// Length of a sum's array: every pixel of the tile, and three more so that four lanes can
+/// start at any pixel (lanes past the splat's row add exactly zero).
+const G: usize = N + 3;
+
+/// The front surface's sums for every pixel of a tile (row-major), and what deciding
+/// membership needs of each pixel's surface; four consecutive pixels load as one vector.
+pub(super) struct FrontSums {
+    /// The front surface's depth; NaN where the pixel is not open (no surface, or opaque), so
+    /// that no splat is a sample of it or behind it.
+    z: [f32; G],
+    /// Its layer (exact as `f32`: layers are `u16`) and 1 where it was observed, else 0.
+    layer: [f32; G],
+    observed: [f32; G],
+    inv_front: [f32; G],
+    geometry: [f32; G],
+    coverage: [f32; G],
+    coverage_weight: [f32; G],
+    kernel: [f32; G],
+    coverage_colour: [[f32; G]; 3],
+    kernel_colour: [[f32; G]; 3],
+    depth: [f32; G],
+    /// The four bits of `sides_of`, one flag (0 or 1) per array: `s_x ≤ 0`, `s_x ≥ 0`,
+    /// `s_y ≤ 0`, `s_y ≥ 0`.
+    sides: [[f32; G]; 4],
+}
+
+impl FrontSums {
+    pub(super) fn new() -> Box<Self> {
+        Box::new(Self {
+            z: [f32::NAN; G],
+            layer: [0.0; G],
+            observed: [0.0; G],
+            inv_front: [0.0; G],
+            geometry: [0.0; G],
+            coverage: [0.0; G],
+            coverage_weight: [0.0; G],
+            kernel: [0.0; G],
+            coverage_colour: [[0.0; G]; 3],
+            kernel_colour: [[0.0; G]; 3],
+            depth: [0.0; G],
+            sides: [[0.0; G]; 4],
+        })
+    }
+
+    /// Starts the front pass: every sum zero, the surfaces and their `1/z` from `pixels`.
+    pub(super) fn load(&mut self, pixels: &[PixelState; N]) {
+        for (p, px) in pixels.iter().enumerate() {
+            self.z[p] = if px.open() { px.cur.z } else { f32::NAN };
+            self.layer[p] = px.cur.layer as f32;
+            self.observed[p] = f32::from(u8::from(px.cur.observed));
+            self.inv_front[p] = px.inv_front;
+        }
+        for sums in [
+            &mut self.geometry,
+            &mut self.coverage,
+            &mut self.coverage_weight,
+            &mut self.kernel,
+            &mut self.depth,
+        ] {
+            sums.fill(0.0);
+        }
+        for sums in self
+            .coverage_colour
+            .iter_mut()
+            .chain(&mut self.kernel_colour)
+            .chain(&mut self.sides)
+        {
+            sums.fill(0.0);
+        }
+    }
+
+    /// Ends the front pass: the sums go into the open pixels' [`PixelState::sums`] (the
+    /// `reserved` share and the next surface were kept there all along).
+    pub(super) fn store(&self, pixels: &mut [PixelState; N]) {
+        for (p, px) in pixels.iter_mut().enumerate() {
+            if !px.open() {
+                continue;
+            }
+            let sums = &mut px.sums;
+            sums.geometry = self.geometry[p];
+            sums.coverage = self.coverage[p];
+            sums.coverage_weight = self.coverage_weight[p];
+            sums.kernel = self.kernel[p];
+            for i in 0..3 {
+                sums.coverage_colour[i] = self.coverage_colour[i][p];
+                sums.kernel_colour[i] = self.kernel_colour[i][p];
+            }
+            sums.depth = self.depth[p];
+            sums.sides = (0..4).map(|b| u8::from(self.sides[b][p] > 0.0) << b).sum();
+        }
+    }
+
+    /// Adds splat `s` (colour `c`, colour weight `rho`) to the front pass over the pixels of
+    /// `tile` within its kernel's extent: the `Member` and `Behind` roles of the general pass.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn add(
+        &mut self,
+        pixels: &mut [PixelState; N],
+        s: &Splat,
+        c: [f32; 3],
+        rho: f32,
+        supports: [f32; 2],
+        kernel: SplatKernel,
+        tile: &TileRect,
+        width: usize,
+        height: usize,
+    ) {
+        let Some((x0, x1)) = pixel_span(s.u, s.extent[0], width) else {
+            return;
+        };
+        let Some((y0, y1)) = pixel_span(s.v, s.extent[1], height) else {
+            return;
+        };
+        let x0 = x0.max(tile.x0);
+        let x1 = x1.min(tile.x0 + tile.w - 1);
+        let y0 = y0.max(tile.y0);
+        let y1 = y1.min(tile.y0 + tile.h - 1);
+        if x0 > x1 || y0 > y1 {
+            return;
+        }
+        let probe = Probe::of(s);
+        let splat = SplatLanes::new(s, &probe, c, rho, supports, kernel);
+        let last = Vec4::splat(x1 as f32);
+        for y in y0..=y1 {
+            let dy = y as f32 - s.v;
+            let (m1dy, m3dy) = (
+                Vec4::splat(s.inverse[1] * dy),
+                Vec4::splat(s.inverse[3] * dy),
+            );
+            let base = (y - tile.y0) * TILE;
+            let mut behind = false;
+            for x in (x0..=x1).step_by(4) {
+                let xf = x as f32;
+                let xs = Vec4::new(xf, xf + 1.0, xf + 2.0, xf + 3.0);
+                let valid = xs.cmple(last);
+                let p = base + x - tile.x0;
+                behind |= if splat.finite {
+                    self.add_group::<false>(p, xs, valid, m1dy, m3dy, &splat)
+                } else {
+                    self.add_group::<true>(p, xs, valid, m1dy, m3dy, &splat)
+                };
+            }
+            if behind {
+                for x in x0..=x1 {
+                    let dx = x as f32 - s.u;
+                    let [m0, m1, m2, m3] = s.inverse;
+                    let (sx, sy) = (m0 * dx + m1 * dy, m2 * dx + m3 * dy);
+                    add_behind(&mut pixels[base + x - tile.x0], s, &probe, sx, sy);
+                }
+            }
+        }
+    }
+
+    /// Four pixels of a splat's row: tile pixels `p..p + 4` at pixel columns `xs`, `valid` the
+    /// lanes within the splat's box, `m1dy`/`m3dy` the row's terms of `s = M'⁻¹·d`. Returns whether the
+    /// splat is behind the surface of any valid lane. `SELECT`: add the colour products through
+    /// selects (a colour that is not finite, where `0·c` would be NaN).
+    #[inline]
+    fn add_group<const SELECT: bool>(
+        &mut self,
+        p: usize,
+        xs: Vec4,
+        valid: BVec4A,
+        m1dy: Vec4,
+        m3dy: Vec4,
+        s: &SplatLanes,
+    ) -> bool {
+        let dx = xs - s.u;
+        let sx = s.m0 * dx + m1dy;
+        let sy = s.m2 * dx + m3dy;
+        let (z, layer) = (lanes(&self.z, p), lanes(&self.layer, p));
+        // `SurfaceKey::holds` and `SurfaceKey::before` (a NaN depth: neither).
+        let observed = lanes(&self.observed, p);
+        let same = layer.cmpeq(s.layer) | (observed.cmpeq(Vec4::ONE) & s.observed);
+        let member = same & s.lo.cmple(z) & s.hi.cmpge(z);
+        let before = z.cmplt(s.z) | (z.cmpeq(s.z) & layer.cmplt(s.layer));
+        let behind = (valid & !member & before).any();
+        // `kernel_weights`.
+        let (ax, ay) = (sx.abs(), sy.abs());
+        let inside = ax.cmplt(s.support_u) & ay.cmplt(s.support_v);
+        let (tx, ty) = (tent4(ax), tent4(ay));
+        let t = tx * ty;
+        let k = if s.sharp {
+            kernel4(ax, tx, s.gamma_u, s.kernel) * kernel4(ay, ty, s.gamma_v, s.kernel)
+        } else {
+            t
+        };
+        let take = valid & member & inside;
+        let zero = Vec4::ZERO;
+        let t = Vec4::select(take, t, zero);
+        let k = Vec4::select(take, k, zero);
+        let (w_c, w) = (s.scale * t, s.scale * k);
+        let (cw, kw) = (s.rho * w_c, s.rho * w);
+        add(&mut self.geometry, p, s.area * t);
+        add(&mut self.coverage, p, w_c);
+        add(&mut self.coverage_weight, p, cw);
+        add(&mut self.kernel, p, kw);
+        // (The general pass adds nothing where both weights are zero, not even `0·∞`.)
+        let weighted = take & !(t.cmpeq(zero) & k.cmpeq(zero));
+        for i in 0..3 {
+            let (a, b) = (cw * s.colour[i], kw * s.colour[i]);
+            let (a, b) = if SELECT {
+                (
+                    Vec4::select(weighted, a, zero),
+                    Vec4::select(weighted, b, zero),
+                )
+            } else {
+                (a, b)
+            };
+            add(&mut self.coverage_colour[i], p, a);
+            add(&mut self.kernel_colour[i], p, b);
+        }
+        // `sides_of` where the tent weight is positive.
+        let positive = t.cmpgt(zero);
+        for (flags, side) in self.sides.iter_mut().zip([
+            sx.cmple(zero),
+            sx.cmpge(zero),
+            sy.cmple(zero),
+            sy.cmpge(zero),
+        ]) {
+            let set = lanes(flags, p).max(Vec4::select(positive & side, Vec4::ONE, zero));
+            set.write_to_slice(&mut flags[p..p + 4]);
+        }
+        let offset = (s.z * lanes(&self.inv_front, p) - Vec4::ONE)
+            .max(Vec4::splat(-MAX_DEPTH_OFFSET))
+            .min(Vec4::splat(MAX_DEPTH_OFFSET));
+        add(&mut self.depth, p, Vec4::select(take, w_c * offset, zero));
+        behind
+    }
+}
+
+/// The four values of `sums` from `p` on.
+#[inline]
+fn lanes(sums: &[f32; G], p: usize) -> Vec4 {
+    Vec4::from_slice(&sums[p..p + 4])
+}
+
+/// Adds `v` to the four values of `sums` from `p` on.
+#[inline]
+fn add(sums: &mut [f32; G], p: usize, v: Vec4) {
+    (lanes(sums, p) + v).write_to_slice(&mut sums[p..p + 4]);
+}
+
+/// A splat's per-splat values, broadcast to four lanes.
+struct SplatLanes {
+    u: Vec4,
+    m0: Vec4,
+    m2: Vec4,
+    z: Vec4,
+    lo: Vec4,
+    hi: Vec4,
+    layer: Vec4,
+    /// All lanes set when the splat was observed.
+    observed: BVec4A,
+    support_u: Vec4,
+    support_v: Vec4,
+    gamma_u: f32,
+    gamma_v: f32,
+    sharp: bool,
+    kernel: SplatKernel,
+    scale: Vec4,
+    area: Vec4,
+    rho: Vec4,
+    colour: [Vec4; 3],
+    /// Every colour channel is finite.
+    finite: bool,
+}
+
+impl SplatLanes {
+    fn new(
+        s: &Splat,
+        probe: &Probe,
+        c: [f32; 3],
+        rho: f32,
+        supports: [f32; 2],
+        kernel: SplatKernel,
+    ) -> Self {
+        let o = s.observed;
+        Self {
+            u: Vec4::splat(s.u),
+            m0: Vec4::splat(s.inverse[0]),
+            m2: Vec4::splat(s.inverse[2]),
+            z: Vec4::splat(s.z),
+            lo: Vec4::splat(probe.lo),
+            hi: Vec4::splat(probe.hi),
+            layer: Vec4::splat(s.layer as f32),
+            observed: BVec4A::new(o, o, o, o),
+            support_u: Vec4::splat(supports[0]),
+            support_v: Vec4::splat(supports[1]),
+            gamma_u: s.sharpness[0],
+            gamma_v: s.sharpness[1],
+            sharp: s.sharpness != [0.0; 2],
+            kernel,
+            scale: Vec4::splat(s.scale),
+            area: Vec4::splat(s.area),
+            rho: Vec4::splat(rho),
+            colour: c.map(Vec4::splat),
+            finite: c.iter().all(|v| v.is_finite()),
+        }
+    }
+}
+
+/// [`tent`] of `|x|`, four lanes (`1 − |x|` is never −0, so `max` agrees with `f32::max`).
+#[inline]
+fn tent4(ax: Vec4) -> Vec4 {
+    (Vec4::ONE - ax).max(Vec4::ZERO)
+}
+
+/// `kernel_1d(x, γ, kernel)` of `|x| = ax` with `tent(x) = t`, four lanes: `t + γ·(k − t)`.
+#[inline]
+fn kernel4(ax: Vec4, t: Vec4, gamma: f32, kernel: SplatKernel) -> Vec4 {
+    // (`gamma > 0` false, NaN included: the tent, as `kernel_1d`.)
+    if gamma.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        return t;
+    }
+    let k = match kernel {
+        SplatKernel::Tent => t,
+        SplatKernel::CatmullRom => {
+            // `SplatKernel::weight_1d`, both pieces evaluated and one selected.
+            let x = ax;
+            let inner = (Vec4::splat(1.5) * x - Vec4::splat(2.5)) * x * x + Vec4::ONE;
+            let outer = ((Vec4::splat(-0.5) * x + Vec4::splat(2.5)) * x - Vec4::splat(4.0)) * x
+                + Vec4::splat(2.0);
+            let piece = Vec4::select(x.cmplt(Vec4::ONE), inner, outer);
+            Vec4::select(x.cmplt(Vec4::splat(2.0)), piece, Vec4::ZERO)
+        }
+    };
+    t + gamma * (k - t)
+}
+
+/// The general pass's `Behind` role for one pixel (front pass).
+#[inline]
+fn add_behind(px: &mut PixelState, s: &Splat, probe: &Probe, sx: f32, sy: f32) {
+    if !px.open() || px.cur.holds(probe) || !px.cur.before(&probe.key) {
+        return;
+    }
+    let w_c = s.scale * tent(sx) * tent(sy);
+    if w_c == 0.0 {
+        return;
+    }
+    if s.observed && !px.cur.observed {
+        px.sums.reserved += w_c;
+    }
+    if w_c >= MIN_VISIBLE_WEIGHT && probe.key.before(&px.next) {
+        px.next = probe.key;
+    }
+}
