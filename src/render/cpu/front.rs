@@ -12,9 +12,9 @@
 //! handled one pixel at a time on the tile's [`PixelState`]s.
 
 use super::splats::{Splat, TileRect, pixel_span};
-use super::surface::{PixelState, Probe};
-use super::{MAX_DEPTH_OFFSET, MIN_VISIBLE_WEIGHT, TILE};
-use crate::render::{SplatKernel, tent};
+use super::surface::{PixelState, Probe, Role};
+use super::{MAX_DEPTH_OFFSET, TILE};
+use crate::render::SplatKernel;
 use glam::{BVec4A, Vec4};
 
 /// Pixels of a tile.
@@ -166,7 +166,10 @@ impl FrontSums {
                     let dx = x as f32 - s.u;
                     let [m0, m1, m2, m3] = s.inverse;
                     let (sx, sy) = (m0 * dx + m1 * dy, m2 * dx + m3 * dy);
-                    add_behind(&mut pixels[base + x - tile.x0], s, &probe, sx, sy);
+                    let px = &mut pixels[base + x - tile.x0];
+                    if px.open() && px.classify(&probe, true) == Role::Behind {
+                        px.add_behind(s, &probe, sx, sy);
+                    }
                 }
             }
         }
@@ -347,22 +350,4 @@ fn kernel4(ax: Vec4, t: Vec4, gamma: f32, kernel: SplatKernel) -> Vec4 {
         }
     };
     t + gamma * (k - t)
-}
-
-/// The general pass's `Behind` role for one pixel (front pass).
-#[inline]
-fn add_behind(px: &mut PixelState, s: &Splat, probe: &Probe, sx: f32, sy: f32) {
-    if !px.open() || px.cur.holds(probe) || !px.cur.before(&probe.key) {
-        return;
-    }
-    let w_c = s.scale * tent(sx) * tent(sy);
-    if w_c == 0.0 {
-        return;
-    }
-    if s.observed && !px.cur.observed {
-        px.sums.reserved += w_c;
-    }
-    if w_c >= MIN_VISIBLE_WEIGHT && probe.key.before(&px.next) {
-        px.next = probe.key;
-    }
 }

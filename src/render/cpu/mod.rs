@@ -358,18 +358,7 @@ pub fn render_cpu_with(
                                         * (s.z * px.inv_front - 1.0)
                                             .clamp(-MAX_DEPTH_OFFSET, MAX_DEPTH_OFFSET);
                                 }
-                                Role::Behind => {
-                                    let w_c = s.scale * tent(sx) * tent(sy);
-                                    if w_c == 0.0 {
-                                        return;
-                                    }
-                                    if s.observed && !px.cur.observed {
-                                        px.sums.reserved += w_c;
-                                    }
-                                    if w_c >= MIN_VISIBLE_WEIGHT && probe.key.before(&px.next) {
-                                        px.next = probe.key;
-                                    }
-                                }
+                                Role::Behind => px.add_behind(s, &probe, sx, sy),
                                 Role::None => {}
                             }
                         });

@@ -3,7 +3,8 @@
 
 use super::footprint::SURROUNDED;
 use super::splats::Splat;
-use super::{OPAQUE_REMAINDER, SURROUNDED_MIN_GEOMETRY};
+use super::{MIN_VISIBLE_WEIGHT, OPAQUE_REMAINDER, SURROUNDED_MIN_GEOMETRY};
+use crate::render::tent;
 
 /// One surface's sums at a pixel.
 #[derive(Clone, Copy, Debug, Default)]
@@ -216,6 +217,23 @@ impl PixelState {
             Role::Behind
         } else {
             Role::None
+        }
+    }
+
+    /// A splat that is behind the current surface (`Role::Behind`), at source-grid offset
+    /// `(s_x, s_y)`: observed points claim their coverage of a synthesised surface's pixel
+    /// (`reserved`), and the nearest one that covers the pixel visibly is the next surface.
+    #[inline]
+    pub(super) fn add_behind(&mut self, s: &Splat, probe: &Probe, sx: f32, sy: f32) {
+        let w_c = s.scale * tent(sx) * tent(sy);
+        if w_c == 0.0 {
+            return;
+        }
+        if s.observed && !self.cur.observed {
+            self.sums.reserved += w_c;
+        }
+        if w_c >= MIN_VISIBLE_WEIGHT && probe.key.before(&self.next) {
+            self.next = probe.key;
         }
     }
 
