@@ -11,7 +11,7 @@
 //! that a splat is *behind* (a candidate for the next surface) is rare inside a tile and is
 //! handled one pixel at a time on the tile's [`PixelState`]s.
 
-use super::splats::{Splat, TileRect, pixel_span};
+use super::splats::{Splat, TileRect, tile_box};
 use super::surface::{PixelState, Probe, Role};
 use super::{MAX_DEPTH_OFFSET, TILE};
 use crate::render::SplatKernel;
@@ -111,43 +111,25 @@ impl FrontSums {
         }
     }
 
-    /// Adds splat `s` (colour `c`, colour weight `rho`) to the front pass over the pixels of
+    /// Adds splat `s` (its values in lanes: `splat`) to the front pass over the pixels of
     /// `tile` within its kernel's extent: the `Member` and `Behind` roles of the general pass.
-    #[allow(clippy::too_many_arguments)]
     pub(super) fn add(
         &mut self,
         pixels: &mut [PixelState; N],
         s: &Splat,
-        c: [f32; 3],
-        rho: f32,
-        supports: [f32; 2],
-        kernel: SplatKernel,
+        splat: &SplatLanes,
         tile: &TileRect,
         width: usize,
         height: usize,
     ) {
-        let Some((x0, x1)) = pixel_span(s.u, s.extent[0], width) else {
+        let Some((x0, x1, y0, y1)) = tile_box(s, tile, width, height, s.extent) else {
             return;
         };
-        let Some((y0, y1)) = pixel_span(s.v, s.extent[1], height) else {
-            return;
-        };
-        let x0 = x0.max(tile.x0);
-        let x1 = x1.min(tile.x0 + tile.w - 1);
-        let y0 = y0.max(tile.y0);
-        let y1 = y1.min(tile.y0 + tile.h - 1);
-        if x0 > x1 || y0 > y1 {
-            return;
-        }
-        let probe = Probe::of(s);
-        let splat = SplatLanes::new(s, &probe, c, rho, supports, kernel);
+        let [m0, m1, m2, m3] = s.inverse;
         let last = Vec4::splat(x1 as f32);
         for y in y0..=y1 {
             let dy = y as f32 - s.v;
-            let (m1dy, m3dy) = (
-                Vec4::splat(s.inverse[1] * dy),
-                Vec4::splat(s.inverse[3] * dy),
-            );
+            let (m1dy, m3dy) = (Vec4::splat(m1 * dy), Vec4::splat(m3 * dy));
             let base = (y - tile.y0) * TILE;
             let mut behind = false;
             for x in (x0..=x1).step_by(4) {
@@ -156,19 +138,18 @@ impl FrontSums {
                 let valid = xs.cmple(last);
                 let p = base + x - tile.x0;
                 behind |= if splat.finite {
-                    self.add_group::<false>(p, xs, valid, m1dy, m3dy, &splat)
+                    self.add_group::<false>(p, xs, valid, m1dy, m3dy, splat)
                 } else {
-                    self.add_group::<true>(p, xs, valid, m1dy, m3dy, &splat)
+                    self.add_group::<true>(p, xs, valid, m1dy, m3dy, splat)
                 };
             }
             if behind {
                 for x in x0..=x1 {
                     let dx = x as f32 - s.u;
-                    let [m0, m1, m2, m3] = s.inverse;
                     let (sx, sy) = (m0 * dx + m1 * dy, m2 * dx + m3 * dy);
                     let px = &mut pixels[base + x - tile.x0];
-                    if px.open() && px.classify(&probe, true) == Role::Behind {
-                        px.add_behind(s, &probe, sx, sy);
+                    if px.open() && px.classify(&splat.probe, true) == Role::Behind {
+                        px.add_behind(s, &splat.probe, sx, sy);
                     }
                 }
             }
@@ -176,8 +157,8 @@ impl FrontSums {
     }
 
     /// Four pixels of a splat's row: tile pixels `p..p + 4` at pixel columns `xs`, `valid` the
-    /// lanes within the splat's box, `m1dy`/`m3dy` the row's terms of `s = M'⁻¹·d`. Returns whether the
-    /// splat is behind the surface of any valid lane. `SELECT`: add the colour products through
+    /// lanes within the splat's box, `m1dy`/`m3dy` the row's terms of `s = M'⁻¹·d`. Returns
+    /// whether the splat is behind the surface of any valid lane. `SELECT`: add the colour products through
     /// selects (a colour that is not finite, where `0·c` would be NaN).
     #[inline]
     fn add_group<const SELECT: bool>(
@@ -265,8 +246,10 @@ fn add(sums: &mut [f32; G], p: usize, v: Vec4) {
     (lanes(sums, p) + v).write_to_slice(&mut sums[p..p + 4]);
 }
 
-/// A splat's per-splat values, broadcast to four lanes.
-struct SplatLanes {
+/// A splat's values for the front pass, broadcast to four lanes.
+pub(super) struct SplatLanes {
+    /// The splat's membership test, for the pixels it is behind (one at a time).
+    probe: Probe,
     u: Vec4,
     m0: Vec4,
     m2: Vec4,
@@ -291,7 +274,8 @@ struct SplatLanes {
 }
 
 impl SplatLanes {
-    fn new(
+    /// Splat `s` with its `probe`, colour `c`, colour weight `rho` and kernel supports.
+    pub(super) fn new(
         s: &Splat,
         probe: &Probe,
         c: [f32; 3],
@@ -301,6 +285,7 @@ impl SplatLanes {
     ) -> Self {
         let o = s.observed;
         Self {
+            probe: *probe,
             u: Vec4::splat(s.u),
             m0: Vec4::splat(s.inverse[0]),
             m2: Vec4::splat(s.inverse[2]),

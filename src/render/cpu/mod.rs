@@ -308,17 +308,8 @@ pub fn render_cpu_with(
                             SYNTHESISED_COLOUR_WEIGHT
                         };
                         if first && shape.is_some() {
-                            front.add(
-                                &mut pixels,
-                                s,
-                                c,
-                                rho,
-                                supports,
-                                kernel,
-                                &tile,
-                                width,
-                                height,
-                            );
+                            let lanes = front::SplatLanes::new(s, &probe, c, rho, supports, kernel);
+                            front.add(&mut pixels, s, &lanes, &tile, width, height);
                             continue;
                         }
                         for_each_offset(s, &tile, width, height, extent, |p, sx, sy| {

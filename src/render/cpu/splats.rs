@@ -288,6 +288,25 @@ pub(super) struct TileRect {
     pub(super) h: usize,
 }
 
+/// The pixels `(x0, x1, y0, y1)` (inclusive) of `tile` strictly inside the box of half-extents
+/// `extent` around the splat's centre; `None` when there are none.
+#[inline]
+pub(super) fn tile_box(
+    s: &Splat,
+    tile: &TileRect,
+    width: usize,
+    height: usize,
+    extent: [f32; 2],
+) -> Option<(usize, usize, usize, usize)> {
+    let (x0, x1) = pixel_span(s.u, extent[0], width)?;
+    let (y0, y1) = pixel_span(s.v, extent[1], height)?;
+    let x0 = x0.max(tile.x0);
+    let x1 = x1.min(tile.x0 + tile.w - 1);
+    let y0 = y0.max(tile.y0);
+    let y1 = y1.min(tile.y0 + tile.h - 1);
+    (x0 <= x1 && y0 <= y1).then_some((x0, x1, y0, y1))
+}
+
 /// Calls `f(pixel in tile, s_x, s_y)` for every pixel of `tile` strictly inside the box of
 /// half-extents `extent` around the splat's centre, with `(s_x, s_y)` the pixel's offset in the
 /// splat's source-pixel grid.
@@ -300,16 +319,9 @@ pub(super) fn for_each_offset(
     extent: [f32; 2],
     mut f: impl FnMut(usize, f32, f32),
 ) {
-    let Some((x0, x1)) = pixel_span(s.u, extent[0], width) else {
+    let Some((x0, x1, y0, y1)) = tile_box(s, tile, width, height, extent) else {
         return;
     };
-    let Some((y0, y1)) = pixel_span(s.v, extent[1], height) else {
-        return;
-    };
-    let x0 = x0.max(tile.x0);
-    let x1 = x1.min(tile.x0 + tile.w - 1);
-    let y0 = y0.max(tile.y0);
-    let y1 = y1.min(tile.y0 + tile.h - 1);
     let [m0, m1, m2, m3] = s.inverse;
     for y in y0..=y1 {
         let dy = y as f32 - s.v;
