@@ -64,7 +64,8 @@
 //! fixes, and the sums run in point order (tiles keep point order), so the output does not depend
 //! on how rayon schedules the work: the same input gives the same bytes.
 //!
-//! **Speed.** Points are projected in parallel chunks, each chunk's splats sorted into 16×16
+//! **Speed.** Points are projected in parallel chunks, four at a time (`project4.rs`: the same
+//! arithmetic lane by lane, the same splats to the bit), each chunk's splats sorted into 16×16
 //! tiles (a counting sort that keeps point order), and rows of tiles are rasterised in parallel,
 //! each straight into the output rows it owns. A tile runs one visibility pass over its splats
 //! and then one pass per surface, and stops as soon as every pixel is covered or has nothing
@@ -75,7 +76,8 @@
 //!
 //! **Files.** `footprint.rs`: the footprint `M'`, the prefilter and the kernel; `tolerance.rs`:
 //! which depths are one surface; `surface.rs`: a pixel's surfaces and their compositing;
-//! `front.rs`: the front surface's pass four pixels at a time;
+//! `front.rs`: the front surface's pass four pixels at a time; `project4.rs`: projection four
+//! points at a time;
 //! `splats.rs`: projection, binning into tiles and the pixels a splat reaches; this file: the
 //! passes over a tile and the [`FrameRenderer`].
 
@@ -90,6 +92,7 @@ use std::sync::Arc;
 
 mod footprint;
 mod front;
+mod project4;
 mod splats;
 mod surface;
 mod tolerance;

@@ -2,6 +2,7 @@
 
 use super::TILE;
 use super::footprint::{footprint, source_pixel_size, support};
+use super::project4::LANES;
 use super::tolerance::{depth_tolerance, parallax_tolerance};
 use crate::geometry::{View, WorldToCamera};
 use crate::render::SplatSettings;
@@ -220,10 +221,7 @@ pub(super) fn project_and_bin(
         splats.clear();
         starts.clear();
         starts.resize(n_tiles + 1, 0);
-        for i in points {
-            let Some(s) = projector.splat(i) else {
-                continue;
-            };
+        let mut keep = |s: Splat| {
             if let Some((tx0, tx1, ty0, ty1)) = tile_range(&s, width, height) {
                 for ty in ty0..=ty1 {
                     for tx in tx0..=tx1 {
@@ -231,6 +229,16 @@ pub(super) fn project_and_bin(
                     }
                 }
                 splats.push(s);
+            }
+        };
+        // Four points at a time, the rest one at a time (the same splats either way).
+        let groups = points.start..points.end - points.len() % LANES;
+        for i in groups.clone().step_by(LANES) {
+            projector.splats4(i, &mut keep);
+        }
+        for i in groups.end..points.end {
+            if let Some(s) = projector.splat(i) {
+                keep(s);
             }
         }
         for t in 0..n_tiles {
