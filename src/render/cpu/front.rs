@@ -19,35 +19,54 @@ use glam::{BVec4A, Vec4};
 
 /// Pixels of a tile.
 const N: usize = TILE * TILE;
-/// Length of a sum's array: every pixel of the tile, and three more so that four lanes can
-/// start at any pixel (lanes past the splat's row add exactly zero).
-const G: usize = N + 3;
+/// Length of a sum's array: every pixel of the tile, and seven more so that four or eight
+/// lanes can start at any pixel (lanes past the splat's row add exactly zero).
+pub(super) const G: usize = N + 7;
 
 /// The front surface's sums for every pixel of a tile (row-major), and what deciding
 /// membership needs of each pixel's surface; four consecutive pixels load as one vector.
 pub(super) struct FrontSums {
     /// The front surface's depth; NaN where the pixel is not open (no surface, or opaque), so
     /// that no splat is a sample of it or behind it.
-    z: [f32; G],
+    pub(super) z: [f32; G],
     /// Its layer (exact as `f32`: layers are `u16`) and 1 where it was observed, else 0.
-    layer: [f32; G],
-    observed: [f32; G],
-    inv_front: [f32; G],
-    geometry: [f32; G],
-    coverage: [f32; G],
-    coverage_weight: [f32; G],
-    kernel: [f32; G],
-    coverage_colour: [[f32; G]; 3],
-    kernel_colour: [[f32; G]; 3],
-    depth: [f32; G],
+    pub(super) layer: [f32; G],
+    pub(super) observed: [f32; G],
+    pub(super) inv_front: [f32; G],
+    pub(super) geometry: [f32; G],
+    pub(super) coverage: [f32; G],
+    pub(super) coverage_weight: [f32; G],
+    pub(super) kernel: [f32; G],
+    pub(super) coverage_colour: [[f32; G]; 3],
+    pub(super) kernel_colour: [[f32; G]; 3],
+    pub(super) depth: [f32; G],
     /// The four bits of `sides_of`, one flag (0 or 1) per array: `s_x ≤ 0`, `s_x ≥ 0`,
     /// `s_y ≤ 0`, `s_y ≥ 0`.
-    sides: [[f32; G]; 4],
+    pub(super) sides: [[f32; G]; 4],
+    /// This CPU has AVX: the pass runs eight lanes at a time (`avx.rs`).
+    #[cfg(target_arch = "x86_64")]
+    avx: bool,
+}
+
+/// Whether this CPU runs the front pass eight lanes at a time (x86-64 with AVX, `avx.rs`).
+pub(super) fn eight_lanes_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
 }
 
 impl FrontSums {
-    pub(super) fn new() -> Box<Self> {
+    /// Zeroed sums; `eight_lanes` asks for the eight-lane pass, taken where the CPU has AVX.
+    #[cfg_attr(not(target_arch = "x86_64"), allow(unused_variables))]
+    pub(super) fn new(eight_lanes: bool) -> Box<Self> {
         Box::new(Self {
+            #[cfg(target_arch = "x86_64")]
+            avx: eight_lanes && eight_lanes_available(),
             z: [f32::NAN; G],
             layer: [0.0; G],
             observed: [0.0; G],
@@ -122,37 +141,55 @@ impl FrontSums {
         width: usize,
         height: usize,
     ) {
-        let Some((x0, x1, y0, y1)) = tile_box(s, tile, width, height, s.extent) else {
+        let Some(span) = tile_box(s, tile, width, height, s.extent) else {
             return;
         };
-        let [m0, m1, m2, m3] = s.inverse;
-        let last = Vec4::splat(x1 as f32);
+        #[cfg(target_arch = "x86_64")]
+        if self.avx && splat.finite {
+            // SAFETY: `avx` is set only where the CPU has AVX.
+            #[allow(unsafe_code)]
+            unsafe {
+                super::avx::add_splat(self, pixels, s, splat, tile, span)
+            };
+            return;
+        }
+        let (x0, x1, y0, y1) = span;
         for y in y0..=y1 {
-            let dy = y as f32 - s.v;
-            let (m1dy, m3dy) = (Vec4::splat(m1 * dy), Vec4::splat(m3 * dy));
-            let base = (y - tile.y0) * TILE;
-            let mut behind = false;
-            for x in (x0..=x1).step_by(4) {
-                let xf = x as f32;
-                let xs = Vec4::new(xf, xf + 1.0, xf + 2.0, xf + 3.0);
-                let valid = xs.cmple(last);
-                let p = base + x - tile.x0;
-                behind |= if splat.finite {
-                    self.add_group::<false>(p, xs, valid, m1dy, m3dy, splat)
-                } else {
-                    self.add_group::<true>(p, xs, valid, m1dy, m3dy, splat)
-                };
-            }
-            if behind {
-                for x in x0..=x1 {
-                    let dx = x as f32 - s.u;
-                    let (sx, sy) = (m0 * dx + m1 * dy, m2 * dx + m3 * dy);
-                    let px = &mut pixels[base + x - tile.x0];
-                    if px.open() && px.classify(&splat.probe, true) == Role::Behind {
-                        px.add_behind(s, &splat.probe, sx, sy);
-                    }
-                }
-            }
+            self.add_row(pixels, s, splat, tile, y, x0, x1);
+        }
+    }
+
+    /// Row `y` of splat `s`'s box, columns `x0..=x1`, four lanes at a time.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn add_row(
+        &mut self,
+        pixels: &mut [PixelState; N],
+        s: &Splat,
+        splat: &SplatLanes,
+        tile: &TileRect,
+        y: usize,
+        x0: usize,
+        x1: usize,
+    ) {
+        let [_, m1, _, m3] = s.inverse;
+        let last = Vec4::splat(x1 as f32);
+        let dy = y as f32 - s.v;
+        let (m1dy, m3dy) = (Vec4::splat(m1 * dy), Vec4::splat(m3 * dy));
+        let base = (y - tile.y0) * TILE;
+        let mut behind = false;
+        for x in (x0..=x1).step_by(4) {
+            let xf = x as f32;
+            let xs = Vec4::new(xf, xf + 1.0, xf + 2.0, xf + 3.0);
+            let valid = xs.cmple(last);
+            let p = base + x - tile.x0;
+            behind |= if splat.finite {
+                self.add_group::<false>(p, xs, valid, m1dy, m3dy, splat)
+            } else {
+                self.add_group::<true>(p, xs, valid, m1dy, m3dy, splat)
+            };
+        }
+        if behind {
+            behind_row(pixels, s, splat, tile, y, x0, x1);
         }
     }
 
@@ -234,6 +271,29 @@ impl FrontSums {
     }
 }
 
+/// The `Behind` role of splat `s` on row `y`, columns `x0..=x1`, one pixel at a time.
+pub(super) fn behind_row(
+    pixels: &mut [PixelState; N],
+    s: &Splat,
+    splat: &SplatLanes,
+    tile: &TileRect,
+    y: usize,
+    x0: usize,
+    x1: usize,
+) {
+    let [m0, m1, m2, m3] = s.inverse;
+    let dy = y as f32 - s.v;
+    let base = (y - tile.y0) * TILE;
+    for x in x0..=x1 {
+        let dx = x as f32 - s.u;
+        let (sx, sy) = (m0 * dx + m1 * dy, m2 * dx + m3 * dy);
+        let px = &mut pixels[base + x - tile.x0];
+        if px.open() && px.classify(&splat.probe, true) == Role::Behind {
+            px.add_behind(s, &splat.probe, sx, sy);
+        }
+    }
+}
+
 /// The four values of `sums` from `p` on.
 #[inline]
 fn lanes(sums: &[f32; G], p: usize) -> Vec4 {
@@ -249,28 +309,28 @@ fn add(sums: &mut [f32; G], p: usize, v: Vec4) {
 /// A splat's values for the front pass, broadcast to four lanes.
 pub(super) struct SplatLanes {
     /// The splat's membership test, for the pixels it is behind (one at a time).
-    probe: Probe,
-    u: Vec4,
-    m0: Vec4,
-    m2: Vec4,
-    z: Vec4,
-    lo: Vec4,
-    hi: Vec4,
-    layer: Vec4,
+    pub(super) probe: Probe,
+    pub(super) u: Vec4,
+    pub(super) m0: Vec4,
+    pub(super) m2: Vec4,
+    pub(super) z: Vec4,
+    pub(super) lo: Vec4,
+    pub(super) hi: Vec4,
+    pub(super) layer: Vec4,
     /// All lanes set when the splat was observed.
-    observed: BVec4A,
-    support_u: Vec4,
-    support_v: Vec4,
-    gamma_u: f32,
-    gamma_v: f32,
-    sharp: bool,
-    kernel: SplatKernel,
-    scale: Vec4,
-    area: Vec4,
-    rho: Vec4,
-    colour: [Vec4; 3],
+    pub(super) observed: BVec4A,
+    pub(super) support_u: Vec4,
+    pub(super) support_v: Vec4,
+    pub(super) gamma_u: f32,
+    pub(super) gamma_v: f32,
+    pub(super) sharp: bool,
+    pub(super) kernel: SplatKernel,
+    pub(super) scale: Vec4,
+    pub(super) area: Vec4,
+    pub(super) rho: Vec4,
+    pub(super) colour: [Vec4; 3],
     /// Every colour channel is finite.
-    finite: bool,
+    pub(super) finite: bool,
 }
 
 impl SplatLanes {
