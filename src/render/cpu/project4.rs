@@ -283,39 +283,29 @@ impl Projector<'_> {
                 }
                 continue;
             }
-            let alpha = cloud.alphas[index];
-            if alpha <= 0.0 || alpha.is_nan() {
+            let Some(alpha) = self.alpha(index) else {
                 continue;
-            }
-            if self.only_layer.is_some_and(|l| cloud.layer[index] != l) {
-                continue;
-            }
+            };
             let (u, v) = (lane(u, j), lane(v, j));
-            let (ex, ey) = (lane(extent[0], j), lane(extent[1], j));
+            let extent = extent.map(|e| lane(e, j));
             let area = lane(area, j);
-            let scale = alpha.min(1.0) * area;
-            if scale.is_nan()
-                || scale <= 0.0
-                || u + ex < -0.5
-                || v + ey < -0.5
-                || u - ex > self.width - 0.5
-                || v - ey > self.height - 0.5
-            {
+            let Some(scale) = self.scale(alpha, area, u, v, extent) else {
                 continue;
-            }
+            };
+            let (layer, observed) = self.kind(index);
             keep(Splat {
                 u,
                 v,
                 z: lane(z, j),
                 tol: lane(tol, j),
                 inverse: inverse.map(|m| lane(m, j)),
-                extent: [ex, ey],
+                extent,
                 tent_extent: tent_extent.map(|m| lane(m, j)),
                 scale,
                 area,
                 sharpness: [lane(gu, j), lane(gv, j)],
-                layer: cloud.layer.get(index).map_or(0, |&l| u32::from(l)),
-                observed: !cloud.inpainted.get(index).copied().unwrap_or(false),
+                layer,
+                observed,
                 index: index as u32,
             });
         }

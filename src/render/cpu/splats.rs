@@ -69,25 +69,32 @@ impl<'a> Projector<'a> {
         }
     }
 
-    /// Point `i` as a splat in the view, `None` when it is culled.
+    /// Point `i`'s alpha, `None` when it is not drawn (transparent, or not of the drawn layer).
     #[inline]
-    pub(super) fn splat(&self, i: usize) -> Option<Splat> {
+    pub(super) fn alpha(&self, i: usize) -> Option<f32> {
         let alpha = self.cloud.alphas[i];
-        if alpha <= 0.0 || alpha.is_nan() {
+        if alpha <= 0.0
+            || alpha.is_nan()
+            || self.only_layer.is_some_and(|l| self.cloud.layer[i] != l)
+        {
             return None;
         }
-        if self.only_layer.is_some_and(|l| self.cloud.layer[i] != l) {
-            return None;
-        }
-        let k = &self.intrinsics;
-        let p = self.w2c.apply(self.positions[i]);
-        let (u, v, z) = k.project(p)?;
-        let tu = self.w2c.rotation * self.cloud.tangent_u[i];
-        let tv = self.w2c.rotation * self.cloud.tangent_v[i];
-        let pixel = source_pixel_size(self.cloud.positions[i], self.cloud.tangent_u[i]);
-        let f = footprint(k, p, tu, tv, pixel, self.settings)?;
-        let [ex, ey] = f.extent;
-        let scale = alpha.min(1.0) * f.area;
+        Some(alpha)
+    }
+
+    /// The splat's `scale = min(α, 1)·g`, `None` when it is zero or NaN, or when the support box
+    /// of half-extents `extent` around `(u, v)` misses the frame.
+    #[inline]
+    pub(super) fn scale(
+        &self,
+        alpha: f32,
+        area: f32,
+        u: f32,
+        v: f32,
+        extent: [f32; 2],
+    ) -> Option<f32> {
+        let [ex, ey] = extent;
+        let scale = alpha.min(1.0) * area;
         if scale.is_nan()
             || scale <= 0.0
             || u + ex < -0.5
@@ -97,6 +104,32 @@ impl<'a> Projector<'a> {
         {
             return None;
         }
+        Some(scale)
+    }
+
+    /// Point `i`'s layer and whether its colour was observed (see [`Splat`]).
+    #[inline]
+    pub(super) fn kind(&self, i: usize) -> (u32, bool) {
+        let cloud = self.cloud;
+        (
+            cloud.layer.get(i).map_or(0, |&l| u32::from(l)),
+            !cloud.inpainted.get(i).copied().unwrap_or(false),
+        )
+    }
+
+    /// Point `i` as a splat in the view, `None` when it is culled.
+    #[inline]
+    pub(super) fn splat(&self, i: usize) -> Option<Splat> {
+        let alpha = self.alpha(i)?;
+        let k = &self.intrinsics;
+        let p = self.w2c.apply(self.positions[i]);
+        let (u, v, z) = k.project(p)?;
+        let tu = self.w2c.rotation * self.cloud.tangent_u[i];
+        let tv = self.w2c.rotation * self.cloud.tangent_v[i];
+        let pixel = source_pixel_size(self.cloud.positions[i], self.cloud.tangent_u[i]);
+        let f = footprint(k, p, tu, tv, pixel, self.settings)?;
+        let scale = self.scale(alpha, f.area, u, v, f.extent)?;
+        let (layer, observed) = self.kind(i);
         Some(Splat {
             u,
             v,
@@ -115,8 +148,8 @@ impl<'a> Projector<'a> {
             scale,
             area: f.area,
             sharpness: f.sharpness,
-            layer: self.cloud.layer.get(i).map_or(0, |&l| u32::from(l)),
-            observed: !self.cloud.inpainted.get(i).copied().unwrap_or(false),
+            layer,
+            observed,
             index: i as u32,
         })
     }
