@@ -91,6 +91,37 @@ fn eval_nvs_on_quarter_aloe_with_oracle_depth() {
         "{json}"
     );
     assert!(noop["consistency"].is_null());
+    // The regions partition the view: their shares add up to 100 % and their mean squared
+    // errors, weighted by share, to the view's.
+    let shares: Vec<f64> = json["region_percent"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert_eq!(shares.len(), 4, "{json}");
+    assert!(
+        (shares.iter().sum::<f64>() - 100.0).abs() < 1e-6,
+        "{shares:?}"
+    );
+    for r in json["rows"].as_array().unwrap() {
+        let mse: f64 = r["region_psnr_db"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .zip(&shares)
+            .map(|(v, share)| {
+                v.as_f64()
+                    .map_or(0.0, |db| share / 100.0 * 10f64.powf(-db / 10.0))
+            })
+            .sum();
+        let view = 10f64.powf(-psnr(r, "psnr_db") / 10.0);
+        assert!(
+            (mse / view - 1.0).abs() < 1e-6,
+            "{}: {mse} vs {view}",
+            r["name"]
+        );
+    }
 
     // The markdown form has the same rows.
     let md = nvs(&[]);
@@ -102,6 +133,8 @@ fn eval_nvs_on_quarter_aloe_with_oracle_depth() {
         "w/o layer inpainting",
         "per-frame",
         "naive",
+        "known, boundary",
+        "disocclusions",
     ] {
         assert!(text.contains(name), "{text}");
     }

@@ -18,6 +18,11 @@
 //!   camera never saw (the right border strip, about `d_min` columns wide, and disocclusions),
 //!   where any method can only guess.
 //!
+//! A second table splits the view ([`ViewRegions`]): the known pixels whose eight neighbours
+//! are known (**interior**) and the rest (**boundary**: where a depth edge's one-pixel errors
+//! show), and the unknown pixels right of their row's last known one (the **right border
+//! strip**, beyond the left photo) and elsewhere (**disocclusions**), each row's PSNR on each.
+//!
 //! PSNR and SSIM come from [`crate::metrics`] (SSIM per RGB channel on the table; luma in the
 //! JSON). Depth for the scene, imported through the depth stage's import path (a `.npy` depth
 //! file in a temporary folder):
@@ -73,8 +78,8 @@ mod pair;
 mod table;
 
 pub use naive::forward_splat;
-pub use pair::{StereoPair, fill_unknown_disparity};
-pub use table::{NvsDepth, NvsMethod, NvsOptions, NvsRow, NvsTable};
+pub use pair::{StereoPair, ViewRegions, fill_unknown_disparity};
+pub use table::{NvsDepth, NvsMethod, NvsOptions, NvsRow, NvsTable, REGION_NAMES};
 
 use crate::error::{Error, Result};
 use crate::eval::TempDir;
@@ -201,6 +206,11 @@ pub fn eval_nvs(pair: &StereoPair, options: &NvsOptions, progress: &Progress) ->
     let view_mask = MaskRaster::from_fn(w, h, |x, _| x >= options.border_px);
     let known_mask = pair.covisible_mask();
     let known_count = known_mask.data().iter().filter(|&&b| b).count();
+    let regions = ViewRegions::new(&known_mask, &view_mask);
+    let view_count = view_mask.data().iter().filter(|&&b| b).count().max(1);
+    let region_percent = regions
+        .masks()
+        .map(|m| 100.0 * m.data().iter().filter(|&&b| b).count() as f64 / view_count as f64);
     let count = options.methods.len() as f32;
     let mut rows = Vec::new();
     for (i, &method) in options.methods.iter().enumerate() {
@@ -236,7 +246,14 @@ pub fn eval_nvs(pair: &StereoPair, options: &NvsOptions, progress: &Progress) ->
             let name = format!("{method:?}").to_lowercase();
             crate::image_io::save_rgb_png(&dir.join(format!("{name}.png")), &out.right, false)?;
         }
-        rows.push(score_row(method, out, pair, &view_mask, &known_mask)?);
+        rows.push(score_row(
+            method,
+            out,
+            pair,
+            &view_mask,
+            &known_mask,
+            &regions,
+        )?);
     }
     progress.report(1.0, "nvs");
     Ok(NvsTable {
@@ -252,6 +269,7 @@ pub fn eval_nvs(pair: &StereoPair, options: &NvsOptions, progress: &Progress) ->
         preset: options.preset,
         layer_depth,
         known_percent: 100.0 * known_count as f64 / (w * h) as f64,
+        region_percent,
         rows,
     })
 }
@@ -262,8 +280,18 @@ fn score_row(
     pair: &StereoPair,
     view_mask: &MaskRaster,
     known_mask: &MaskRaster,
+    regions: &ViewRegions,
 ) -> Result<NvsRow> {
     let rgb = SsimChannels::PerChannel;
+    let region = |m: &MaskRaster| -> Result<Option<f64>> {
+        if m.data().iter().any(|&b| b) {
+            metrics::psnr_masked(&out.right, &pair.right, m).map(Some)
+        } else {
+            Ok(None)
+        }
+    };
+    let [a, b, c, d] = regions.masks();
+    let region_psnr_db = [region(a)?, region(b)?, region(c)?, region(d)?];
     Ok(NvsRow {
         method,
         name: method.name().to_string(),
@@ -281,6 +309,7 @@ fn score_row(
         consistency: out.consistency.map(|c| c.0),
         consistency_stepwise: out.consistency.map(|c| c.1),
         seconds: out.seconds,
+        region_psnr_db,
     })
 }
 

@@ -167,6 +167,62 @@ impl StereoPair {
     }
 }
 
+/// The view split by what the left camera saw (masks within the view, disjoint, covering it).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ViewRegions {
+    /// Known pixels whose eight neighbours are all known.
+    pub known_interior: MaskRaster,
+    /// Known pixels next to an unknown one (or the image border): where a depth edge's
+    /// one-pixel errors show.
+    pub known_boundary: MaskRaster,
+    /// Unknown pixels right of their row's last known pixel: what the right camera sees beyond
+    /// the left photo's edge (the baseline is along +x).
+    pub border_strip: MaskRaster,
+    /// The other unknown pixels: what nearer objects hide from the left camera.
+    pub disocclusions: MaskRaster,
+}
+
+impl ViewRegions {
+    /// Splits `view` by `known` (the co-visible pixels, [`StereoPair::covisible_mask`]).
+    pub fn new(known: &MaskRaster, view: &MaskRaster) -> Self {
+        let (w, h) = known.size();
+        let known_at = |x: isize, y: isize| {
+            x >= 0
+                && y >= 0
+                && (x as usize) < w
+                && (y as usize) < h
+                && known.at(x as usize, y as usize)
+        };
+        let last_known: Vec<Option<usize>> = (0..h)
+            .map(|y| (0..w).rev().find(|&x| known.at(x, y)))
+            .collect();
+        let pick = |f: &dyn Fn(usize, usize) -> bool| {
+            MaskRaster::from_fn(w, h, |x, y| view.at(x, y) && f(x, y))
+        };
+        let surrounded = |x: usize, y: usize| {
+            let (x, y) = (x as isize, y as isize);
+            (-1..=1).all(|dy| (-1..=1).all(|dx| known_at(x + dx, y + dy)))
+        };
+        let beyond = |x: usize, y: usize| last_known[y].is_none_or(|last| x > last);
+        Self {
+            known_interior: pick(&|x, y| known.at(x, y) && surrounded(x, y)),
+            known_boundary: pick(&|x, y| known.at(x, y) && !surrounded(x, y)),
+            border_strip: pick(&|x, y| !known.at(x, y) && beyond(x, y)),
+            disocclusions: pick(&|x, y| !known.at(x, y) && !beyond(x, y)),
+        }
+    }
+
+    /// The four masks in table order.
+    pub fn masks(&self) -> [&MaskRaster; 4] {
+        [
+            &self.known_interior,
+            &self.known_boundary,
+            &self.border_strip,
+            &self.disocclusions,
+        ]
+    }
+}
+
 /// A ground-truth disparity value that is known.
 pub(super) fn is_known(d: f32) -> bool {
     d.is_finite() && d > 0.0
@@ -229,6 +285,42 @@ pub fn fill_unknown_disparity(disparity: &GrayRaster) -> Result<GrayRaster> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn view_regions_split_the_view_by_what_the_left_camera_saw() {
+        // Known (#) and unknown (.) right-view pixels; the view leaves out column 0.
+        let rows = ["######", "##..##", "######", "####..", "......"];
+        let known = MaskRaster::from_fn(6, 5, |x, y| rows[y].as_bytes()[x] == b'#');
+        let view = MaskRaster::from_fn(6, 5, |x, _| x >= 1);
+        let r = ViewRegions::new(&known, &view);
+        let draw = |m: &MaskRaster| -> Vec<String> {
+            (0..5)
+                .map(|y| (0..6).map(|x| if m.at(x, y) { 'x' } else { '-' }).collect())
+                .collect()
+        };
+        // Interior: known with all eight neighbours known (the image border counts as unknown).
+        assert_eq!(
+            draw(&r.known_interior),
+            ["------", "------", "------", "------", "------"]
+        );
+        assert_eq!(
+            draw(&r.known_boundary),
+            ["-xxxxx", "-x--xx", "-xxxxx", "-xxx--", "------"]
+        );
+        assert_eq!(
+            draw(&r.border_strip),
+            ["------", "------", "------", "----xx", "-xxxxx"]
+        );
+        assert_eq!(
+            draw(&r.disocclusions),
+            ["------", "--xx--", "------", "------", "------"]
+        );
+        // A bigger known block has an interior.
+        let known = MaskRaster::new(5, 5, true);
+        let r = ViewRegions::new(&known, &MaskRaster::new(5, 5, true));
+        assert_eq!(r.known_interior.data().iter().filter(|&&b| b).count(), 9);
+        assert_eq!(r.known_boundary.data().iter().filter(|&&b| b).count(), 16);
+    }
 
     #[test]
     fn unknown_disparity_takes_the_farther_neighbour() {

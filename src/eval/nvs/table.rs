@@ -150,7 +150,19 @@ pub struct NvsRow {
     /// Wall time to make the right view (scene build + render, or the whole per-frame chain),
     /// seconds.
     pub seconds: f64,
+    /// PSNR on each region of the view, dB, in [`REGION_NAMES`] order (see
+    /// [`ViewRegions`](super::ViewRegions)); `None` for an empty region.
+    #[serde(default)]
+    pub region_psnr_db: [Option<f64>; 4],
 }
+
+/// The regions of [`ViewRegions`](super::ViewRegions), as the tables name them.
+pub const REGION_NAMES: [&str; 4] = [
+    "known, interior",
+    "known, boundary",
+    "right border strip",
+    "disocclusions",
+];
 
 /// The evaluation's table and what it was measured on.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -179,6 +191,9 @@ pub struct NvsTable {
     pub layer_depth: bool,
     /// Percentage of the right view that is co-visible (the "known" pixels).
     pub known_percent: f64,
+    /// Share of the view of each region, percent, in [`REGION_NAMES`] order.
+    #[serde(default)]
+    pub region_percent: [f64; 4],
     /// The rows.
     pub rows: Vec<NvsRow>,
 }
@@ -232,6 +247,23 @@ impl NvsTable {
             self.preset,
             if self.layer_depth { "on" } else { "off" }
         ));
+        s.push_str("\nPSNR (dB) by region of the view:\n\n| region (share of the view) |");
+        for r in &self.rows {
+            s.push_str(&format!(" {} |", r.name));
+        }
+        s.push_str("\n|---|");
+        s.push_str(&"---:|".repeat(self.rows.len()));
+        s.push('\n');
+        for (i, name) in REGION_NAMES.iter().enumerate() {
+            s.push_str(&format!("| {name} ({:.1} %) |", self.region_percent[i]));
+            for r in &self.rows {
+                match r.region_psnr_db[i] {
+                    Some(v) => s.push_str(&format!(" {v:.2} |")),
+                    None => s.push_str(" – |"),
+                }
+            }
+            s.push('\n');
+        }
         s
     }
 
