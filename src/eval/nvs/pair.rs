@@ -298,23 +298,29 @@ mod tests {
                 .map(|y| (0..6).map(|x| if m.at(x, y) { 'x' } else { '-' }).collect())
                 .collect()
         };
-        // Interior: known with all eight neighbours known (the image border counts as unknown).
-        assert_eq!(
-            draw(&r.known_interior),
-            ["------", "------", "------", "------", "------"]
-        );
-        assert_eq!(
-            draw(&r.known_boundary),
-            ["-xxxxx", "-x--xx", "-xxxxx", "-xxx--", "------"]
-        );
-        assert_eq!(
-            draw(&r.border_strip),
-            ["------", "------", "------", "----xx", "-xxxxx"]
-        );
-        assert_eq!(
-            draw(&r.disocclusions),
-            ["------", "--xx--", "------", "------", "------"]
-        );
+        // Interior: known with all eight neighbours known (the image border counts as
+        // unknown); the strip: right of a row's last known pixel.
+        let want = [
+            (
+                &r.known_interior,
+                ["------", "------", "------", "------", "------"],
+            ),
+            (
+                &r.known_boundary,
+                ["-xxxxx", "-x--xx", "-xxxxx", "-xxx--", "------"],
+            ),
+            (
+                &r.border_strip,
+                ["------", "------", "------", "----xx", "-xxxxx"],
+            ),
+            (
+                &r.disocclusions,
+                ["------", "--xx--", "------", "------", "------"],
+            ),
+        ];
+        for (i, (mask, rows)) in want.into_iter().enumerate() {
+            assert_eq!(draw(mask), rows, "region {i}");
+        }
         // A bigger known block has an interior.
         let known = MaskRaster::new(5, 5, true);
         let r = ViewRegions::new(&known, &MaskRaster::new(5, 5, true));
