@@ -196,19 +196,24 @@ impl ViewRegions {
         let last_known: Vec<Option<usize>> = (0..h)
             .map(|y| (0..w).rev().find(|&x| known.at(x, y)))
             .collect();
-        let pick = |f: &dyn Fn(usize, usize) -> bool| {
-            MaskRaster::from_fn(w, h, |x, y| view.at(x, y) && f(x, y))
-        };
-        let surrounded = |x: usize, y: usize| {
-            let (x, y) = (x as isize, y as isize);
-            (-1..=1).all(|dy| (-1..=1).all(|dx| known_at(x + dx, y + dy)))
-        };
-        let beyond = |x: usize, y: usize| last_known[y].is_none_or(|last| x > last);
+        // Each pixel's region in `masks()` order, once.
+        let region = Raster::from_fn(w, h, |x, y| {
+            if known.at(x, y) {
+                let (x, y) = (x as isize, y as isize);
+                let surrounded = (-1..=1).all(|dy| (-1..=1).all(|dx| known_at(x + dx, y + dy)));
+                if surrounded { 0u8 } else { 1 }
+            } else if last_known[y].is_none_or(|last| x > last) {
+                2
+            } else {
+                3
+            }
+        });
+        let pick = |r: u8| MaskRaster::from_fn(w, h, |x, y| view.at(x, y) && region.at(x, y) == r);
         Self {
-            known_interior: pick(&|x, y| known.at(x, y) && surrounded(x, y)),
-            known_boundary: pick(&|x, y| known.at(x, y) && !surrounded(x, y)),
-            border_strip: pick(&|x, y| !known.at(x, y) && beyond(x, y)),
-            disocclusions: pick(&|x, y| !known.at(x, y) && !beyond(x, y)),
+            known_interior: pick(0),
+            known_boundary: pick(1),
+            border_strip: pick(2),
+            disocclusions: pick(3),
         }
     }
 
