@@ -112,6 +112,9 @@ pub use tolerance::{MAX_TOLERANCE, PARALLAX_TOLERANCE_PX, depth_tolerance, paral
 /// Tile side, pixels.
 const TILE: usize = 16;
 
+/// Largest output side the CPU renderer takes, pixels (tile coordinates are kept as `u16`).
+pub const MAX_RENDER_SIDE: usize = TILE << 16;
+
 /// Largest number of surfaces per pixel the renderers support.
 pub const MAX_K: usize = 16;
 
@@ -209,6 +212,11 @@ fn render_lanes(
             "render: output size {width}×{height} has no pixels"
         )));
     }
+    if width > MAX_RENDER_SIDE || height > MAX_RENDER_SIDE {
+        return Err(Error::invalid(format!(
+            "render: output size {width}×{height} is larger than {MAX_RENDER_SIDE} px a side"
+        )));
+    }
     if !view.intrinsics.is_valid() {
         return Err(Error::invalid(format!(
             "render: invalid intrinsics {:?}",
@@ -268,7 +276,7 @@ fn render_lanes(
                 pixels.fill(PixelState::default());
                 let t = ty * tiles_x + tx;
                 // Chunks in point order, each tile's splats in point order within a chunk.
-                let tile_splats = || chunks.iter().flat_map(|c| c.tile(t));
+                let tile_splats = |colours| chunks.iter().flat_map(move |c| c.tile(t, colours));
                 let tile = TileRect {
                     x0: x_start,
                     y0: y_start,
@@ -276,7 +284,7 @@ fn render_lanes(
                     h: th,
                 };
                 // Visibility: the nearest point that covers each pixel.
-                for s in tile_splats() {
+                for s in tile_splats(None) {
                     let key = SurfaceKey::of(s);
                     for_each_offset(s, &tile, width, height, s.tent_extent, |p, sx, sy| {
                         let px = &mut pixels[p];
@@ -308,7 +316,7 @@ fn render_lanes(
                     if surface == 0 {
                         front.load(&pixels);
                     }
-                    for s in tile_splats() {
+                    for s in tile_splats(Some(values)) {
                         if s.z + s.tol < z_lo {
                             continue;
                         }
@@ -973,6 +981,28 @@ mod tests {
         let f = render_cpu(&cloud, None, &view(k), 1, 1, &settings).unwrap();
         // Only z = 1 and z = 2 count: A = 0.5 + 0.25.
         assert!((f.coverage.at(0, 0) - 0.75).abs() < 1e-6);
+    }
+
+    #[test]
+    fn sizes_without_pixels_or_past_the_tile_coordinates_are_refused() {
+        let k = Intrinsics::from_hfov(4, 4, 60.0);
+        let cloud = single_point(2.0, 2.0, 1.0, [0.5; 3], &k);
+        let settings = SplatSettings::default();
+        for (w, h, says) in [
+            (0, 4, "has no pixels"),
+            (4, 0, "has no pixels"),
+            (MAX_RENDER_SIDE + 1, 1, "px a side"),
+            (1, MAX_RENDER_SIDE + 1, "px a side"),
+        ] {
+            let err = render_cpu(&cloud, None, &view(k), w, h, &settings).unwrap_err();
+            assert!(err.to_string().contains(says), "{w}×{h}: {err}");
+        }
+        // The largest side still renders (one row: tile coordinates up to `u16::MAX`).
+        let wide = Intrinsics::from_hfov(MAX_RENDER_SIDE, 1, 60.0);
+        let cloud = single_point(MAX_RENDER_SIDE as f32 - 1.0, 0.0, 1.0, [0.5; 3], &wide);
+        let f = render_cpu(&cloud, None, &view(wide), MAX_RENDER_SIDE, 1, &settings).unwrap();
+        assert_eq!(f.coverage.at(MAX_RENDER_SIDE - 1, 0), 1.0);
+        assert_eq!(f.colour.at(MAX_RENDER_SIDE - 1, 0), [0.5; 3]);
     }
 
     #[test]
