@@ -296,21 +296,21 @@ fn group<const ROW: bool>(
             _mm256_mul_ps(kw, s.colour[i]),
         );
     }
-    // `sides_of` where the tent weight is positive.
+    // `sides_of` where the tent weight is positive: each side's bit where it holds, or-ed in.
     let positive = _mm256_cmp_ps::<_CMP_GT_OS>(t, zero);
-    let sides = [
-        _mm256_cmp_ps::<_CMP_LE_OS>(sx, zero),
-        _mm256_cmp_ps::<_CMP_GE_OS>(sx, zero),
-        _mm256_cmp_ps::<_CMP_LE_OS>(sy, zero),
-        _mm256_cmp_ps::<_CMP_GE_OS>(sy, zero),
-    ];
-    for (flags, side) in sums.sides.iter_mut().zip(sides) {
-        let set = _mm256_max_ps(
-            load::<ROW>(flags, p),
-            select(_mm256_and_ps(positive, side), one, zero),
-        );
-        store::<ROW>(flags, p, set);
-    }
+    let bit = |b: u32| _mm256_set1_ps(f32::from_bits(1 << b));
+    let sides = _mm256_or_ps(
+        _mm256_or_ps(
+            _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OS>(sx, zero), bit(0)),
+            _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OS>(sx, zero), bit(1)),
+        ),
+        _mm256_or_ps(
+            _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OS>(sy, zero), bit(2)),
+            _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OS>(sy, zero), bit(3)),
+        ),
+    );
+    let set = _mm256_or_ps(load::<ROW>(&sums.sides, p), _mm256_and_ps(positive, sides));
+    store::<ROW>(&mut sums.sides, p, set);
     let offset = _mm256_min_ps(
         _mm256_max_ps(
             _mm256_sub_ps(_mm256_mul_ps(s.z, load::<ROW>(&sums.inv_front, p)), one),

@@ -40,9 +40,10 @@ pub(super) struct FrontSums {
     pub(super) coverage_colour: [[f32; G]; 3],
     pub(super) kernel_colour: [[f32; G]; 3],
     pub(super) depth: [f32; G],
-    /// The four bits of `sides_of`, one flag (0 or 1) per array: `s_x ≤ 0`, `s_x ≥ 0`,
-    /// `s_y ≤ 0`, `s_y ≥ 0`.
-    pub(super) sides: [[f32; G]; 4],
+    /// [`sides_of`](super::sides_of) of the samples, or-ed: the four bits held in the bit
+    /// pattern of an `f32` (only ever or-ed, loaded and stored, never used as a number), so one
+    /// vector instruction sets them in every lane.
+    pub(super) sides: [f32; G],
     /// This CPU has AVX: the pass runs eight lanes at a time (`avx.rs`).
     #[cfg(target_arch = "x86_64")]
     avx: bool,
@@ -78,7 +79,7 @@ impl FrontSums {
             coverage_colour: [[0.0; G]; 3],
             kernel_colour: [[0.0; G]; 3],
             depth: [0.0; G],
-            sides: [[0.0; G]; 4],
+            sides: [0.0; G],
         })
     }
 
@@ -96,6 +97,7 @@ impl FrontSums {
             &mut self.coverage_weight,
             &mut self.kernel,
             &mut self.depth,
+            &mut self.sides,
         ] {
             sums.fill(0.0);
         }
@@ -103,7 +105,6 @@ impl FrontSums {
             .coverage_colour
             .iter_mut()
             .chain(&mut self.kernel_colour)
-            .chain(&mut self.sides)
         {
             sums.fill(0.0);
         }
@@ -126,7 +127,7 @@ impl FrontSums {
                 sums.kernel_colour[i] = self.kernel_colour[i][p];
             }
             sums.depth = self.depth[p];
-            sums.sides = (0..4).map(|b| u8::from(self.sides[b][p] > 0.0) << b).sum();
+            sums.sides = self.sides[p].to_bits() as u8;
         }
     }
 
@@ -254,14 +255,16 @@ impl FrontSums {
         }
         // `sides_of` where the tent weight is positive.
         let positive = t.cmpgt(zero);
-        for (flags, side) in self.sides.iter_mut().zip([
+        let sides = [
             sx.cmple(zero),
             sx.cmpge(zero),
             sy.cmple(zero),
             sy.cmpge(zero),
-        ]) {
-            let set = lanes(flags, p).max(Vec4::select(positive & side, Vec4::ONE, zero));
-            set.write_to_slice(&mut flags[p..p + 4]);
+        ]
+        .map(|side| (positive & side).bitmask());
+        for (lane, flags) in self.sides[p..p + 4].iter_mut().enumerate() {
+            let bits = (0..4).fold(0, |bits, b| bits | (((sides[b] >> lane) & 1) << b));
+            *flags = f32::from_bits(flags.to_bits() | bits);
         }
         let offset = (s.z * lanes(&self.inv_front, p) - Vec4::ONE)
             .max(Vec4::splat(-MAX_DEPTH_OFFSET))
