@@ -66,8 +66,9 @@
 //!
 //! **Speed.** Points are projected in parallel chunks, four at a time (`project4.rs`: the same
 //! arithmetic lane by lane, the same splats to the bit), each chunk's splats sorted into 16×16
-//! tiles (a counting sort that keeps point order), and rows of tiles are rasterised in parallel,
-//! each straight into the output rows it owns. A tile runs one visibility pass over its splats
+//! tiles (a counting sort that keeps point order; the placement reads each splat's tile range
+//! kept from the count), and rows of tiles are rasterised in parallel, each straight into the
+//! output rows it owns; a tile's walk over its splats prefetches the ones a few places on. A tile runs one visibility pass over its splats
 //! and then one pass per surface, and stops as soon as every pixel is covered or has nothing
 //! behind: interior tiles take two passes, tiles on an edge three. The front surface's pass,
 //! where nearly all the work is (every splat's kernel over every pixel of its surface), keeps
