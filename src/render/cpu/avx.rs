@@ -265,6 +265,12 @@ fn group<const ROW: bool>(
         _mm256_cmp_ps::<_CMP_LT_OS>(ax, s.support_u),
         _mm256_cmp_ps::<_CMP_LT_OS>(ay, s.support_v),
     );
+    let take = _mm256_and_ps(_mm256_and_ps(valid, member), inside);
+    if _mm256_movemask_ps(take) == 0 {
+        // No lane is a sample (a splat of a surface behind, or beyond its support here): every
+        // sum would add +0, which leaves it as it is (a sum is never −0).
+        return behind;
+    }
     let (tx, ty) = (tent(ax), tent(ay));
     let t = _mm256_mul_ps(tx, ty);
     let k = if s.sharp {
@@ -275,7 +281,6 @@ fn group<const ROW: bool>(
     } else {
         t
     };
-    let take = _mm256_and_ps(_mm256_and_ps(valid, member), inside);
     let t = select(take, t, zero);
     let k = select(take, k, zero);
     let (w_c, w) = (_mm256_mul_ps(s.scale, t), _mm256_mul_ps(s.scale, k));

@@ -221,6 +221,11 @@ impl FrontSums {
         // `kernel_weights`.
         let (ax, ay) = (sx.abs(), sy.abs());
         let inside = ax.cmplt(s.support_u) & ay.cmplt(s.support_v);
+        let take = valid & member & inside;
+        if !take.any() {
+            // No lane is a sample: every sum would add +0 (see the module docs).
+            return behind;
+        }
         let (tx, ty) = (tent4(ax), tent4(ay));
         let t = tx * ty;
         let k = if s.sharp {
@@ -228,7 +233,6 @@ impl FrontSums {
         } else {
             t
         };
-        let take = valid & member & inside;
         let zero = Vec4::ZERO;
         let t = Vec4::select(take, t, zero);
         let k = Vec4::select(take, k, zero);

@@ -309,10 +309,15 @@ fn render_lanes(
                     // the result, only the work.
                     let mut z_lo = f32::INFINITY;
                     let mut z_hi = f32::NEG_INFINITY;
-                    for px in pixels.iter_mut().filter(|px| px.open()) {
+                    // The rectangle of the open pixels: a splat whose box misses it reaches no
+                    // pixel that still takes anything (after the front surface, often a few
+                    // pixels along an edge).
+                    let mut open = OpenRect::EMPTY;
+                    for (p, px) in pixels.iter_mut().enumerate().filter(|(_, px)| px.open()) {
                         z_lo = z_lo.min(px.cur.z);
                         z_hi = z_hi.max(px.cur.z);
                         px.inv_front = 1.0 / px.cur.z;
+                        open.add(x_start + p % TILE, y_start + p / TILE);
                     }
                     if surface == 0 {
                         front.load(&pixels);
@@ -329,6 +334,9 @@ fn render_lanes(
                         } else {
                             s.tent_extent
                         };
+                        if open.misses(s, extent) {
+                            continue;
+                        }
                         let c = values[s.index as usize];
                         let probe = Probe::of(s);
                         let first = surface == 0;
@@ -409,6 +417,43 @@ fn render_lanes(
         coverage,
         depth,
     })
+}
+
+/// A rectangle of pixels (inclusive bounds, as `f32`), grown one pixel at a time.
+struct OpenRect {
+    x0: f32,
+    x1: f32,
+    y0: f32,
+    y1: f32,
+}
+
+impl OpenRect {
+    const EMPTY: OpenRect = OpenRect {
+        x0: f32::INFINITY,
+        x1: f32::NEG_INFINITY,
+        y0: f32::INFINITY,
+        y1: f32::NEG_INFINITY,
+    };
+
+    /// Grows the rectangle to hold pixel `(x, y)`.
+    #[inline]
+    fn add(&mut self, x: usize, y: usize) {
+        let (x, y) = (x as f32, y as f32);
+        self.x0 = self.x0.min(x);
+        self.x1 = self.x1.max(x);
+        self.y0 = self.y0.min(y);
+        self.y1 = self.y1.max(y);
+    }
+
+    /// True when no pixel of the rectangle lies strictly inside the box of half-extents
+    /// `extent` around the splat's centre: the pixels [`for_each_offset`] visits are those with
+    /// `u − e < x < u + e` (computed exactly so), so a box that ends at or before the
+    /// rectangle's first column, or starts at or after its last, visits none of them.
+    #[inline]
+    fn misses(&self, s: &splats::Splat, extent: [f32; 2]) -> bool {
+        let [ex, ey] = extent;
+        s.u + ex <= self.x0 || s.u - ex >= self.x1 || s.v + ey <= self.y0 || s.v - ey >= self.y1
+    }
 }
 
 /// The CPU renderer behind the [`FrameRenderer`] trait.
@@ -982,6 +1027,62 @@ mod tests {
         let f = render_cpu(&cloud, None, &view(k), 1, 1, &settings).unwrap();
         // Only z = 1 and z = 2 count: A = 0.5 + 0.25.
         assert!((f.coverage.at(0, 0) - 0.75).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_splat_missing_the_open_rectangle_reaches_none_of_its_pixels() {
+        // `OpenRect::misses` against the pixels `for_each_offset` visits, on centres and
+        // extents that land on, just before and just after whole pixels.
+        let tile = TileRect {
+            x0: 16,
+            y0: 32,
+            w: TILE,
+            h: TILE,
+        };
+        let (width, height) = (64, 64);
+        let mut state = 0x9e37_79b9_u32;
+        let mut next = |n: u32| {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) % n
+        };
+        let (mut missed, mut reached) = (0, 0);
+        for _ in 0..20_000 {
+            let quarter = |n: u32, next: &mut dyn FnMut(u32) -> u32| next(n) as f32 / 4.0;
+            let s = splats::Splat {
+                u: 13.0 + quarter(88, &mut next),
+                v: 29.0 + quarter(88, &mut next),
+                ..splats::Splat::default()
+            };
+            let extent = [quarter(12, &mut next), quarter(12, &mut next)];
+            let mut open = OpenRect::EMPTY;
+            let mut pixels = [false; TILE * TILE];
+            for _ in 0..1 + next(3) {
+                let (c, r) = (next(TILE as u32) as usize, next(TILE as u32) as usize);
+                open.add(tile.x0 + c, tile.y0 + r);
+                pixels[r * TILE + c] = true;
+            }
+            // Every pixel of the rectangle, not only the open ones: `misses` is about the
+            // rectangle.
+            let (cols, rows) = (
+                open.x0 as usize - tile.x0..=open.x1 as usize - tile.x0,
+                open.y0 as usize - tile.y0..=open.y1 as usize - tile.y0,
+            );
+            let mut hits = 0;
+            for_each_offset(&s, &tile, width, height, extent, |p, _, _| {
+                hits += usize::from(cols.contains(&(p % TILE)) && rows.contains(&(p / TILE)));
+            });
+            if open.misses(&s, extent) {
+                assert_eq!(hits, 0, "{:?} {extent:?}", (s.u, s.v));
+                missed += 1;
+            } else {
+                reached += usize::from(hits > 0);
+            }
+        }
+        // Both outcomes were exercised, and most boxes it keeps do reach the rectangle.
+        assert!(
+            missed > 1000 && reached > 1000,
+            "{missed} missed, {reached} reached"
+        );
     }
 
     #[test]
