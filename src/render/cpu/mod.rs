@@ -68,10 +68,11 @@
 //! arithmetic lane by lane, the same splats to the bit), each chunk's splats sorted into 16×16
 //! tiles (a counting sort that keeps point order; the placement reads each splat's tile range
 //! kept from the count), and rows of tiles are rasterised in parallel, each straight into the
-//! output rows it owns; a tile's walk over its splats prefetches the ones a few places on. A tile runs one visibility pass over its splats
-//! and then one pass per surface, and stops as soon as every pixel is covered or has nothing
-//! behind: interior tiles take two passes, tiles on an edge three. The front surface's pass,
-//! where nearly all the work is (every splat's kernel over every pixel of its surface), keeps
+//! output rows it owns; a tile's walk over its splats prefetches the ones a few places on. A
+//! tile runs one visibility pass over its splats and then one pass per surface, and stops as
+//! soon as every pixel is covered or has nothing behind: interior tiles take two passes, tiles
+//! on an edge three (a pass after the first skips the splats whose box misses every pixel still
+//! open). The front surface's pass, where nearly all the work is (every splat's kernel over every pixel of its surface), keeps
 //! its sums as arrays and adds a splat to four pixels of a row at once (`front.rs`), or, on
 //! x86-64 CPUs with AVX (detected at run time), to eight: two rows of up to four pixels or
 //! eight of one row (`avx.rs`), with the same arithmetic per pixel as the other passes, so the
