@@ -72,11 +72,11 @@
 //! tile runs one visibility pass over its splats and then one pass per surface, and stops as
 //! soon as every pixel is covered or has nothing behind: interior tiles take two passes, tiles
 //! on an edge three (a pass after the first skips the splats whose box misses every pixel still
-//! open). The front surface's pass, where nearly all the work is (every splat's kernel over every pixel of its surface), keeps
-//! its sums as arrays and adds a splat to four pixels of a row at once (`front.rs`), or, on
-//! x86-64 CPUs with AVX (detected at run time), to eight: two rows of up to four pixels or
-//! eight of one row (`avx.rs`), with the same arithmetic per pixel as the other passes, so the
-//! output is the same to the bit.
+//! open). The front surface's pass, where nearly all the work is (every splat's kernel over every
+//! pixel of its surface), keeps its sums as arrays and adds a splat to four pixels of a row at
+//! once (`front.rs`), or, on x86-64 CPUs with AVX (detected at run time), to eight: two rows of
+//! up to four pixels or eight of one row (`avx.rs`), with the same arithmetic per pixel as the
+//! other passes, so the output is the same to the bit.
 //!
 //! **Files.** `footprint.rs`: the footprint `M'`, the prefilter and the kernel; `tolerance.rs`:
 //! which depths are one surface; `surface.rs`: a pixel's surfaces and their compositing;
@@ -1056,11 +1056,9 @@ mod tests {
             };
             let extent = [quarter(12, &mut next), quarter(12, &mut next)];
             let mut open = OpenRect::EMPTY;
-            let mut pixels = [false; TILE * TILE];
             for _ in 0..1 + next(3) {
                 let (c, r) = (next(TILE as u32) as usize, next(TILE as u32) as usize);
                 open.add(tile.x0 + c, tile.y0 + r);
-                pixels[r * TILE + c] = true;
             }
             // Every pixel of the rectangle, not only the open ones: `misses` is about the
             // rectangle.
