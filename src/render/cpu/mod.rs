@@ -277,25 +277,26 @@ fn render_lanes(
                 let tw = TILE.min(width - x_start);
                 pixels.fill(PixelState::default());
                 let t = ty * tiles_x + tx;
-                // Chunks in point order, each tile's splats in point order within a chunk.
-                let tile_splats = |colours| chunks.iter().flat_map(move |c| c.tile(t, colours));
                 let tile = TileRect {
                     x0: x_start,
                     y0: y_start,
                     w: tw,
                     h: th,
                 };
-                // Visibility: the nearest point that covers each pixel.
-                for s in tile_splats(None) {
-                    let key = SurfaceKey::of(s);
-                    for_each_offset(s, &tile, width, height, s.tent_extent, |p, sx, sy| {
-                        let px = &mut pixels[p];
-                        if key.before(&px.cur)
-                            && s.scale * tent(sx) * tent(sy) >= MIN_VISIBLE_WEIGHT
-                        {
-                            px.cur = key;
-                        }
-                    });
+                // Visibility: the nearest point that covers each pixel. (Every walk takes the
+                // chunks in point order, each tile's splats in point order within a chunk.)
+                for c in &chunks {
+                    for s in c.tile(t, None) {
+                        let key = SurfaceKey::of(s);
+                        for_each_offset(s, &tile, width, height, s.tent_extent, |p, sx, sy| {
+                            let px = &mut pixels[p];
+                            if key.before(&px.cur)
+                                && s.scale * tent(sx) * tent(sy) >= MIN_VISIBLE_WEIGHT
+                            {
+                                px.cur = key;
+                            }
+                        });
+                    }
                 }
                 // One pass per surface, front to back: the front surface with the kernel, the
                 // ones behind it (seen only through an edge's partial coverage) with the tent.
@@ -323,76 +324,83 @@ fn render_lanes(
                     if surface == 0 {
                         front.load(&pixels);
                     }
-                    for s in tile_splats(Some(values)) {
-                        if s.z + s.tol < z_lo {
-                            continue;
-                        }
-                        // Only the front pass uses the kernel, and only for splats that can be
-                        // samples of a pixel's surface; elsewhere the tent is enough.
-                        let shape = if s.z - s.tol > z_hi { None } else { shape };
-                        let extent = if shape.is_some() {
-                            s.extent
-                        } else {
-                            s.tent_extent
-                        };
-                        if open.misses(s, extent) {
-                            continue;
-                        }
-                        let c = values[s.index as usize];
-                        let probe = Probe::of(s);
-                        let first = surface == 0;
-                        let supports = s.sharpness.map(|g| support(g, kernel));
-                        let rho = if s.observed {
-                            1.0
-                        } else {
-                            SYNTHESISED_COLOUR_WEIGHT
-                        };
-                        if first && shape.is_some() {
-                            let lanes = front::SplatLanes::new(s, &probe, c, rho, supports, kernel);
-                            front.add(&mut pixels, s, &lanes, &tile, width, height);
-                            continue;
-                        }
-                        for_each_offset(s, &tile, width, height, extent, |p, sx, sy| {
-                            let px = &mut pixels[p];
-                            if !px.open() {
-                                return;
+                    for c in &chunks {
+                        for s in c.tile(t, Some(values)) {
+                            if s.z + s.tol < z_lo {
+                                continue;
                             }
-                            match px.classify(&probe, first) {
-                                Role::Member => {
-                                    let (t, k) = match shape {
-                                        Some(kernel) => {
-                                            kernel_weights(sx, sy, s.sharpness, supports, kernel)
-                                        }
-                                        None => {
-                                            let t = tent(sx) * tent(sy);
-                                            (t, t)
-                                        }
-                                    };
-                                    if t == 0.0 && k == 0.0 {
-                                        return;
-                                    }
-                                    let (w_c, w) = (s.scale * t, s.scale * k);
-                                    let (cw, kw) = (rho * w_c, rho * w);
-                                    let sums = &mut px.sums;
-                                    sums.geometry += s.area * t;
-                                    sums.coverage += w_c;
-                                    sums.coverage_weight += cw;
-                                    sums.kernel += kw;
-                                    for (i, v) in c.iter().enumerate() {
-                                        sums.coverage_colour[i] += cw * v;
-                                        sums.kernel_colour[i] += kw * v;
-                                    }
-                                    if t > 0.0 {
-                                        sums.sides |= sides_of(sx, sy);
-                                    }
-                                    sums.depth += w_c
-                                        * (s.z * px.inv_front - 1.0)
-                                            .clamp(-MAX_DEPTH_OFFSET, MAX_DEPTH_OFFSET);
+                            // Only the front pass uses the kernel, and only for splats that can be
+                            // samples of a pixel's surface; elsewhere the tent is enough.
+                            let shape = if s.z - s.tol > z_hi { None } else { shape };
+                            let extent = if shape.is_some() {
+                                s.extent
+                            } else {
+                                s.tent_extent
+                            };
+                            if open.misses(s, extent) {
+                                continue;
+                            }
+                            let c = values[s.index as usize];
+                            let probe = Probe::of(s);
+                            let first = surface == 0;
+                            let supports = s.sharpness.map(|g| support(g, kernel));
+                            let rho = if s.observed {
+                                1.0
+                            } else {
+                                SYNTHESISED_COLOUR_WEIGHT
+                            };
+                            if first && shape.is_some() {
+                                let lanes =
+                                    front::SplatLanes::new(s, &probe, c, rho, supports, kernel);
+                                front.add(&mut pixels, s, &lanes, &tile, width, height);
+                                continue;
+                            }
+                            for_each_offset(s, &tile, width, height, extent, |p, sx, sy| {
+                                let px = &mut pixels[p];
+                                if !px.open() {
+                                    return;
                                 }
-                                Role::Behind => px.add_behind(s, &probe, sx, sy),
-                                Role::None => {}
-                            }
-                        });
+                                match px.classify(&probe, first) {
+                                    Role::Member => {
+                                        let (t, k) = match shape {
+                                            Some(kernel) => kernel_weights(
+                                                sx,
+                                                sy,
+                                                s.sharpness,
+                                                supports,
+                                                kernel,
+                                            ),
+                                            None => {
+                                                let t = tent(sx) * tent(sy);
+                                                (t, t)
+                                            }
+                                        };
+                                        if t == 0.0 && k == 0.0 {
+                                            return;
+                                        }
+                                        let (w_c, w) = (s.scale * t, s.scale * k);
+                                        let (cw, kw) = (rho * w_c, rho * w);
+                                        let sums = &mut px.sums;
+                                        sums.geometry += s.area * t;
+                                        sums.coverage += w_c;
+                                        sums.coverage_weight += cw;
+                                        sums.kernel += kw;
+                                        for (i, v) in c.iter().enumerate() {
+                                            sums.coverage_colour[i] += cw * v;
+                                            sums.kernel_colour[i] += kw * v;
+                                        }
+                                        if t > 0.0 {
+                                            sums.sides |= sides_of(sx, sy);
+                                        }
+                                        sums.depth += w_c
+                                            * (s.z * px.inv_front - 1.0)
+                                                .clamp(-MAX_DEPTH_OFFSET, MAX_DEPTH_OFFSET);
+                                    }
+                                    Role::Behind => px.add_behind(s, &probe, sx, sy),
+                                    Role::None => {}
+                                }
+                            });
+                        }
                     }
                     if surface == 0 {
                         front.store(&mut pixels);
