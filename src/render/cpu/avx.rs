@@ -12,7 +12,7 @@
 
 use super::MAX_DEPTH_OFFSET;
 use super::TILE;
-use super::front::{FrontSums, G, SplatLanes, behind_row};
+use super::front::{FrontSums, G, SplatLanes, behind_pixels};
 use super::splats::{Splat, TileRect};
 use super::surface::PixelState;
 use crate::render::SplatKernel;
@@ -174,13 +174,9 @@ pub(super) fn add_splat(
             let (a, b) = (m3 * dy0, m3 * dy1);
             let m3dy = _mm256_setr_ps(a, a, a, a, b, b, b, b);
             let p = (y - tile.y0) * TILE + x0 - tile.x0;
-            let behind = group::<false>(sums, p, xs, valid, m1dy, m3dy, &l);
-            if behind & 0x0f != 0 {
-                behind_row(pixels, s, splat, tile, y, x0, x1);
-            }
-            if behind & 0xf0 != 0 {
-                behind_row(pixels, s, splat, tile, y + 1, x0, x1);
-            }
+            let behind = group::<false>(sums, p, xs, valid, m1dy, m3dy, &l) as u32;
+            behind_pixels(pixels, s, splat, tile, y, x0, behind & 0x0f);
+            behind_pixels(pixels, s, splat, tile, y + 1, x0, behind >> 4);
             y += 2;
         }
         if y == y1 {
@@ -206,11 +202,10 @@ pub(super) fn add_splat(
                     xf + 7.0,
                 );
                 let valid = _mm256_cmp_ps::<_CMP_LE_OS>(xs, last);
-                behind |= group::<true>(sums, base + x - tile.x0, xs, valid, m1dy, m3dy, &l);
+                let lanes = group::<true>(sums, base + x - tile.x0, xs, valid, m1dy, m3dy, &l);
+                behind |= (lanes as u32) << (x - x0);
             }
-            if behind != 0 {
-                behind_row(pixels, s, splat, tile, y, x0, x1);
-            }
+            behind_pixels(pixels, s, splat, tile, y, x0, behind);
         }
     }
 }

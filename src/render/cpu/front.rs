@@ -177,26 +177,25 @@ impl FrontSums {
         let dy = y as f32 - s.v;
         let (m1dy, m3dy) = (Vec4::splat(m1 * dy), Vec4::splat(m3 * dy));
         let base = (y - tile.y0) * TILE;
-        let mut behind = false;
+        let mut behind = 0;
         for x in (x0..=x1).step_by(4) {
             let xf = x as f32;
             let xs = Vec4::new(xf, xf + 1.0, xf + 2.0, xf + 3.0);
             let valid = xs.cmple(last);
             let p = base + x - tile.x0;
-            behind |= if splat.finite {
+            let lanes = if splat.finite {
                 self.add_group::<false>(p, xs, valid, m1dy, m3dy, splat)
             } else {
                 self.add_group::<true>(p, xs, valid, m1dy, m3dy, splat)
             };
+            behind |= lanes << (x - x0);
         }
-        if behind {
-            behind_row(pixels, s, splat, tile, y, x0, x1);
-        }
+        behind_pixels(pixels, s, splat, tile, y, x0, behind);
     }
 
     /// Four pixels of a splat's row: tile pixels `p..p + 4` at pixel columns `xs`, `valid` the
     /// lanes within the splat's box, `m1dy`/`m3dy` the row's terms of `s = M'⁻¹·d`. Returns
-    /// whether the splat is behind the surface of any valid lane. `SELECT`: add the colour products through
+    /// the valid lanes (bits) whose surface the splat is behind. `SELECT`: add the colour products through
     /// selects (a colour that is not finite, where `0·c` would be NaN).
     #[inline]
     fn add_group<const SELECT: bool>(
@@ -207,7 +206,7 @@ impl FrontSums {
         m1dy: Vec4,
         m3dy: Vec4,
         s: &SplatLanes,
-    ) -> bool {
+    ) -> u32 {
         let dx = xs - s.u;
         let sx = s.m0 * dx + m1dy;
         let sy = s.m2 * dx + m3dy;
@@ -217,7 +216,7 @@ impl FrontSums {
         let same = layer.cmpeq(s.layer) | (observed.cmpeq(Vec4::ONE) & s.observed);
         let member = same & s.lo.cmple(z) & s.hi.cmpge(z);
         let before = z.cmplt(s.z) | (z.cmpeq(s.z) & layer.cmplt(s.layer));
-        let behind = (valid & !member & before).any();
+        let behind = (valid & !member & before).bitmask();
         // `kernel_weights`.
         let (ax, ay) = (sx.abs(), sy.abs());
         let inside = ax.cmplt(s.support_u) & ay.cmplt(s.support_v);
@@ -278,26 +277,29 @@ impl FrontSums {
     }
 }
 
-/// The `Behind` role of splat `s` on row `y`, columns `x0..=x1`, one pixel at a time.
-pub(super) fn behind_row(
+/// The `Behind` role of splat `s` on row `y` at the columns `x0 + j` for the set bits `j` of
+/// `lanes`: the pixels whose (open) surface the splat is behind, as the front pass's lanes found
+/// them (`!holds && before`: exactly `PixelState::classify`'s `Behind`), one at a time.
+pub(super) fn behind_pixels(
     pixels: &mut [PixelState; N],
     s: &Splat,
     splat: &SplatLanes,
     tile: &TileRect,
     y: usize,
     x0: usize,
-    x1: usize,
+    mut lanes: u32,
 ) {
     let [m0, m1, m2, m3] = s.inverse;
     let dy = y as f32 - s.v;
     let base = (y - tile.y0) * TILE;
-    for x in x0..=x1 {
+    while lanes != 0 {
+        let x = x0 + lanes.trailing_zeros() as usize;
+        lanes &= lanes - 1;
         let dx = x as f32 - s.u;
         let (sx, sy) = (m0 * dx + m1 * dy, m2 * dx + m3 * dy);
         let px = &mut pixels[base + x - tile.x0];
-        if px.open() && px.classify(&splat.probe, true) == Role::Behind {
-            px.add_behind(s, &splat.probe, sx, sy);
-        }
+        debug_assert!(px.open() && px.classify(&splat.probe, true) == Role::Behind);
+        px.add_behind(s, &splat.probe, sx, sy);
     }
 }
 
