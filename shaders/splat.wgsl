@@ -61,7 +61,7 @@ const PARALLAX_TOLERANCE_PX: f32 = 0.5;
 const MAX_TOLERANCE: f32 = 1.0e6;
 // `cpu::SURROUNDED`, `cpu::SURROUNDED_MIN_GEOMETRY`.
 const SURROUNDED: u32 = 15u;
-const SURROUNDED_MIN_GEOMETRY: f32 = 0.5;
+const SURROUNDED_MIN_GEOMETRY: f32 = 0.25;
 // `cpu::MAX_DEPTH_OFFSET`.
 const MAX_DEPTH_OFFSET: f32 = 0.125;
 // Fixed-point scales of the surface sums: weights, colours (8 bits) and relative depth offsets.
@@ -642,9 +642,7 @@ fn visit(px: ptr<function, Pixel>, q: u32, x: f32, y: f32, pass_index: u32) {
         (*px).q_kernel += qk;
         (*px).q_kernel_colour += qk * vec3<i32>(c8);
         (*px).q_depth += i32(qc) * dz;
-        if kw.x > 0.0 {
-            (*px).sides |= sides_of(sx, sy);
-        }
+        (*px).sides |= sides_of(sx, sy);
     } else if key_before((*px).cur, key) {
         if key.observed && !(*px).cur.observed {
             (*px).q_reserved += u32(round(w_c * WEIGHT_ONE));

@@ -17,7 +17,7 @@ use super::splats::{Splat, TileRect};
 use super::surface::PixelState;
 use crate::render::SplatKernel;
 use std::arch::x86_64::{
-    __m256, _CMP_EQ_OQ, _CMP_GE_OS, _CMP_GT_OS, _CMP_LE_OS, _CMP_LT_OS, _mm_loadu_ps,
+    __m256, _CMP_EQ_OQ, _CMP_GE_OS, _CMP_LE_OS, _CMP_LT_OS, _CMP_NEQ_UQ, _mm_loadu_ps,
     _mm_storeu_ps, _mm256_add_ps, _mm256_and_ps, _mm256_andnot_ps, _mm256_blendv_ps,
     _mm256_castps128_ps256, _mm256_castps256_ps128, _mm256_cmp_ps, _mm256_extractf128_ps,
     _mm256_insertf128_ps, _mm256_loadu_ps, _mm256_max_ps, _mm256_min_ps, _mm256_movemask_ps,
@@ -296,8 +296,12 @@ fn group<const ROW: bool>(
             _mm256_mul_ps(kw, s.colour[i]),
         );
     }
-    // `sides_of` where the tent weight is positive: each side's bit where it holds, or-ed in.
-    let positive = _mm256_cmp_ps::<_CMP_GT_OS>(t, zero);
+    // `sides_of` of every sample (the lanes with a weight; NaN counts, as in the general pass):
+    // each side's bit where it holds, or-ed in.
+    let positive = _mm256_or_ps(
+        _mm256_cmp_ps::<_CMP_NEQ_UQ>(t, zero),
+        _mm256_cmp_ps::<_CMP_NEQ_UQ>(k, zero),
+    );
     let bit = |b: u32| _mm256_set1_ps(f32::from_bits(1 << b));
     let sides = _mm256_or_ps(
         _mm256_or_ps(

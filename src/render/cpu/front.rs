@@ -256,8 +256,9 @@ impl FrontSums {
             add(&mut self.coverage_colour[i], p, a);
             add(&mut self.kernel_colour[i], p, b);
         }
-        // `sides_of` where the tent weight is positive.
-        let positive = t.cmpgt(zero);
+        // `sides_of` of every sample (the lanes with a weight; NaN counts, as in the general
+        // pass).
+        let positive = t.cmpne(zero) | k.cmpne(zero);
         let sides = [
             sx.cmple(zero),
             sx.cmpge(zero),

@@ -36,9 +36,12 @@
 //! observed points, [`SYNTHESISED_COLOUR_WEIGHT`] for synthesised ones, so the photo's colour
 //! dominates where both reach a pixel), depth `z₁·(1 + Σ w_c·δ / Σ w_c)` with `δ = (z − z₁)/z₁`
 //! clamped to ±[`MAX_DEPTH_OFFSET`], opacity `α_s = Σ w_c / Σ g·tent`, covered share
-//! `γ_s = min(1, Σ g·tent)`, or 1 where the samples surround the pixel along both source axes
+//! `γ_s = min(1, Σ g·tent)`, or 1 where the samples (every one within its kernel's support)
+//! surround the pixel along both source axes and `Σ g·tent ≥` [`SURROUNDED_MIN_GEOMETRY`]
 //! ([`sides_of`]; a footprint from central differences on a depth ramp falls short of its
-//! farther neighbour, and the shortfall would show what lies behind as a crack). The next surface is the nearest point behind, and so on
+//! farther neighbour, samples scattered by a noisy depth's parallax no longer tile, and either
+//! shortfall would show what lies behind as a crack). The next surface is the nearest point
+//! behind, and so on
 //! for up to `k` surfaces (the ones behind the front surface, seen only through partial coverage,
 //! are averaged with the tent), front to back: each takes `a_s = α_s·min(γ_s, B)` of what is left of
 //! the pixel (`B` starts at 1 and loses `a_s`; a synthesised surface takes at most `B` less the
@@ -138,8 +141,11 @@ pub const SYNTHESISED_COLOUR_WEIGHT: f32 = 1.0 / 16.0;
 pub const BASE_RELATIVE_TOLERANCE: f32 = 0.01;
 
 /// Smallest `Σ g·tent` with which a surface that surrounds a pixel covers it whole (see
-/// `SurfaceSums::resolve`).
-pub const SURROUNDED_MIN_GEOMETRY: f32 = 0.5;
+/// `SurfaceSums::resolve`). Inside a surface whose depth is noisy the samples' screen positions
+/// scatter by their parallax, their tents no longer tile, and the sum dips below ½ at pixels
+/// between them (measured: 0.46 inside the README fly-in's water); a sub-pixel structure of a
+/// minified surface still keeps its partial coverage below ¼.
+pub const SURROUNDED_MIN_GEOMETRY: f32 = 0.25;
 
 /// Largest relative depth offset of a sample from its surface's front that the surface's depth
 /// takes in (a surface that the parallax tolerance joins across a depth step reports a depth
@@ -389,9 +395,7 @@ fn render_lanes(
                                             sums.coverage_colour[i] += cw * v;
                                             sums.kernel_colour[i] += kw * v;
                                         }
-                                        if t > 0.0 {
-                                            sums.sides |= sides_of(sx, sy);
-                                        }
+                                        sums.sides |= sides_of(sx, sy);
                                         sums.depth += w_c
                                             * (s.z * px.inv_front - 1.0)
                                                 .clamp(-MAX_DEPTH_OFFSET, MAX_DEPTH_OFFSET);
@@ -900,6 +904,45 @@ mod tests {
             "{}",
             f.depth.at(1, 0)
         );
+    }
+
+    #[test]
+    fn a_pixel_inside_a_surface_is_covered_whatever_its_tents_add_up_to() {
+        // Source points (depth 4, one source pixel footprints) magnified 2× (the kernel is
+        // Catmull-Rom, support two source pixels): output pixel (2, 2) is source point (1, 1),
+        // and a sample at source offset `o` from it has `s = −o`.
+        let k = Intrinsics {
+            fx: 100.0,
+            fy: 100.0,
+            cx: 0.0,
+            cy: 0.0,
+        };
+        let zoom = Intrinsics {
+            fx: 200.0,
+            fy: 200.0,
+            ..k
+        };
+        let coverage = |offsets: &[[f32; 2]]| {
+            let mut cloud = PointCloud::default();
+            for o in offsets {
+                cloud.append(single_point(1.0 + o[0], 1.0 + o[1], 4.0, [0.5; 3], &k));
+            }
+            let f = render_cpu(&cloud, None, &view(zoom), 5, 5, &SplatSettings::default());
+            f.unwrap().coverage.at(2, 2)
+        };
+        let around = |d: f32| [[-d, 0.0], [d, 0.0], [0.0, -d], [0.0, d]];
+        // Samples on all four sides whose tents add up to 4 × 0.1 = 0.4 (a noisy depth's
+        // parallax scattered them apart): covered whole (at ½ it was 0.4, and the layer behind
+        // showed through the crack).
+        assert!((coverage(&around(0.9)) - 1.0).abs() < 1e-6);
+        // Tents adding up to 4 × 0.05 = 0.2 stay partial: a sub-pixel structure.
+        assert!((coverage(&around(0.95)) - 0.2).abs() < 1e-5);
+        // A tent of 0.6 on the left and, 1.5 source pixels to the right, a sample that only the
+        // kernel reaches (Catmull-Rom(1.5) = −1/16, tent 0): it still marks the right side, so
+        // the pixel is inside (the tent alone would leave 0.4 to what lies behind).
+        assert!((coverage(&[[-0.4, 0.0], [1.5, 0.0]]) - 1.0).abs() < 1e-6);
+        // Without the sample on the right it is the surface's edge: 0.6.
+        assert!((coverage(&[[-0.4, 0.0]]) - 0.6).abs() < 1e-5);
     }
 
     #[test]

@@ -21,7 +21,7 @@ pub(super) struct SurfaceSums {
     pub(super) kernel: f32,
     /// `Σ ρ·w·c`.
     pub(super) kernel_colour: [f32; 3],
-    /// [`sides_of`] of the samples with a non-zero tent weight, or-ed.
+    /// [`sides_of`] of the samples (every one with a tent or kernel weight), or-ed.
     pub(super) sides: u8,
     /// `Σ w_c·δ`, `δ` a sample's depth relative to the surface's front,
     /// `(z − z₁)/z₁`, clamped to ±[`MAX_DEPTH_OFFSET`].

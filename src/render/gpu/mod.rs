@@ -366,6 +366,53 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn a_pixel_inside_a_surface_is_covered_as_on_the_cpu() {
+        // `cpu::tests::a_pixel_inside_a_surface_is_covered_whatever_its_tents_add_up_to`.
+        let _lock = gpu_lock();
+        let Some(mut gpu) = splatter(SplatSettings::default()) else {
+            return;
+        };
+        let k = Intrinsics {
+            fx: 100.0,
+            fy: 100.0,
+            cx: 0.0,
+            cy: 0.0,
+        };
+        let zoom = Intrinsics {
+            fx: 200.0,
+            fy: 200.0,
+            ..k
+        };
+        let around = |d: f32| vec![[-d, 0.0], [d, 0.0], [0.0, -d], [0.0, d]];
+        for (offsets, expected) in [
+            (around(0.9), 1.0),
+            (around(0.95), 0.2),
+            (vec![[-0.4, 0.0], [1.5, 0.0]], 1.0),
+            (vec![[-0.4, 0.0]], 0.6),
+        ] {
+            let mut cloud = PointCloud::default();
+            for [x, y] in offsets {
+                let (u, v, z) = (1.0 + x, 1.0 + y, 4.0);
+                cloud.append(PointCloud {
+                    positions: vec![k.unproject(u, v, z)],
+                    colours: vec![[0.5; 3]],
+                    alphas: vec![1.0],
+                    tangent_u: vec![Vec3::new(z / k.fx, 0.0, 0.0)],
+                    tangent_v: vec![Vec3::new(0.0, z / k.fy, 0.0)],
+                    source_depth: vec![z],
+                    source_pixel: vec![[u, v]],
+                    layer: vec![0],
+                    inpainted: vec![false],
+                });
+            }
+            gpu.set_cloud(&cloud).unwrap();
+            let f = gpu.render(&view(zoom, Pose::IDENTITY), 5, 5, None).unwrap();
+            let got = f.coverage.at(2, 2);
+            assert!((got - expected).abs() < 1e-4, "{got} vs {expected}");
+        }
+    }
+
+    #[test]
     fn k_nearest_ties_and_culling_match_the_reference() {
         let _lock = gpu_lock();
         let Some(mut gpu) = splatter(SplatSettings {
