@@ -59,9 +59,11 @@ const SAME_SURFACE_RELATIVE_DEPTH: f32 = 0.1;
 // `cpu::PARALLAX_TOLERANCE_PX`, `cpu::MAX_TOLERANCE`.
 const PARALLAX_TOLERANCE_PX: f32 = 0.5;
 const MAX_TOLERANCE: f32 = 1.0e6;
-// `cpu::SURROUNDED`, `cpu::SURROUNDED_MIN_GEOMETRY`.
+// `cpu::SURROUNDED`, `cpu::SUB_PIXEL`, `cpu::SUB_PIXEL_MAX_AREA`, `cpu::SURROUNDED_MIN_GEOMETRY`.
 const SURROUNDED: u32 = 15u;
-const SURROUNDED_MIN_GEOMETRY: f32 = 0.25;
+const SUB_PIXEL: u32 = 16u;
+const SUB_PIXEL_MAX_AREA: f32 = 0.5;
+const SURROUNDED_MIN_GEOMETRY: f32 = 0.5;
 // `cpu::MAX_DEPTH_OFFSET`.
 const MAX_DEPTH_OFFSET: f32 = 0.125;
 // Fixed-point scales of the surface sums: weights, colours (8 bits) and relative depth offsets.
@@ -510,6 +512,14 @@ fn kernel_1d(x: f32, gamma: f32) -> f32 {
     return t;
 }
 
+// `cpu::sub_pixel_bit`.
+fn sub_pixel_bit(area: f32) -> u32 {
+    if area <= SUB_PIXEL_MAX_AREA {
+        return SUB_PIXEL;
+    }
+    return 0u;
+}
+
 // `cpu::sides_of`.
 fn sides_of(sx: f32, sy: f32) -> u32 {
     return select(0u, 1u, sx <= 0.0) | select(0u, 2u, sx >= 0.0) | select(0u, 4u, sy <= 0.0)
@@ -642,7 +652,7 @@ fn visit(px: ptr<function, Pixel>, q: u32, x: f32, y: f32, pass_index: u32) {
         (*px).q_kernel += qk;
         (*px).q_kernel_colour += qk * vec3<i32>(c8);
         (*px).q_depth += i32(qc) * dz;
-        (*px).sides |= sides_of(sx, sy);
+        (*px).sides |= sides_of(sx, sy) | sub_pixel_bit(c.z);
     } else if key_before((*px).cur, key) {
         if key.observed && !(*px).cur.observed {
             (*px).q_reserved += u32(round(w_c * WEIGHT_ONE));
@@ -672,7 +682,9 @@ fn finish_surface(px: ptr<function, Pixel>) {
         let qg = f32((*px).q_geometry);
         let opacity = min(qc / qg, 1.0);
         var covered = min(qg / WEIGHT_ONE, 1.0);
-        if (*px).sides == SURROUNDED && qg / WEIGHT_ONE >= SURROUNDED_MIN_GEOMETRY {
+        let sub_pixel = ((*px).sides & SUB_PIXEL) != 0u;
+        if ((*px).sides & SURROUNDED) == SURROUNDED
+            && (!sub_pixel || qg / WEIGHT_ONE >= SURROUNDED_MIN_GEOMETRY) {
             covered = 1.0;
         }
         // `cpu::PixelState::finish_surface`: a synthesised surface fills only what the observed

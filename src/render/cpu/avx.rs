@@ -100,6 +100,8 @@ struct Lanes8 {
     area: __m256,
     rho: __m256,
     colour: [__m256; 3],
+    /// `SplatLanes::sub_pixel` as a bit pattern in every lane.
+    sub_pixel: __m256,
 }
 
 impl Lanes8 {
@@ -134,6 +136,7 @@ impl Lanes8 {
                 _mm256_set1_ps(l.colour[1].x),
                 _mm256_set1_ps(l.colour[2].x),
             ],
+            sub_pixel: _mm256_set1_ps(f32::from_bits(l.sub_pixel)),
         }
     }
 }
@@ -297,7 +300,7 @@ fn group<const ROW: bool>(
         );
     }
     // `sides_of` of every sample (the lanes with a weight; NaN counts, as in the general pass):
-    // each side's bit where it holds, or-ed in.
+    // each side's bit where it holds and the splat's sub-pixel bit, or-ed in.
     let positive = _mm256_or_ps(
         _mm256_cmp_ps::<_CMP_NEQ_UQ>(t, zero),
         _mm256_cmp_ps::<_CMP_NEQ_UQ>(k, zero),
@@ -313,6 +316,7 @@ fn group<const ROW: bool>(
             _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OS>(sy, zero), bit(3)),
         ),
     );
+    let sides = _mm256_or_ps(sides, s.sub_pixel);
     let set = _mm256_or_ps(load::<ROW>(&sums.sides, p), _mm256_and_ps(positive, sides));
     store::<ROW>(&mut sums.sides, p, set);
     let offset = _mm256_min_ps(

@@ -258,6 +258,27 @@ pub fn sides_of(sx: f32, sy: f32) -> u8 {
 /// [`sides_of`] of a pixel that a surface's samples surround.
 pub const SURROUNDED: u8 = 15;
 
+/// The bit a sample adds to its surface's sides when it is a sub-pixel sample (see
+/// [`sub_pixel_bit`]).
+pub const SUB_PIXEL: u8 = 16;
+
+/// Largest area share `g` of a sub-pixel sample: one widened by the prefilter at least 2× along
+/// a source axis (a surface minified to half a pixel per point or less there), or squeezed that
+/// much by the anisotropy floor.
+pub const SUB_PIXEL_MAX_AREA: f32 = 0.5;
+
+/// [`SUB_PIXEL`] for a sample of area share `g` (see [`SUB_PIXEL_MAX_AREA`]), else 0. Structures
+/// narrower than a pixel exist only among sub-pixel samples, so only a surface with one keeps its
+/// partial coverage where its samples surround a pixel (see `SurfaceSums::resolve`).
+#[inline]
+pub fn sub_pixel_bit(area: f32) -> u8 {
+    if area <= SUB_PIXEL_MAX_AREA {
+        SUB_PIXEL
+    } else {
+        0
+    }
+}
+
 /// `(tent(s_x)·tent(s_y), k_γu(s_x)·k_γv(s_y))` at a source-grid offset ([`kernel_1d`]);
 /// `supports` are `support(γ_u)`, `support(γ_v)` ([`support`]), computed once per splat.
 #[inline]

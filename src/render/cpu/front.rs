@@ -266,8 +266,10 @@ impl FrontSums {
             sy.cmpge(zero),
         ]
         .map(|side| (positive & side).bitmask());
+        let samples = positive.bitmask();
         for (lane, flags) in self.sides[p..p + 4].iter_mut().enumerate() {
-            let bits = (0..4).fold(0, |bits, b| bits | (((sides[b] >> lane) & 1) << b));
+            let bits = (0..4).fold(0, |bits, b| bits | (((sides[b] >> lane) & 1) << b))
+                | (((samples >> lane) & 1) * s.sub_pixel);
             *flags = f32::from_bits(flags.to_bits() | bits);
         }
         let offset = (s.z * lanes(&self.inv_front, p) - Vec4::ONE)
@@ -339,6 +341,8 @@ pub(super) struct SplatLanes {
     pub(super) area: Vec4,
     pub(super) rho: Vec4,
     pub(super) colour: [Vec4; 3],
+    /// [`sub_pixel_bit`](super::sub_pixel_bit) of the splat.
+    pub(super) sub_pixel: u32,
     /// Every colour channel is finite.
     pub(super) finite: bool,
 }
@@ -374,6 +378,7 @@ impl SplatLanes {
             area: Vec4::splat(s.area),
             rho: Vec4::splat(rho),
             colour: c.map(Vec4::splat),
+            sub_pixel: u32::from(super::sub_pixel_bit(s.area)),
             finite: c.iter().all(|v| v.is_finite()),
         }
     }

@@ -37,12 +37,12 @@
 //! dominates where both reach a pixel), depth `z₁·(1 + Σ w_c·δ / Σ w_c)` with `δ = (z − z₁)/z₁`
 //! clamped to ±[`MAX_DEPTH_OFFSET`], opacity `α_s = Σ w_c / Σ g·tent`, covered share
 //! `γ_s = min(1, Σ g·tent)`, or 1 where the samples (every one within its kernel's support)
-//! surround the pixel along both source axes and `Σ g·tent ≥` [`SURROUNDED_MIN_GEOMETRY`]
-//! ([`sides_of`]; a footprint from central differences on a depth ramp falls short of its
-//! farther neighbour, samples scattered by a noisy depth's parallax no longer tile, and either
-//! shortfall would show what lies behind as a crack). The next surface is the nearest point
-//! behind, and so on
-//! for up to `k` surfaces (the ones behind the front surface, seen only through partial coverage,
+//! surround the pixel along both source axes ([`sides_of`]) and, if one of them is a sub-pixel
+//! sample ([`SUB_PIXEL`]: a structure narrower than a pixel keeps its partial coverage),
+//! `Σ g·tent ≥` [`SURROUNDED_MIN_GEOMETRY`] (a footprint from central differences on a depth
+//! ramp falls short of its farther neighbour, samples scattered by a noisy depth's parallax no
+//! longer tile, and either shortfall would show what lies behind as a crack). The next surface
+//! is the nearest point behind, and so on for up to `k` surfaces (the ones behind the front surface, seen only through partial coverage,
 //! are averaged with the tent), front to back: each takes `a_s = α_s·min(γ_s, B)` of what is left of
 //! the pixel (`B` starts at 1 and loses `a_s`; a synthesised surface takes at most `B` less the
 //! coverage of the observed points behind it, so inpainted content fills disocclusions and never
@@ -107,8 +107,8 @@ mod surface;
 mod tolerance;
 
 pub use footprint::{
-    Footprint, MAX_ANISOTROPY, SURROUNDED, dilation, footprint, kernel_1d, kernel_weights,
-    sharpness, sides_of, source_pixel_size, support,
+    Footprint, MAX_ANISOTROPY, SUB_PIXEL, SUB_PIXEL_MAX_AREA, SURROUNDED, dilation, footprint,
+    kernel_1d, kernel_weights, sharpness, sides_of, source_pixel_size, sub_pixel_bit, support,
 };
 use splats::{Projector, TileRect, for_each_offset, project_and_bin, recycle};
 use surface::{PixelState, Probe, Role, SurfaceKey};
@@ -140,11 +140,14 @@ pub const SYNTHESISED_COLOUR_WEIGHT: f32 = 1.0 / 16.0;
 /// Relative depth tolerance every point has at least (see the module docs).
 pub const BASE_RELATIVE_TOLERANCE: f32 = 0.01;
 
-/// Smallest `Σ g·tent` with which a surface that surrounds a pixel covers it whole (see
-/// `SurfaceSums::resolve`). Inside a surface whose depth is noisy the samples' screen positions
-/// scatter by their parallax, their tents no longer tile, and the sum dips below ½ at pixels
-/// between them (measured: 0.46 inside the README fly-in's water); a sub-pixel structure of a
-/// minified surface still keeps its partial coverage below ¼.
+/// Smallest `Σ g·tent` with which a surface with a sub-pixel sample ([`SUB_PIXEL`]) covers a
+/// pixel that its samples surround whole (see `SurfaceSums::resolve`): a minified structure
+/// narrower than a pixel keeps its partial coverage below it. Other surfaces need none: inside a
+/// surface whose depth is noisy the samples' screen positions scatter by their parallax, their
+/// tents no longer tile, and the sum between them dips anywhere down to 0 (measured: 0.46 inside
+/// the README fly-in's water, uniformly 0–¼ at the specks an orbit of `wild/autumn` kept with
+/// ¼ for every surface). ¼ rather than ½: the README fly-in's grazing water has samples the
+/// anisotropy floor squeezed to a sub-pixel share, and at ½ a third of the specks there stayed.
 pub const SURROUNDED_MIN_GEOMETRY: f32 = 0.25;
 
 /// Largest relative depth offset of a sample from its surface's front that the surface's depth
@@ -395,7 +398,7 @@ fn render_lanes(
                                             sums.coverage_colour[i] += cw * v;
                                             sums.kernel_colour[i] += kw * v;
                                         }
-                                        sums.sides |= sides_of(sx, sy);
+                                        sums.sides |= sides_of(sx, sy) | sub_pixel_bit(s.area);
                                         sums.depth += w_c
                                             * (s.z * px.inv_front - 1.0)
                                                 .clamp(-MAX_DEPTH_OFFSET, MAX_DEPTH_OFFSET);
@@ -922,21 +925,39 @@ mod tests {
             fy: 200.0,
             ..k
         };
-        let coverage = |offsets: &[[f32; 2]]| {
+        let coverage_at = |centre: f32, zoom: Intrinsics, offsets: &[[f32; 2]]| {
             let mut cloud = PointCloud::default();
             for o in offsets {
-                cloud.append(single_point(1.0 + o[0], 1.0 + o[1], 4.0, [0.5; 3], &k));
+                cloud.append(single_point(
+                    centre + o[0],
+                    centre + o[1],
+                    4.0,
+                    [0.5; 3],
+                    &k,
+                ));
             }
             let f = render_cpu(&cloud, None, &view(zoom), 5, 5, &SplatSettings::default());
             f.unwrap().coverage.at(2, 2)
         };
+        let coverage = |offsets: &[[f32; 2]]| coverage_at(1.0, zoom, offsets);
         let around = |d: f32| [[-d, 0.0], [d, 0.0], [0.0, -d], [0.0, d]];
-        // Samples on all four sides whose tents add up to 4 × 0.1 = 0.4 (a noisy depth's
-        // parallax scattered them apart): covered whole (at ½ it was 0.4, and the layer behind
-        // showed through the crack).
+        // Samples on all four sides whose tents add up to 4 × 0.1 = 0.4 or 4 × 0.01 = 0.04 (a
+        // noisy depth's parallax scattered them apart): covered whole (it was 0.4 and 0.04, and
+        // the layer behind showed through the crack).
         assert!((coverage(&around(0.9)) - 1.0).abs() < 1e-6);
-        // Tents adding up to 4 × 0.05 = 0.2 stay partial: a sub-pixel structure.
-        assert!((coverage(&around(0.95)) - 0.2).abs() < 1e-5);
+        assert!((coverage(&around(0.99)) - 1.0).abs() < 1e-6);
+        // Minified 4× (widened 2× on both axes: area 1/4, sub-pixel samples; `s` = half the
+        // source offset; output pixel (2, 2) is source point (8, 8)), tents adding up to
+        // 4 × ¼ × 0.2 = 0.2 or 0.4 keep their partial coverage (a structure narrower than a
+        // pixel); from ½ on (4 × ¼ × 0.6) they cover the pixel.
+        let out = Intrinsics {
+            fx: 25.0,
+            fy: 25.0,
+            ..k
+        };
+        assert!((coverage_at(8.0, out, &around(1.6)) - 0.2).abs() < 1e-5);
+        assert!((coverage_at(8.0, out, &around(1.2)) - 0.4).abs() < 1e-5);
+        assert!((coverage_at(8.0, out, &around(0.8)) - 1.0).abs() < 1e-6);
         // A tent of 0.6 on the left and, 1.5 source pixels to the right, a sample that only the
         // kernel reaches (Catmull-Rom(1.5) = −1/16, tent 0): it still marks the right side, so
         // the pixel is inside (the tent alone would leave 0.4 to what lies behind).

@@ -1,7 +1,7 @@
 //! A pixel's surfaces: their keys, their sums and the front-to-back compositing (see the module
 //! docs of [`super`]).
 
-use super::footprint::SURROUNDED;
+use super::footprint::{SUB_PIXEL, SURROUNDED};
 use super::splats::Splat;
 use super::{MIN_VISIBLE_WEIGHT, OPAQUE_REMAINDER, SURROUNDED_MIN_GEOMETRY};
 use crate::render::tent;
@@ -21,7 +21,8 @@ pub(super) struct SurfaceSums {
     pub(super) kernel: f32,
     /// `Σ ρ·w·c`.
     pub(super) kernel_colour: [f32; 3],
-    /// [`sides_of`] of the samples (every one with a tent or kernel weight), or-ed.
+    /// [`sides_of`] of the samples (every one with a tent or kernel weight) with
+    /// [`sub_pixel_bit`](super::sub_pixel_bit), or-ed.
     pub(super) sides: u8,
     /// `Σ w_c·δ`, `δ` a sample's depth relative to the surface's front,
     /// `(z − z₁)/z₁`, clamped to ±[`MAX_DEPTH_OFFSET`].
@@ -55,9 +56,12 @@ impl SurfaceSums {
         // Inside a surface (its samples on both sides of the pixel along both source axes) the
         // pixel is covered whatever the tents add up to: a footprint from central differences
         // on a depth ramp falls short of its farther neighbour, and the shortfall would let what
-        // lies behind show through as a crack. Sub-pixel samples (a minified surface's sum is
-        // its area) keep their partial coverage.
-        let covered = if self.sides == SURROUNDED && self.geometry >= SURROUNDED_MIN_GEOMETRY {
+        // lies behind show through as a crack, and so would the gaps between samples scattered
+        // by a noisy depth's parallax. A surface with sub-pixel samples (a minified surface's
+        // sum is its area) keeps its partial coverage below `SURROUNDED_MIN_GEOMETRY`.
+        let surrounded = self.sides & SURROUNDED == SURROUNDED
+            && (self.sides & SUB_PIXEL == 0 || self.geometry >= SURROUNDED_MIN_GEOMETRY);
+        let covered = if surrounded {
             1.0
         } else {
             self.geometry.min(1.0)

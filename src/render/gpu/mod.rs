@@ -383,16 +383,24 @@ pub(crate) mod tests {
             fy: 200.0,
             ..k
         };
+        let out = Intrinsics {
+            fx: 25.0,
+            fy: 25.0,
+            ..k
+        };
         let around = |d: f32| vec![[-d, 0.0], [d, 0.0], [0.0, -d], [0.0, d]];
-        for (offsets, expected) in [
-            (around(0.9), 1.0),
-            (around(0.95), 0.2),
-            (vec![[-0.4, 0.0], [1.5, 0.0]], 1.0),
-            (vec![[-0.4, 0.0]], 0.6),
+        for (centre, target, offsets, expected) in [
+            (1.0, zoom, around(0.9), 1.0),
+            (1.0, zoom, around(0.99), 1.0),
+            (8.0, out, around(1.6), 0.2),
+            (8.0, out, around(1.2), 0.4),
+            (8.0, out, around(0.8), 1.0),
+            (1.0, zoom, vec![[-0.4, 0.0], [1.5, 0.0]], 1.0),
+            (1.0, zoom, vec![[-0.4, 0.0]], 0.6),
         ] {
             let mut cloud = PointCloud::default();
             for [x, y] in offsets {
-                let (u, v, z) = (1.0 + x, 1.0 + y, 4.0);
+                let (u, v, z) = (centre + x, centre + y, 4.0);
                 cloud.append(PointCloud {
                     positions: vec![k.unproject(u, v, z)],
                     colours: vec![[0.5; 3]],
@@ -406,7 +414,9 @@ pub(crate) mod tests {
                 });
             }
             gpu.set_cloud(&cloud).unwrap();
-            let f = gpu.render(&view(zoom, Pose::IDENTITY), 5, 5, None).unwrap();
+            let f = gpu
+                .render(&view(target, Pose::IDENTITY), 5, 5, None)
+                .unwrap();
             let got = f.coverage.at(2, 2);
             assert!((got - expected).abs() < 1e-4, "{got} vs {expected}");
         }
