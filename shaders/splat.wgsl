@@ -63,7 +63,7 @@ const MAX_TOLERANCE: f32 = 1.0e6;
 const SURROUNDED: u32 = 15u;
 const SUB_PIXEL: u32 = 16u;
 const SUB_PIXEL_MAX_AREA: f32 = 0.5;
-const SURROUNDED_MIN_GEOMETRY: f32 = 0.5;
+const SURROUNDED_MIN_GEOMETRY: f32 = 0.25;
 // `cpu::MAX_DEPTH_OFFSET`.
 const MAX_DEPTH_OFFSET: f32 = 0.125;
 // Fixed-point scales of the surface sums: weights, colours (8 bits) and relative depth offsets.

@@ -948,15 +948,15 @@ mod tests {
         assert!((coverage(&around(0.99)) - 1.0).abs() < 1e-6);
         // Minified 4× (widened 2× on both axes: area 1/4, sub-pixel samples; `s` = half the
         // source offset; output pixel (2, 2) is source point (8, 8)), tents adding up to
-        // 4 × ¼ × 0.2 = 0.2 or 0.4 keep their partial coverage (a structure narrower than a
-        // pixel); from ½ on (4 × ¼ × 0.6) they cover the pixel.
+        // 4 × ¼ × 0.2 = 0.2 keep their partial coverage (a structure narrower than a pixel);
+        // from ¼ on (4 × ¼ × 0.4, 4 × ¼ × 0.6) they cover the pixel.
         let out = Intrinsics {
             fx: 25.0,
             fy: 25.0,
             ..k
         };
         assert!((coverage_at(8.0, out, &around(1.6)) - 0.2).abs() < 1e-5);
-        assert!((coverage_at(8.0, out, &around(1.2)) - 0.4).abs() < 1e-5);
+        assert!((coverage_at(8.0, out, &around(1.2)) - 1.0).abs() < 1e-6);
         assert!((coverage_at(8.0, out, &around(0.8)) - 1.0).abs() < 1e-6);
         // A tent of 0.6 on the left and, 1.5 source pixels to the right, a sample that only the
         // kernel reaches (Catmull-Rom(1.5) = −1/16, tent 0): it still marks the right side, so

@@ -393,7 +393,7 @@ pub(crate) mod tests {
             (1.0, zoom, around(0.9), 1.0),
             (1.0, zoom, around(0.99), 1.0),
             (8.0, out, around(1.6), 0.2),
-            (8.0, out, around(1.2), 0.4),
+            (8.0, out, around(1.2), 1.0),
             (8.0, out, around(0.8), 1.0),
             (1.0, zoom, vec![[-0.4, 0.0], [1.5, 0.0]], 1.0),
             (1.0, zoom, vec![[-0.4, 0.0]], 0.6),
