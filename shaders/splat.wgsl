@@ -59,10 +59,11 @@ const SAME_SURFACE_RELATIVE_DEPTH: f32 = 0.1;
 // `cpu::PARALLAX_TOLERANCE_PX`, `cpu::MAX_TOLERANCE`.
 const PARALLAX_TOLERANCE_PX: f32 = 0.5;
 const MAX_TOLERANCE: f32 = 1.0e6;
-// `cpu::SURROUNDED`, `cpu::SUB_PIXEL`, `cpu::SUB_PIXEL_MAX_AREA`, `cpu::SURROUNDED_MIN_GEOMETRY`.
+// `cpu::SURROUNDED`, `cpu::SUB_PIXEL`, `cpu::SURROUNDED_MIN_GEOMETRY`.
 const SURROUNDED: u32 = 15u;
 const SUB_PIXEL: u32 = 16u;
-const SUB_PIXEL_MAX_AREA: f32 = 0.5;
+// Added to a splat's sharpness code (at most 1023·1024 + 1023) when it is a sub-pixel sample.
+const SUB_PIXEL_CODE: f32 = 1048576.0;
 const SURROUNDED_MIN_GEOMETRY: f32 = 0.25;
 // `cpu::MAX_DEPTH_OFFSET`.
 const MAX_DEPTH_OFFSET: f32 = 0.125;
@@ -172,11 +173,12 @@ fn culled() -> Splat {
     return Splat(vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0));
 }
 
-// `cpu::Footprint`: `M'⁻¹`, `(extent_x, extent_y, area, widen)`, `(γ_u, γ_v)`.
+// `cpu::Footprint`: `M'⁻¹`, `(extent_x, extent_y, area, widen)`, `(γ_u, γ_v)`, sub-pixel.
 struct Footprint {
     inverse: vec4<f32>,
     extra: vec4<f32>,
     gamma: vec2<f32>,
+    sub_pixel: bool,
 }
 
 // `cpu::columns_largest_singular_value`.
@@ -264,6 +266,7 @@ fn footprint_from_columns(a: vec2<f32>, b: vec2<f32>, lo: f32, cap: f32) -> Foot
         inverse,
         vec4<f32>(ru * abs(m.x) + rv * abs(m.y), ru * abs(m.z) + rv * abs(m.w), area, clamp(widen, 1.0, 1e6)),
         gamma,
+        fa > 1.0 || fb > 1.0,
     );
 }
 
@@ -361,7 +364,11 @@ fn project_point(i: u32) -> Splat {
         depth_tolerance(z, tu.z, tv.z, f.extra.w, support(max(f.gamma.x, f.gamma.y))),
         parallax_tolerance(p),
     );
-    let code = round(f.gamma.x * 1023.0) * 1024.0 + round(f.gamma.y * 1023.0);
+    // The sharpness code, plus `SUB_PIXEL_CODE` for a sub-pixel sample (exact: below 2²¹).
+    var code = round(f.gamma.x * 1023.0) * 1024.0 + round(f.gamma.y * 1023.0);
+    if f.sub_pixel {
+        code += SUB_PIXEL_CODE;
+    }
     return Splat(vec4<f32>(u, v, z, tol), f.inverse, vec4<f32>(ex, ey, f.extra.z, code));
 }
 
@@ -479,7 +486,7 @@ var<workgroup> list_start: u32;
 var<workgroup> list_end: u32;
 var<workgroup> open_count: atomic<u32>;
 var<workgroup> open_total: u32;
-// The batch's splats: `(u, v, z, tolerance)`, `M'⁻¹`, `(extent_x, extent_y, g, γ code)`, and
+// The batch's splats: `(u, v, z, tolerance)`, `M'⁻¹`, `(extent_x, extent_y, g, γ code + sub-pixel)`, and
 // `(point index, point_meta)`.
 var<workgroup> batch_a: array<vec4<f32>, BATCH>;
 var<workgroup> batch_inverse: array<vec4<f32>, BATCH>;
@@ -513,8 +520,8 @@ fn kernel_1d(x: f32, gamma: f32) -> f32 {
 }
 
 // `cpu::sub_pixel_bit`.
-fn sub_pixel_bit(area: f32) -> u32 {
-    if area <= SUB_PIXEL_MAX_AREA {
+fn sub_pixel_bit(sub_pixel: bool) -> u32 {
+    if sub_pixel {
         return SUB_PIXEL;
     }
     return 0u;
@@ -604,9 +611,14 @@ fn visit(px: ptr<function, Pixel>, q: u32, x: f32, y: f32, pass_index: u32) {
     let sy = m.z * dx + m.w * dy;
     // The front surface (pass 1) with the kernel; visibility and the surfaces behind with the
     // tent (`cpu::render_cpu_with`).
+    let sub_pixel = c.w >= SUB_PIXEL_CODE;
     var gamma = vec2<f32>(0.0);
     if pass_index == 1u {
-        gamma = vec2<f32>(floor(c.w / 1024.0), c.w - 1024.0 * floor(c.w / 1024.0)) / 1023.0;
+        var code = c.w;
+        if sub_pixel {
+            code -= SUB_PIXEL_CODE;
+        }
+        gamma = vec2<f32>(floor(code / 1024.0), code - 1024.0 * floor(code / 1024.0)) / 1023.0;
     }
     let kw = kernel_weights(sx, sy, gamma);
     if kw.x == 0.0 && kw.y == 0.0 {
@@ -652,7 +664,7 @@ fn visit(px: ptr<function, Pixel>, q: u32, x: f32, y: f32, pass_index: u32) {
         (*px).q_kernel += qk;
         (*px).q_kernel_colour += qk * vec3<i32>(c8);
         (*px).q_depth += i32(qc) * dz;
-        (*px).sides |= sides_of(sx, sy) | sub_pixel_bit(c.z);
+        (*px).sides |= sides_of(sx, sy) | sub_pixel_bit(sub_pixel);
     } else if key_before((*px).cur, key) {
         if key.observed && !(*px).cur.observed {
             (*px).q_reserved += u32(round(w_c * WEIGHT_ONE));

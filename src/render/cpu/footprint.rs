@@ -20,6 +20,9 @@ pub struct Footprint {
     /// `γ_u`, `γ_v` in `[0, 1]` (multiples of 1/1023): the share of the sharp kernel along each
     /// source axis (see [`sharpness`]).
     pub sharpness: [f32; 2],
+    /// The prefilter widened it along a source axis: the point covers less than
+    /// `min_radius_px` there, a sub-pixel sample (see [`SUB_PIXEL`]).
+    pub sub_pixel: bool,
 }
 
 /// Largest ratio of a footprint's singular values: a point stretched along one axis (a depth
@@ -181,6 +184,7 @@ pub(super) fn footprint_from_columns(
         area,
         widen: widen.clamp(1.0, 1e6),
         sharpness: gamma,
+        sub_pixel: fa > 1.0 || fb > 1.0,
     }
 }
 
@@ -258,25 +262,16 @@ pub fn sides_of(sx: f32, sy: f32) -> u8 {
 /// [`sides_of`] of a pixel that a surface's samples surround.
 pub const SURROUNDED: u8 = 15;
 
-/// The bit a sample adds to its surface's sides when it is a sub-pixel sample (see
-/// [`sub_pixel_bit`]).
+/// The bit a sample adds to its surface's sides when it is a sub-pixel sample
+/// ([`Footprint::sub_pixel`]).
 pub const SUB_PIXEL: u8 = 16;
 
-/// Largest area share `g` of a sub-pixel sample: one widened by the prefilter at least 2× along
-/// a source axis (a surface minified to half a pixel per point or less there), or squeezed that
-/// much by the anisotropy floor.
-pub const SUB_PIXEL_MAX_AREA: f32 = 0.5;
-
-/// [`SUB_PIXEL`] for a sample of area share `g` (see [`SUB_PIXEL_MAX_AREA`]), else 0. Structures
-/// narrower than a pixel exist only among sub-pixel samples, so only a surface with one keeps its
-/// partial coverage where its samples surround a pixel (see `SurfaceSums::resolve`).
+/// [`SUB_PIXEL`] for a sub-pixel sample ([`Footprint::sub_pixel`]), else 0. Structures narrower
+/// than a pixel exist only among sub-pixel samples, so only a surface with one keeps its partial
+/// coverage where its samples surround a pixel (see `SurfaceSums::resolve`).
 #[inline]
-pub fn sub_pixel_bit(area: f32) -> u8 {
-    if area <= SUB_PIXEL_MAX_AREA {
-        SUB_PIXEL
-    } else {
-        0
-    }
+pub fn sub_pixel_bit(sub_pixel: bool) -> u8 {
+    if sub_pixel { SUB_PIXEL } else { 0 }
 }
 
 /// `(tent(s_x)·tent(s_y), k_γu(s_x)·k_γv(s_y))` at a source-grid offset ([`kernel_1d`]);

@@ -378,7 +378,7 @@ impl SplatLanes {
             area: Vec4::splat(s.area),
             rho: Vec4::splat(rho),
             colour: c.map(Vec4::splat),
-            sub_pixel: u32::from(super::sub_pixel_bit(s.area)),
+            sub_pixel: u32::from(super::sub_pixel_bit(s.sub_pixel)),
             finite: c.iter().all(|v| v.is_finite()),
         }
     }

@@ -107,8 +107,8 @@ mod surface;
 mod tolerance;
 
 pub use footprint::{
-    Footprint, MAX_ANISOTROPY, SUB_PIXEL, SUB_PIXEL_MAX_AREA, SURROUNDED, dilation, footprint,
-    kernel_1d, kernel_weights, sharpness, sides_of, source_pixel_size, sub_pixel_bit, support,
+    Footprint, MAX_ANISOTROPY, SUB_PIXEL, SURROUNDED, dilation, footprint, kernel_1d,
+    kernel_weights, sharpness, sides_of, source_pixel_size, sub_pixel_bit, support,
 };
 use splats::{Projector, TileRect, for_each_offset, project_and_bin, recycle};
 use surface::{PixelState, Probe, Role, SurfaceKey};
@@ -146,8 +146,7 @@ pub const BASE_RELATIVE_TOLERANCE: f32 = 0.01;
 /// surface whose depth is noisy the samples' screen positions scatter by their parallax, their
 /// tents no longer tile, and the sum between them dips anywhere down to 0 (measured: 0.46 inside
 /// the README fly-in's water, uniformly 0–¼ at the specks an orbit of `wild/autumn` kept with
-/// ¼ for every surface). ¼ rather than ½: the README fly-in's grazing water has samples the
-/// anisotropy floor squeezed to a sub-pixel share, and at ½ a third of the specks there stayed.
+/// ¼ for every surface).
 pub const SURROUNDED_MIN_GEOMETRY: f32 = 0.25;
 
 /// Largest relative depth offset of a sample from its surface's front that the surface's depth
@@ -398,7 +397,7 @@ fn render_lanes(
                                             sums.coverage_colour[i] += cw * v;
                                             sums.kernel_colour[i] += kw * v;
                                         }
-                                        sums.sides |= sides_of(sx, sy) | sub_pixel_bit(s.area);
+                                        sums.sides |= sides_of(sx, sy) | sub_pixel_bit(s.sub_pixel);
                                         sums.depth += w_c
                                             * (s.z * px.inv_front - 1.0)
                                                 .clamp(-MAX_DEPTH_OFFSET, MAX_DEPTH_OFFSET);
@@ -588,13 +587,13 @@ mod tests {
             assert!((got - want).abs() < 1e-5, "{:?}", f.inverse);
         }
         assert!((f.extent[0] - 2.0).abs() < 1e-5 && (f.extent[1] - 2.0).abs() < 1e-5);
-        assert_eq!((f.area, f.widen), (1.0, 1.0));
+        assert_eq!((f.area, f.widen, f.sub_pixel), (1.0, 1.0, false));
         // ½× minification needs no prefilter (the tent is then the 2×2 area average) ...
         let f = footprint(&k.scaled(0.5, 0.5), p, tu, tv, pixel, &settings).unwrap();
         for (got, want) in f.inverse.iter().zip([2.0, 0.0, 0.0, 2.0]) {
             assert!((got - want).abs() < 1e-4, "{:?}", f.inverse);
         }
-        assert_eq!((f.area, f.widen), (1.0, 1.0));
+        assert_eq!((f.area, f.widen, f.sub_pixel), (1.0, 1.0, false));
         // ... ¼× is widened to half a pixel (2 source pixels), its weight scaled by the area it
         // covers (¼); 0.3× is widened by the same whole factor.
         let f = footprint(&k.scaled(0.25, 0.25), p, tu, tv, pixel, &settings).unwrap();
@@ -602,6 +601,7 @@ mod tests {
             assert!((got - want).abs() < 1e-4, "{:?}", f.inverse);
         }
         assert!((f.area - 0.25).abs() < 1e-5 && (f.widen - 2.0).abs() < 1e-5);
+        assert!(f.sub_pixel);
         // Catmull-Rom is used at full strength from 1:1 on, the tent below ½×.
         assert_eq!(sharpness(2.0, SplatKernel::CatmullRom), 1.0);
         assert_eq!(sharpness(0.4, SplatKernel::CatmullRom), 0.0);
@@ -619,6 +619,16 @@ mod tests {
         ];
         assert!((s[0] - 1.0).abs() < 1e-5 && s[1].abs() < 1e-5, "{s:?}");
         assert!((f.extent[0] - 4.0 * c).abs() < 1e-5, "{:?}", f.extent);
+        // A thin footprint that the anisotropy floor widens is no sub-pixel sample: 8 pixels
+        // long, 1 across, raised to 2 across (area ½).
+        let f = footprint_from_columns(
+            Vec2::new(8.0, 0.0),
+            Vec2::new(0.0, 1.0),
+            0.5,
+            10.0,
+            SplatKernel::Tent,
+        );
+        assert!((f.area - 0.5).abs() < 1e-6 && !f.sub_pixel, "{f:?}");
     }
 
     #[test]

@@ -219,6 +219,7 @@ impl Projector<'_> {
         let (m0, m1, m2, m3) = (a2x, b2x, a2y, b2y);
         let det2 = (m0 * m3 - m1 * m2).abs();
         let widen = max(fa, fb);
+        let sub_pixel = (fa.cmpgt(Vec4::ONE) | fb.cmpgt(Vec4::ONE)).bitmask();
         let pp = a2x * a2x + a2y * a2y;
         let pq = a2x * b2x + a2y * b2y;
         let pr = b2x * b2x + b2y * b2y;
@@ -307,6 +308,7 @@ impl Projector<'_> {
                 sharpness: [lane(gu, j), lane(gv, j)],
                 layer,
                 observed,
+                sub_pixel: sub_pixel & (1 << j) != 0,
                 index: index as u32,
             });
         }
@@ -335,7 +337,12 @@ mod tests {
         out.extend(s.tent_extent);
         out.extend(s.sharpness);
         let mut out: Vec<u32> = out.into_iter().map(f32::to_bits).collect();
-        out.extend([s.layer, u32::from(s.observed), s.index]);
+        out.extend([
+            s.layer,
+            u32::from(s.observed),
+            u32::from(s.sub_pixel),
+            s.index,
+        ]);
         out
     }
 

@@ -33,6 +33,8 @@ pub(super) struct Splat {
     /// [`SurfaceKey::holds`].
     pub(super) layer: u32,
     pub(super) observed: bool,
+    /// [`Footprint::sub_pixel`](super::Footprint::sub_pixel).
+    pub(super) sub_pixel: bool,
     pub(super) index: u32,
 }
 
@@ -150,6 +152,7 @@ impl<'a> Projector<'a> {
             sharpness: f.sharpness,
             layer,
             observed,
+            sub_pixel: f.sub_pixel,
             index: i as u32,
         })
     }
