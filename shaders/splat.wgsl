@@ -588,6 +588,8 @@ struct Pixel {
     q_reserved: u32,
     // `cpu::SurfaceSums::sides`.
     sides: u32,
+    // `cpu::PixelState::carried`.
+    carried: u32,
 }
 
 fn pixel_open(px: ptr<function, Pixel>) -> bool {
@@ -677,6 +679,12 @@ fn visit(px: ptr<function, Pixel>, q: u32, x: f32, y: f32, pass_index: u32) {
 
 // `cpu::PixelState::finish_surface` with `cpu::SurfaceSums::resolve`.
 fn finish_surface(px: ptr<function, Pixel>) {
+    // `cpu::PixelState::finish_surface`: a layer's fragments surround a pixel together.
+    var sides = (*px).sides;
+    if (*px).prev.layer == (*px).cur.layer {
+        sides |= (*px).carried;
+    }
+    (*px).carried = sides;
     var wt = 0.0;
     var colour = vec3<f32>(0.0);
     var depth = 0.0;
@@ -694,8 +702,8 @@ fn finish_surface(px: ptr<function, Pixel>) {
         let qg = f32((*px).q_geometry);
         let opacity = min(qc / qg, 1.0);
         var covered = min(qg / WEIGHT_ONE, 1.0);
-        let sub_pixel = ((*px).sides & SUB_PIXEL) != 0u;
-        if ((*px).sides & SURROUNDED) == SURROUNDED
+        let sub_pixel = (sides & SUB_PIXEL) != 0u;
+        if (sides & SURROUNDED) == SURROUNDED
             && (!sub_pixel || qg / WEIGHT_ONE >= SURROUNDED_MIN_GEOMETRY) {
             covered = 1.0;
         }
@@ -824,7 +832,7 @@ fn raster(
 
     var px = Pixel(
         Key(-3.4e38, 0xffffffffu, false), key_none(), key_none(), 1.0, vec3<f32>(0.0), 0.0, 0.0,
-        0u, 0u, 0u, vec3<u32>(0u), 0, vec3<i32>(0), 0, 0u, 0u,
+        0u, 0u, 0u, vec3<u32>(0u), 0, vec3<i32>(0), 0, 0u, 0u, 0u,
     );
     // Visibility: the nearest covering depth of every pixel.
     tile_pass(&px, 0u, start, end, li, tile_x0, tile_y0, tile_x1, tile_y1, inside, x, y);

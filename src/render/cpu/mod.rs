@@ -41,8 +41,10 @@
 //! sample ([`SUB_PIXEL`]: a structure narrower than a pixel keeps its partial coverage),
 //! `Σ g·tent ≥` [`SURROUNDED_MIN_GEOMETRY`] (a footprint from central differences on a depth
 //! ramp falls short of its farther neighbour, samples scattered by a noisy depth's parallax no
-//! longer tile, and either shortfall would show what lies behind as a crack). The next surface
-//! is the nearest point behind, and so on for up to `k` surfaces (the ones behind the front surface, seen only through partial coverage,
+//! longer tile, and either shortfall would show what lies behind as a crack); consecutive
+//! surfaces of one layer (fragments a noisy depth split beyond the tolerance) count their
+//! samples' sides together. The next surface is the nearest point behind, and so on for up to
+//! `k` surfaces (the ones behind the front surface, seen only through partial coverage,
 //! are averaged with the tent), front to back: each takes `a_s = α_s·min(γ_s, B)` of what is left of
 //! the pixel (`B` starts at 1 and loses `a_s`; a synthesised surface takes at most `B` less the
 //! coverage of the observed points behind it, so inpainted content fills disocclusions and never
@@ -519,7 +521,7 @@ impl FrameRenderer for CpuRenderer {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::footprint::footprint_from_columns;
     use super::splats::{ceil_to_i64, floor_to_i64};
     use super::*;
@@ -974,6 +976,54 @@ mod tests {
         assert!((coverage(&[[-0.4, 0.0], [1.5, 0.0]]) - 1.0).abs() < 1e-6);
         // Without the sample on the right it is the surface's edge: 0.6.
         assert!((coverage(&[[-0.4, 0.0]]) - 0.6).abs() < 1e-5);
+    }
+
+    /// Two fragments of one surface (depths 4 and 4.8, split by the parallax of a camera moved
+    /// 0.1 sideways) on either side of output pixel (2, 2), seen magnified 2×: each has two
+    /// samples 0.8 source pixels to one side and 0.5 above and below (tents 4 × 0.1). Returns
+    /// the pixel's coverage with the farther fragment in `far_layer`.
+    pub(crate) fn fragments_coverage(
+        mut render: impl FnMut(&PointCloud, &View) -> Frame,
+        far_layer: u16,
+    ) -> f32 {
+        let k = Intrinsics {
+            fx: 100.0,
+            fy: 100.0,
+            cx: 0.0,
+            cy: 0.0,
+        };
+        let zoom = Intrinsics {
+            fx: 200.0,
+            fy: 200.0,
+            ..k
+        };
+        let moved = Pose::new(glam::Quat::IDENTITY, Vec3::new(0.1, 0.0, 0.0));
+        let mut cloud = PointCloud::default();
+        for (dx, z, layer) in [(-1.6, 4.0, 0), (1.6, 4.8, far_layer)] {
+            for dy in [-1.0, 1.0] {
+                let mut p = single_point(0.0, 0.0, z, [0.5; 3], &k);
+                p.positions[0] = moved.transform_point(zoom.unproject(2.0 + dx, 2.0 + dy, z));
+                p.layer[0] = layer;
+                cloud.append(p);
+            }
+        }
+        let v = View {
+            intrinsics: zoom,
+            world_from_camera: moved,
+        };
+        render(&cloud, &v).coverage.at(2, 2)
+    }
+
+    #[test]
+    fn fragments_of_one_layer_surround_a_pixel_together() {
+        let cpu = |c: &PointCloud, v: &View| {
+            render_cpu(c, None, v, 5, 5, &SplatSettings::default()).unwrap()
+        };
+        // Neither fragment surrounds the pixel, together they do: the nearer covers 0.2, the
+        // farther the rest (without the union each covered 0.2 and 0.6 stayed open).
+        assert!((fragments_coverage(cpu, 0) - 1.0).abs() < 1e-6);
+        // Fragments of two layers are two objects: 0.2 each.
+        assert!((fragments_coverage(cpu, 1) - 0.4).abs() < 1e-5);
     }
 
     #[test]

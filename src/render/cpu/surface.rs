@@ -34,9 +34,10 @@ pub(super) struct SurfaceSums {
 
 impl SurfaceSums {
     /// The surface's colour, opacity `α = Σ w_c / Σ g·tent`, covered share (`min(1, Σ g·tent)`,
-    /// or 1 where its samples surround the pixel) and depth (`front` is its front point's).
+    /// or 1 where its samples, with the layer's nearer fragments (`sides`: these sums' sides
+    /// and theirs), surround the pixel) and depth (`front` is its front point's).
     #[inline]
-    pub(super) fn resolve(&self, front: f32) -> ([f32; 3], f32, f32, f32) {
+    pub(super) fn resolve(&self, front: f32, sides: u8) -> ([f32; 3], f32, f32, f32) {
         if !(self.coverage > 0.0 && self.geometry > 0.0) {
             return ([0.0; 3], 0.0, 0.0, 0.0);
         }
@@ -59,8 +60,8 @@ impl SurfaceSums {
         // lies behind show through as a crack, and so would the gaps between samples scattered
         // by a noisy depth's parallax. A surface with sub-pixel samples (a minified surface's
         // sum is its area) keeps its partial coverage below `SURROUNDED_MIN_GEOMETRY`.
-        let surrounded = self.sides & SURROUNDED == SURROUNDED
-            && (self.sides & SUB_PIXEL == 0 || self.geometry >= SURROUNDED_MIN_GEOMETRY);
+        let surrounded = sides & SURROUNDED == SURROUNDED
+            && (sides & SUB_PIXEL == 0 || self.geometry >= SURROUNDED_MIN_GEOMETRY);
         let covered = if surrounded {
             1.0
         } else {
@@ -156,6 +157,9 @@ pub(super) struct PixelState {
     /// `1 / cur.z`, set when a surface pass starts.
     pub(super) inv_front: f32,
     pub(super) sums: SurfaceSums,
+    /// The sides of the previous surfaces of the current run of one layer (see
+    /// [`PixelState::finish_surface`]).
+    pub(super) carried: u8,
 }
 
 impl Default for PixelState {
@@ -170,6 +174,7 @@ impl Default for PixelState {
             depth: 0.0,
             inv_front: 0.0,
             sums: SurfaceSums::default(),
+            carried: 0,
         }
     }
 }
@@ -185,7 +190,15 @@ impl PixelState {
     /// it takes `a = α·min(covered, budget)` of the pixel (module docs).
     #[inline]
     pub(super) fn finish_surface(&mut self) {
-        let (c, opacity, covered, z) = self.sums.resolve(self.cur.z);
+        // Consecutive surfaces of one layer are fragments of it (a noisy depth splits a surface
+        // where its samples differ by more than the tolerance): they surround a pixel together.
+        let sides = if self.prev.layer == self.cur.layer {
+            self.sums.sides | self.carried
+        } else {
+            self.sums.sides
+        };
+        self.carried = sides;
+        let (c, opacity, covered, z) = self.sums.resolve(self.cur.z, sides);
         // A synthesised surface fills only what the observed surfaces behind it leave: it is
         // what a layer shows where nothing was observed, never a cover over the photo's pixels.
         let available = if self.cur.observed {

@@ -423,6 +423,23 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn fragments_of_one_layer_surround_a_pixel_together_as_on_the_cpu() {
+        // `cpu::tests::fragments_of_one_layer_surround_a_pixel_together`.
+        let _lock = gpu_lock();
+        let Some(mut gpu) = splatter(SplatSettings::default()) else {
+            return;
+        };
+        let mut render = |c: &PointCloud, v: &View| {
+            gpu.set_cloud(c).unwrap();
+            gpu.render(v, 5, 5, None).unwrap()
+        };
+        let one = crate::render::cpu::tests::fragments_coverage(&mut render, 0);
+        assert!((one - 1.0).abs() < 1e-4, "{one}");
+        let two = crate::render::cpu::tests::fragments_coverage(&mut render, 1);
+        assert!((two - 0.4).abs() < 1e-4, "{two}");
+    }
+
+    #[test]
     fn k_nearest_ties_and_culling_match_the_reference() {
         let _lock = gpu_lock();
         let Some(mut gpu) = splatter(SplatSettings {
