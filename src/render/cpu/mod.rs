@@ -921,87 +921,79 @@ pub(crate) mod tests {
         );
     }
 
-    #[test]
-    fn a_pixel_inside_a_surface_is_covered_whatever_its_tents_add_up_to() {
-        // Source points (depth 4, one source pixel footprints) magnified 2× (the kernel is
-        // Catmull-Rom, support two source pixels): output pixel (2, 2) is source point (1, 1),
-        // and a sample at source offset `o` from it has `s = −o`.
-        let k = Intrinsics {
-            fx: 100.0,
-            fy: 100.0,
-            cx: 0.0,
-            cy: 0.0,
-        };
-        let zoom = Intrinsics {
-            fx: 200.0,
-            fy: 200.0,
-            ..k
-        };
-        let coverage_at = |centre: f32, zoom: Intrinsics, offsets: &[[f32; 2]]| {
+    /// The source camera of the coverage scenes below, and its view magnified by `zoom` (pixel
+    /// `x` of the view is source pixel `x / zoom`).
+    const SOURCE: Intrinsics = Intrinsics {
+        fx: 100.0,
+        fy: 100.0,
+        cx: 0.0,
+        cy: 0.0,
+    };
+
+    fn zoomed(zoom: f32) -> Intrinsics {
+        Intrinsics {
+            fx: SOURCE.fx * zoom,
+            fy: SOURCE.fy * zoom,
+            ..SOURCE
+        }
+    }
+
+    /// Scenes of one surface's samples (depth 4, one source pixel footprints, at source offsets
+    /// from the source point that output pixel (2, 2) of a 5×5 view shows), each with the
+    /// view and the pixel's coverage a renderer must give (see the comments).
+    pub(crate) fn inside_surface_scenes() -> Vec<(PointCloud, View, f32)> {
+        let scene = |zoom: f32, offsets: &[[f32; 2]], expected: f32| {
+            let centre = 2.0 / zoom;
             let mut cloud = PointCloud::default();
             for o in offsets {
-                cloud.append(single_point(
-                    centre + o[0],
-                    centre + o[1],
-                    4.0,
-                    [0.5; 3],
-                    &k,
-                ));
+                let (u, v) = (centre + o[0], centre + o[1]);
+                cloud.append(single_point(u, v, 4.0, [0.5; 3], &SOURCE));
             }
-            let f = render_cpu(&cloud, None, &view(zoom), 5, 5, &SplatSettings::default());
-            f.unwrap().coverage.at(2, 2)
+            (cloud, view(zoomed(zoom)), expected)
         };
-        let coverage = |offsets: &[[f32; 2]]| coverage_at(1.0, zoom, offsets);
         let around = |d: f32| [[-d, 0.0], [d, 0.0], [0.0, -d], [0.0, d]];
-        // Samples on all four sides whose tents add up to 4 × 0.1 = 0.4 or 4 × 0.01 = 0.04 (a
-        // noisy depth's parallax scattered them apart): covered whole (it was 0.4 and 0.04, and
-        // the layer behind showed through the crack).
-        assert!((coverage(&around(0.9)) - 1.0).abs() < 1e-6);
-        assert!((coverage(&around(0.99)) - 1.0).abs() < 1e-6);
-        // Minified 4× (widened 2× on both axes: area 1/4, sub-pixel samples; `s` = half the
-        // source offset; output pixel (2, 2) is source point (8, 8)), tents adding up to
-        // 4 × ¼ × 0.2 = 0.2 keep their partial coverage (a structure narrower than a pixel);
-        // from ¼ on (4 × ¼ × 0.4, 4 × ¼ × 0.6) they cover the pixel.
-        let out = Intrinsics {
-            fx: 25.0,
-            fy: 25.0,
-            ..k
-        };
-        assert!((coverage_at(8.0, out, &around(1.6)) - 0.2).abs() < 1e-5);
-        assert!((coverage_at(8.0, out, &around(1.2)) - 1.0).abs() < 1e-6);
-        assert!((coverage_at(8.0, out, &around(0.8)) - 1.0).abs() < 1e-6);
-        // A tent of 0.6 on the left and, 1.5 source pixels to the right, a sample that only the
-        // kernel reaches (Catmull-Rom(1.5) = −1/16, tent 0): it still marks the right side, so
-        // the pixel is inside (the tent alone would leave 0.4 to what lies behind).
-        assert!((coverage(&[[-0.4, 0.0], [1.5, 0.0]]) - 1.0).abs() < 1e-6);
-        // Without the sample on the right it is the surface's edge: 0.6.
-        assert!((coverage(&[[-0.4, 0.0]]) - 0.6).abs() < 1e-5);
+        vec![
+            // Magnified 2× (Catmull-Rom, support two source pixels; `s` = −offset): samples on
+            // all four sides whose tents add up to 4 × 0.1 = 0.4 or 4 × 0.01 = 0.04 (a noisy
+            // depth's parallax scattered them apart) cover the pixel whole (it was 0.4 and 0.04,
+            // and the layer behind showed through the crack).
+            scene(2.0, &around(0.9), 1.0),
+            scene(2.0, &around(0.99), 1.0),
+            // Minified 4× (widened 2× on both axes: area ¼, sub-pixel samples; `s` = half the
+            // offset): tents adding up to 4 × ¼ × 0.2 = 0.2 keep their partial coverage (a
+            // structure narrower than a pixel); from ¼ on (4 × ¼ × 0.4, × 0.6) they cover it.
+            scene(0.25, &around(1.6), 0.2),
+            scene(0.25, &around(1.2), 1.0),
+            scene(0.25, &around(0.8), 1.0),
+            // A tent of 0.6 on the left and, 1.5 source pixels to the right, a sample that only
+            // the kernel reaches (Catmull-Rom(1.5) = −1/16, tent 0): it still marks the right
+            // side, so the pixel is inside (the tent alone would leave 0.4 to what lies behind).
+            scene(2.0, &[[-0.4, 0.0], [1.5, 0.0]], 1.0),
+            // Without the sample on the right it is the surface's edge: 0.6.
+            scene(2.0, &[[-0.4, 0.0]], 0.6),
+        ]
+    }
+
+    #[test]
+    fn a_pixel_inside_a_surface_is_covered_whatever_its_tents_add_up_to() {
+        for (cloud, v, expected) in inside_surface_scenes() {
+            let f = render_cpu(&cloud, None, &v, 5, 5, &SplatSettings::default()).unwrap();
+            let got = f.coverage.at(2, 2);
+            assert!((got - expected).abs() < 1e-5, "{got} vs {expected}");
+        }
     }
 
     /// Two fragments of one surface (depths 4 and 4.8, split by the parallax of a camera moved
-    /// 0.1 sideways) on either side of output pixel (2, 2), seen magnified 2×: each has two
-    /// samples 0.8 source pixels to one side and 0.5 above and below (tents 4 × 0.1). Returns
-    /// the pixel's coverage with the farther fragment in `far_layer`.
-    pub(crate) fn fragments_coverage(
-        mut render: impl FnMut(&PointCloud, &View) -> Frame,
-        far_layer: u16,
-    ) -> f32 {
-        let k = Intrinsics {
-            fx: 100.0,
-            fy: 100.0,
-            cx: 0.0,
-            cy: 0.0,
-        };
-        let zoom = Intrinsics {
-            fx: 200.0,
-            fy: 200.0,
-            ..k
-        };
+    /// 0.1 sideways) on either side of output pixel (2, 2) of a 5×5 view, magnified 2×: each
+    /// has two samples 0.8 source pixels to one side and 0.5 above and below (tents 4 × 0.1).
+    /// The scene with the farther fragment in `far_layer`, and its view.
+    pub(crate) fn fragments_scene(far_layer: u16) -> (PointCloud, View) {
+        let zoom = zoomed(2.0);
         let moved = Pose::new(glam::Quat::IDENTITY, Vec3::new(0.1, 0.0, 0.0));
         let mut cloud = PointCloud::default();
         for (dx, z, layer) in [(-1.6, 4.0, 0), (1.6, 4.8, far_layer)] {
             for dy in [-1.0, 1.0] {
-                let mut p = single_point(0.0, 0.0, z, [0.5; 3], &k);
+                let mut p = single_point(0.0, 0.0, z, [0.5; 3], &SOURCE);
                 p.positions[0] = moved.transform_point(zoom.unproject(2.0 + dx, 2.0 + dy, z));
                 p.layer[0] = layer;
                 cloud.append(p);
@@ -1011,19 +1003,21 @@ pub(crate) mod tests {
             intrinsics: zoom,
             world_from_camera: moved,
         };
-        render(&cloud, &v).coverage.at(2, 2)
+        (cloud, v)
     }
 
     #[test]
     fn fragments_of_one_layer_surround_a_pixel_together() {
-        let cpu = |c: &PointCloud, v: &View| {
-            render_cpu(c, None, v, 5, 5, &SplatSettings::default()).unwrap()
+        let coverage = |far_layer| {
+            let (cloud, v) = fragments_scene(far_layer);
+            let f = render_cpu(&cloud, None, &v, 5, 5, &SplatSettings::default()).unwrap();
+            f.coverage.at(2, 2)
         };
         // Neither fragment surrounds the pixel, together they do: the nearer covers 0.2, the
         // farther the rest (without the union each covered 0.2 and 0.6 stayed open).
-        assert!((fragments_coverage(cpu, 0) - 1.0).abs() < 1e-6);
+        assert!((coverage(0) - 1.0).abs() < 1e-6);
         // Fragments of two layers are two objects: 0.2 each.
-        assert!((fragments_coverage(cpu, 1) - 0.4).abs() < 1e-5);
+        assert!((coverage(1) - 0.4).abs() < 1e-5);
     }
 
     #[test]

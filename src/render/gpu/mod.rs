@@ -367,76 +367,24 @@ pub(crate) mod tests {
 
     #[test]
     fn a_pixel_inside_a_surface_is_covered_as_on_the_cpu() {
-        // `cpu::tests::a_pixel_inside_a_surface_is_covered_whatever_its_tents_add_up_to`.
-        let _lock = gpu_lock();
-        let Some(mut gpu) = splatter(SplatSettings::default()) else {
-            return;
-        };
-        let k = Intrinsics {
-            fx: 100.0,
-            fy: 100.0,
-            cx: 0.0,
-            cy: 0.0,
-        };
-        let zoom = Intrinsics {
-            fx: 200.0,
-            fy: 200.0,
-            ..k
-        };
-        let out = Intrinsics {
-            fx: 25.0,
-            fy: 25.0,
-            ..k
-        };
-        let around = |d: f32| vec![[-d, 0.0], [d, 0.0], [0.0, -d], [0.0, d]];
-        for (centre, target, offsets, expected) in [
-            (1.0, zoom, around(0.9), 1.0),
-            (1.0, zoom, around(0.99), 1.0),
-            (8.0, out, around(1.6), 0.2),
-            (8.0, out, around(1.2), 1.0),
-            (8.0, out, around(0.8), 1.0),
-            (1.0, zoom, vec![[-0.4, 0.0], [1.5, 0.0]], 1.0),
-            (1.0, zoom, vec![[-0.4, 0.0]], 0.6),
-        ] {
-            let mut cloud = PointCloud::default();
-            for [x, y] in offsets {
-                let (u, v, z) = (centre + x, centre + y, 4.0);
-                cloud.append(PointCloud {
-                    positions: vec![k.unproject(u, v, z)],
-                    colours: vec![[0.5; 3]],
-                    alphas: vec![1.0],
-                    tangent_u: vec![Vec3::new(z / k.fx, 0.0, 0.0)],
-                    tangent_v: vec![Vec3::new(0.0, z / k.fy, 0.0)],
-                    source_depth: vec![z],
-                    source_pixel: vec![[u, v]],
-                    layer: vec![0],
-                    inpainted: vec![false],
-                });
-            }
-            gpu.set_cloud(&cloud).unwrap();
-            let f = gpu
-                .render(&view(target, Pose::IDENTITY), 5, 5, None)
-                .unwrap();
-            let got = f.coverage.at(2, 2);
-            assert!((got - expected).abs() < 1e-4, "{got} vs {expected}");
-        }
-    }
-
-    #[test]
-    fn fragments_of_one_layer_surround_a_pixel_together_as_on_the_cpu() {
+        // `cpu::tests::a_pixel_inside_a_surface_is_covered_whatever_its_tents_add_up_to` and
         // `cpu::tests::fragments_of_one_layer_surround_a_pixel_together`.
         let _lock = gpu_lock();
         let Some(mut gpu) = splatter(SplatSettings::default()) else {
             return;
         };
-        let mut render = |c: &PointCloud, v: &View| {
-            gpu.set_cloud(c).unwrap();
-            gpu.render(v, 5, 5, None).unwrap()
-        };
-        let one = crate::render::cpu::tests::fragments_coverage(&mut render, 0);
-        assert!((one - 1.0).abs() < 1e-4, "{one}");
-        let two = crate::render::cpu::tests::fragments_coverage(&mut render, 1);
-        assert!((two - 0.4).abs() < 1e-4, "{two}");
+        let fragments = [0, 1].map(|layer| {
+            let (cloud, v) = crate::render::cpu::tests::fragments_scene(layer);
+            (cloud, v, [1.0, 0.4][usize::from(layer)])
+        });
+        for (cloud, v, expected) in crate::render::cpu::tests::inside_surface_scenes()
+            .into_iter()
+            .chain(fragments)
+        {
+            gpu.set_cloud(&cloud).unwrap();
+            let got = gpu.render(&v, 5, 5, None).unwrap().coverage.at(2, 2);
+            assert!((got - expected).abs() < 1e-4, "{got} vs {expected}");
+        }
     }
 
     #[test]
