@@ -259,17 +259,21 @@ impl FrontSums {
         // `sides_of` of every sample (the lanes with a weight; NaN counts, as in the general
         // pass).
         let positive = t.cmpne(zero) | k.cmpne(zero);
-        let sides = [
+        // Side `b`'s lane mask at bits `4b..4b + 4` ([`lane_sides`]).
+        let packed = [
             sx.cmple(zero),
             sx.cmpge(zero),
             sy.cmple(zero),
             sy.cmpge(zero),
         ]
-        .map(|side| (positive & side).bitmask());
+        .iter()
+        .enumerate()
+        .fold(0, |packed, (b, side)| {
+            packed | ((positive & *side).bitmask() << (4 * b))
+        });
         let samples = positive.bitmask();
         for (lane, flags) in self.sides[p..p + 4].iter_mut().enumerate() {
-            let bits = (0..4).fold(0, |bits, b| bits | (((sides[b] >> lane) & 1) << b))
-                | (((samples >> lane) & 1) * s.sub_pixel);
+            let bits = lane_sides(packed, lane) | (((samples >> lane) & 1) * s.sub_pixel);
             *flags = f32::from_bits(flags.to_bits() | bits);
         }
         let offset = (s.z * lanes(&self.inv_front, p) - Vec4::ONE)
@@ -304,6 +308,15 @@ pub(super) fn behind_pixels(
         debug_assert!(px.open() && px.classify(&splat.probe, true) == Role::Behind);
         px.add_behind(s, &splat.probe, sx, sy);
     }
+}
+
+/// Lane `lane`'s side bits (bit `b`: side `b`) from `packed`, which holds side `b`'s four-lane
+/// mask at bits `4b..4b + 4`: the bits `lane`, `4 + lane`, `8 + lane`, `12 + lane`, gathered to
+/// bits 0–3 by one multiplication (bit `4b` times `2^(3·(3 − b))` lands on bit `9 + b`, and no two
+/// of the sixteen products share a bit, so nothing carries).
+#[inline]
+pub(super) fn lane_sides(packed: u32, lane: usize) -> u32 {
+    ((((packed >> lane) & 0x1111) * 0x249) >> 9) & 0xf
 }
 
 /// The four values of `sums` from `p` on.

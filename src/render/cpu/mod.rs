@@ -1021,6 +1021,16 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn lane_sides_gathers_every_lane_of_every_side_mask() {
+        for packed in 0..1u32 << 16 {
+            for lane in 0..4 {
+                let want = (0..4).fold(0, |bits, b| bits | (((packed >> (4 * b + lane)) & 1) << b));
+                assert_eq!(front::lane_sides(packed, lane), want, "{packed:#x} {lane}");
+            }
+        }
+    }
+
+    #[test]
     fn parallax_tolerance_has_known_answers() {
         let k = Intrinsics {
             fx: 200.0,
