@@ -295,8 +295,8 @@ fn render_lanes(
                 };
                 // Visibility: the nearest point that covers each pixel. (Every walk takes the
                 // chunks in point order, each tile's splats in point order within a chunk.)
-                for c in &chunks {
-                    for s in c.tile(t, None) {
+                for chunk in &chunks {
+                    for s in chunk.tile(t, None) {
                         let key = SurfaceKey::of(s);
                         for_each_offset(s, &tile, width, height, s.tent_extent, |p, sx, sy| {
                             let px = &mut pixels[p];
@@ -334,8 +334,8 @@ fn render_lanes(
                     if surface == 0 {
                         front.load(&pixels);
                     }
-                    for c in &chunks {
-                        for s in c.tile(t, Some(values)) {
+                    for chunk in &chunks {
+                        for s in chunk.tile(t, Some(values)) {
                             if s.z + s.tol < z_lo {
                                 continue;
                             }
@@ -350,7 +350,7 @@ fn render_lanes(
                             if open.misses(s, extent) {
                                 continue;
                             }
-                            let c = values[s.index as usize];
+                            let colour = values[s.index as usize];
                             let probe = Probe::of(s);
                             let first = surface == 0;
                             let supports = s.sharpness.map(|g| support(g, kernel));
@@ -360,8 +360,9 @@ fn render_lanes(
                                 SYNTHESISED_COLOUR_WEIGHT
                             };
                             if first && shape.is_some() {
-                                let lanes =
-                                    front::SplatLanes::new(s, &probe, c, rho, supports, kernel);
+                                let lanes = front::SplatLanes::new(
+                                    s, &probe, colour, rho, supports, kernel,
+                                );
                                 front.add(&mut pixels, s, &lanes, &tile, width, height);
                                 continue;
                             }
@@ -385,24 +386,7 @@ fn render_lanes(
                                                 (t, t)
                                             }
                                         };
-                                        if t == 0.0 && k == 0.0 {
-                                            return;
-                                        }
-                                        let (w_c, w) = (s.scale * t, s.scale * k);
-                                        let (cw, kw) = (rho * w_c, rho * w);
-                                        let sums = &mut px.sums;
-                                        sums.geometry += s.area * t;
-                                        sums.coverage += w_c;
-                                        sums.coverage_weight += cw;
-                                        sums.kernel += kw;
-                                        for (i, v) in c.iter().enumerate() {
-                                            sums.coverage_colour[i] += cw * v;
-                                            sums.kernel_colour[i] += kw * v;
-                                        }
-                                        sums.sides |= sides_of(sx, sy) | sub_pixel_bit(s.sub_pixel);
-                                        sums.depth += w_c
-                                            * (s.z * px.inv_front - 1.0)
-                                                .clamp(-MAX_DEPTH_OFFSET, MAX_DEPTH_OFFSET);
+                                        px.add_sample(s, colour, rho, (t, k), (sx, sy));
                                     }
                                     Role::Behind => px.add_behind(s, &probe, sx, sy),
                                     Role::None => {}
@@ -986,38 +970,42 @@ pub(crate) mod tests {
     /// Two fragments of one surface (depths 4 and 4.8, split by the parallax of a camera moved
     /// 0.1 sideways) on either side of output pixel (2, 2) of a 5×5 view, magnified 2×: each
     /// has two samples 0.8 source pixels to one side and 0.5 above and below (tents 4 × 0.1).
-    /// The scene with the farther fragment in `far_layer`, and its view.
-    pub(crate) fn fragments_scene(far_layer: u16) -> (PointCloud, View) {
+    /// The farther fragment in one layer with the nearer, then in another, each with its view
+    /// and the pixel's coverage a renderer must give: neither fragment surrounds the pixel,
+    /// together they do, so the nearer covers 0.2 and the farther the rest (without the union
+    /// each covered 0.2 and 0.6 stayed open); fragments of two layers are two objects, 0.2 each.
+    pub(crate) fn fragments_scenes() -> Vec<(PointCloud, View, f32)> {
         let zoom = zoomed(2.0);
         let moved = Pose::new(glam::Quat::IDENTITY, Vec3::new(0.1, 0.0, 0.0));
-        let mut cloud = PointCloud::default();
-        for (dx, z, layer) in [(-1.6, 4.0, 0), (1.6, 4.8, far_layer)] {
-            for dy in [-1.0, 1.0] {
-                let mut p = single_point(0.0, 0.0, z, [0.5; 3], &SOURCE);
-                p.positions[0] = moved.transform_point(zoom.unproject(2.0 + dx, 2.0 + dy, z));
-                p.layer[0] = layer;
-                cloud.append(p);
-            }
-        }
         let v = View {
             intrinsics: zoom,
             world_from_camera: moved,
         };
-        (cloud, v)
+        [(0, 1.0), (1, 0.4)]
+            .into_iter()
+            .map(|(far_layer, expected)| {
+                let mut cloud = PointCloud::default();
+                for (dx, z, layer) in [(-1.6, 4.0, 0), (1.6, 4.8, far_layer)] {
+                    for dy in [-1.0, 1.0] {
+                        let mut p = single_point(0.0, 0.0, z, [0.5; 3], &SOURCE);
+                        p.positions[0] =
+                            moved.transform_point(zoom.unproject(2.0 + dx, 2.0 + dy, z));
+                        p.layer[0] = layer;
+                        cloud.append(p);
+                    }
+                }
+                (cloud, v, expected)
+            })
+            .collect()
     }
 
     #[test]
     fn fragments_of_one_layer_surround_a_pixel_together() {
-        let coverage = |far_layer| {
-            let (cloud, v) = fragments_scene(far_layer);
+        for (cloud, v, expected) in fragments_scenes() {
             let f = render_cpu(&cloud, None, &v, 5, 5, &SplatSettings::default()).unwrap();
-            f.coverage.at(2, 2)
-        };
-        // Neither fragment surrounds the pixel, together they do: the nearer covers 0.2, the
-        // farther the rest (without the union each covered 0.2 and 0.6 stayed open).
-        assert!((coverage(0) - 1.0).abs() < 1e-6);
-        // Fragments of two layers are two objects: 0.2 each.
-        assert!((coverage(1) - 0.4).abs() < 1e-5);
+            let got = f.coverage.at(2, 2);
+            assert!((got - expected).abs() < 1e-5, "{got} vs {expected}");
+        }
     }
 
     #[test]

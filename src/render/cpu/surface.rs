@@ -1,9 +1,9 @@
 //! A pixel's surfaces: their keys, their sums and the front-to-back compositing (see the module
 //! docs of [`super`]).
 
-use super::footprint::{SUB_PIXEL, SURROUNDED};
+use super::footprint::{SUB_PIXEL, SURROUNDED, sides_of, sub_pixel_bit};
 use super::splats::Splat;
-use super::{MIN_VISIBLE_WEIGHT, OPAQUE_REMAINDER, SURROUNDED_MIN_GEOMETRY};
+use super::{MAX_DEPTH_OFFSET, MIN_VISIBLE_WEIGHT, OPAQUE_REMAINDER, SURROUNDED_MIN_GEOMETRY};
 use crate::render::tent;
 
 /// One surface's sums at a pixel.
@@ -235,6 +235,37 @@ impl PixelState {
         } else {
             Role::None
         }
+    }
+
+    /// Splat `s` (colour `colour`, colour weight `rho`) as a sample of the current surface
+    /// (`Role::Member`) with tent and kernel weights `(t, k)` at source-grid offset `(s_x, s_y)`;
+    /// a sample with neither weight adds nothing (not even `0·∞`). The front pass's lanes do the
+    /// same arithmetic (`front.rs`).
+    #[inline]
+    pub(super) fn add_sample(
+        &mut self,
+        s: &Splat,
+        colour: [f32; 3],
+        rho: f32,
+        (t, k): (f32, f32),
+        (sx, sy): (f32, f32),
+    ) {
+        if t == 0.0 && k == 0.0 {
+            return;
+        }
+        let (w_c, w) = (s.scale * t, s.scale * k);
+        let (cw, kw) = (rho * w_c, rho * w);
+        let sums = &mut self.sums;
+        sums.geometry += s.area * t;
+        sums.coverage += w_c;
+        sums.coverage_weight += cw;
+        sums.kernel += kw;
+        for (i, v) in colour.iter().enumerate() {
+            sums.coverage_colour[i] += cw * v;
+            sums.kernel_colour[i] += kw * v;
+        }
+        sums.sides |= sides_of(sx, sy) | sub_pixel_bit(s.sub_pixel);
+        sums.depth += w_c * (s.z * self.inv_front - 1.0).clamp(-MAX_DEPTH_OFFSET, MAX_DEPTH_OFFSET);
     }
 
     /// A splat that is behind the current surface (`Role::Behind`), at source-grid offset

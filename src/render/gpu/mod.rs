@@ -373,13 +373,10 @@ pub(crate) mod tests {
         let Some(mut gpu) = splatter(SplatSettings::default()) else {
             return;
         };
-        let fragments = [0, 1].map(|layer| {
-            let (cloud, v) = crate::render::cpu::tests::fragments_scene(layer);
-            (cloud, v, [1.0, 0.4][usize::from(layer)])
-        });
-        for (cloud, v, expected) in crate::render::cpu::tests::inside_surface_scenes()
+        use crate::render::cpu::tests::{fragments_scenes, inside_surface_scenes};
+        for (cloud, v, expected) in inside_surface_scenes()
             .into_iter()
-            .chain(fragments)
+            .chain(fragments_scenes())
         {
             gpu.set_cloud(&cloud).unwrap();
             let got = gpu.render(&v, 5, 5, None).unwrap().coverage.at(2, 2);
