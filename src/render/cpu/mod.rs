@@ -958,13 +958,18 @@ pub(crate) mod tests {
         ]
     }
 
-    #[test]
-    fn a_pixel_inside_a_surface_is_covered_whatever_its_tents_add_up_to() {
-        for (cloud, v, expected) in inside_surface_scenes() {
-            let f = render_cpu(&cloud, None, &v, 5, 5, &SplatSettings::default()).unwrap();
+    /// Renders each scene on the CPU and checks pixel (2, 2)'s coverage.
+    fn check_coverage(scenes: &[(PointCloud, View, f32)]) {
+        for (cloud, v, expected) in scenes {
+            let f = render_cpu(cloud, None, v, 5, 5, &SplatSettings::default()).unwrap();
             let got = f.coverage.at(2, 2);
             assert!((got - expected).abs() < 1e-5, "{got} vs {expected}");
         }
+    }
+
+    #[test]
+    fn a_pixel_inside_a_surface_is_covered_whatever_its_tents_add_up_to() {
+        check_coverage(&inside_surface_scenes());
     }
 
     /// Two fragments of one surface (depths 4 and 4.8, split by the parallax of a camera moved
@@ -1001,11 +1006,7 @@ pub(crate) mod tests {
 
     #[test]
     fn fragments_of_one_layer_surround_a_pixel_together() {
-        for (cloud, v, expected) in fragments_scenes() {
-            let f = render_cpu(&cloud, None, &v, 5, 5, &SplatSettings::default()).unwrap();
-            let got = f.coverage.at(2, 2);
-            assert!((got - expected).abs() < 1e-5, "{got} vs {expected}");
-        }
+        check_coverage(&fragments_scenes());
     }
 
     #[test]
