@@ -7,8 +7,8 @@
 //!
 //! Coarsest level: the hole starts from the membrane fill and, in the `draft` preset, is then
 //! onion-peeled: filled ring by ring from its border inwards, each pixel copied from its best
-//! match over the known part of its patch. Finer levels start from the coarser nearest-neighbour field (NNF),
-//! scaled up and voted with the finer source pixels.
+//! match over the known part of its patch. Finer levels start from the coarser
+//! nearest-neighbour field (NNF), scaled up and voted with the finer source pixels.
 //!
 //! EM iteration: PatchMatch passes improve the NNF (propagation from the scan-order
 //! neighbours, random search at halving radii, one candidate drawn from the whole source), then
