@@ -216,7 +216,8 @@ pub(super) fn add_splat(
 /// One group: lanes 0–7 at tile pixels `p..p + 8` (`ROW`) or lanes 0–3 at `p..p + 4` and 4–7
 /// at the next row's `p + 16..p + 20`, pixel columns
 /// `xs`, `valid` the lanes within the splat's box, `m1dy`/`m3dy` each lane's row terms of
-/// `s = M'⁻¹·d`. Returns the lanes (bits) where the splat is behind the pixel's surface.
+/// `s = M'⁻¹·d`. Returns the lanes (bits) where the splat is behind the pixel's surface, within
+/// its tent's support.
 #[inline]
 #[target_feature(enable = "avx")]
 #[allow(clippy::too_many_arguments)]
@@ -255,10 +256,19 @@ fn group<const ROW: bool>(
             _mm256_cmp_ps::<_CMP_LT_OS>(layer, s.layer),
         ),
     );
-    let behind = _mm256_movemask_ps(_mm256_and_ps(_mm256_andnot_ps(member, valid), before));
-    // `kernel_weights`.
     let sign = _mm256_set1_ps(-0.0);
     let (ax, ay) = (_mm256_andnot_ps(sign, sx), _mm256_andnot_ps(sign, sy));
+    // Only where the tent reaches (`|s_x| < 1`, `|s_y| < 1`): elsewhere `add_behind`'s weight
+    // is exactly zero and it returns at once (a NaN offset fails both tests as it would).
+    let in_tent = _mm256_and_ps(
+        _mm256_cmp_ps::<_CMP_LT_OS>(ax, one),
+        _mm256_cmp_ps::<_CMP_LT_OS>(ay, one),
+    );
+    let behind = _mm256_movemask_ps(_mm256_and_ps(
+        _mm256_and_ps(_mm256_andnot_ps(member, valid), before),
+        in_tent,
+    ));
+    // `kernel_weights`.
     let inside = _mm256_and_ps(
         _mm256_cmp_ps::<_CMP_LT_OS>(ax, s.support_u),
         _mm256_cmp_ps::<_CMP_LT_OS>(ay, s.support_v),

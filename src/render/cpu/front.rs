@@ -195,8 +195,9 @@ impl FrontSums {
 
     /// Four pixels of a splat's row: tile pixels `p..p + 4` at pixel columns `xs`, `valid` the
     /// lanes within the splat's box, `m1dy`/`m3dy` the row's terms of `s = M'⁻¹·d`. Returns
-    /// the valid lanes (bits) whose surface the splat is behind. `SELECT`: add the colour products through
-    /// selects (a colour that is not finite, where `0·c` would be NaN).
+    /// the valid lanes (bits) whose surface the splat is behind, within its tent's support.
+    /// `SELECT`: add the colour products through selects (a colour that is not finite, where
+    /// `0·c` would be NaN).
     #[inline]
     fn add_group<const SELECT: bool>(
         &mut self,
@@ -216,9 +217,13 @@ impl FrontSums {
         let same = layer.cmpeq(s.layer) | (observed.cmpeq(Vec4::ONE) & s.observed);
         let member = same & s.lo.cmple(z) & s.hi.cmpge(z);
         let before = z.cmplt(s.z) | (z.cmpeq(s.z) & layer.cmplt(s.layer));
-        let behind = (valid & !member & before).bitmask();
-        // `kernel_weights`.
         let (ax, ay) = (sx.abs(), sy.abs());
+        // Only where the tent reaches (`|s_x| < 1`, `|s_y| < 1`): elsewhere `add_behind`'s
+        // weight is exactly zero and it returns at once (a NaN offset fails both tests as it
+        // would).
+        let in_tent = ax.cmplt(Vec4::ONE) & ay.cmplt(Vec4::ONE);
+        let behind = (valid & !member & before & in_tent).bitmask();
+        // `kernel_weights`.
         let inside = ax.cmplt(s.support_u) & ay.cmplt(s.support_v);
         let take = valid & member & inside;
         if !take.any() {
@@ -286,7 +291,8 @@ impl FrontSums {
 
 /// The `Behind` role of splat `s` on row `y` at the columns `x0 + j` for the set bits `j` of
 /// `lanes`: the pixels whose (open) surface the splat is behind, as the front pass's lanes found
-/// them (`!holds && before`: exactly `PixelState::classify`'s `Behind`), one at a time.
+/// them (`!holds && before`: exactly `PixelState::classify`'s `Behind`), one at a time. The
+/// lanes leave out the pixels beyond the splat's tent, where `add_behind` adds nothing.
 pub(super) fn behind_pixels(
     pixels: &mut [PixelState; N],
     s: &Splat,
