@@ -10,11 +10,10 @@
 
 #![allow(unsafe_code)]
 
-use super::MAX_DEPTH_OFFSET;
 use super::TILE;
-use super::front::{FrontSums, G, SplatLanes, behind_pixels};
+use super::front::{FrontSums, G, SplatLanes};
 use super::splats::{Splat, TileRect};
-use super::surface::PixelState;
+use super::{MAX_DEPTH_OFFSET, MIN_VISIBLE_WEIGHT};
 use crate::render::SplatKernel;
 use std::arch::x86_64::{
     __m256, _CMP_EQ_OQ, _CMP_GE_OS, _CMP_LE_OS, _CMP_LT_OS, _CMP_NEQ_UQ, _mm_loadu_ps,
@@ -24,9 +23,6 @@ use std::arch::x86_64::{
     _mm256_mul_ps, _mm256_or_ps, _mm256_set1_ps, _mm256_setr_ps, _mm256_setzero_ps,
     _mm256_storeu_ps, _mm256_sub_ps,
 };
-
-/// Tile pixels.
-const N: usize = TILE * TILE;
 
 /// Lanes 0–7 from `a[p..p + 8]` (`ROW`), or lanes 0–3 from `a[p..p + 4]` and 4–7 from the next
 /// row's `a[p + 16..p + 20]`.
@@ -113,11 +109,11 @@ impl Lanes8 {
             u: _mm256_set1_ps(l.u.x),
             m0: _mm256_set1_ps(l.m0.x),
             m2: _mm256_set1_ps(l.m2.x),
-            z: _mm256_set1_ps(l.z.x),
+            z: _mm256_set1_ps(l.key.z.x),
             lo: _mm256_set1_ps(l.lo.x),
             hi: _mm256_set1_ps(l.hi.x),
-            layer: _mm256_set1_ps(l.layer.x),
-            observed: if l.observed.any() {
+            layer: _mm256_set1_ps(l.key.layer.x),
+            observed: if l.key.observed.any() {
                 all
             } else {
                 _mm256_setzero_ps()
@@ -128,7 +124,7 @@ impl Lanes8 {
             gamma_v: l.gamma_v,
             sharp: l.sharp,
             kernel: l.kernel,
-            scale: _mm256_set1_ps(l.scale.x),
+            scale: _mm256_set1_ps(l.key.scale.x),
             area: _mm256_set1_ps(l.area.x),
             rho: _mm256_set1_ps(l.rho.x),
             colour: [
@@ -145,7 +141,6 @@ impl Lanes8 {
 #[target_feature(enable = "avx")]
 pub(super) fn add_splat(
     sums: &mut FrontSums,
-    pixels: &mut [PixelState; N],
     s: &Splat,
     splat: &SplatLanes,
     tile: &TileRect,
@@ -177,13 +172,11 @@ pub(super) fn add_splat(
             let (a, b) = (m3 * dy0, m3 * dy1);
             let m3dy = _mm256_setr_ps(a, a, a, a, b, b, b, b);
             let p = (y - tile.y0) * TILE + x0 - tile.x0;
-            let behind = group::<false>(sums, p, xs, valid, m1dy, m3dy, &l) as u32;
-            behind_pixels(pixels, s, splat, tile, y, x0, behind & 0x0f);
-            behind_pixels(pixels, s, splat, tile, y + 1, x0, behind >> 4);
+            group::<false>(sums, p, xs, valid, m1dy, m3dy, &l);
             y += 2;
         }
         if y == y1 {
-            sums.add_row(pixels, s, splat, tile, y, x0, x1);
+            sums.add_row(s, splat, tile, y, x0, x1);
         }
     } else {
         // Eight pixels of one row per group.
@@ -191,7 +184,6 @@ pub(super) fn add_splat(
             let dy = y as f32 - s.v;
             let (m1dy, m3dy) = (_mm256_set1_ps(m1 * dy), _mm256_set1_ps(m3 * dy));
             let base = (y - tile.y0) * TILE;
-            let mut behind = 0;
             for x in (x0..=x1).step_by(8) {
                 let xf = x as f32;
                 let xs = _mm256_setr_ps(
@@ -205,10 +197,8 @@ pub(super) fn add_splat(
                     xf + 7.0,
                 );
                 let valid = _mm256_cmp_ps::<_CMP_LE_OS>(xs, last);
-                let lanes = group::<true>(sums, base + x - tile.x0, xs, valid, m1dy, m3dy, &l);
-                behind |= (lanes as u32) << (x - x0);
+                group::<true>(sums, base + x - tile.x0, xs, valid, m1dy, m3dy, &l);
             }
-            behind_pixels(pixels, s, splat, tile, y, x0, behind);
         }
     }
 }
@@ -216,8 +206,7 @@ pub(super) fn add_splat(
 /// One group: lanes 0–7 at tile pixels `p..p + 8` (`ROW`) or lanes 0–3 at `p..p + 4` and 4–7
 /// at the next row's `p + 16..p + 20`, pixel columns
 /// `xs`, `valid` the lanes within the splat's box, `m1dy`/`m3dy` each lane's row terms of
-/// `s = M'⁻¹·d`. Returns the lanes (bits) where the splat is behind the pixel's surface, within
-/// its tent's support.
+/// `s = M'⁻¹·d`: the `Member` and `Behind` roles (`front.rs`, `add_group`).
 #[inline]
 #[target_feature(enable = "avx")]
 #[allow(clippy::too_many_arguments)]
@@ -229,7 +218,7 @@ fn group<const ROW: bool>(
     m1dy: __m256,
     m3dy: __m256,
     s: &Lanes8,
-) -> i32 {
+) {
     let zero = _mm256_setzero_ps();
     let one = _mm256_set1_ps(1.0);
     let dx = _mm256_sub_ps(xs, s.u);
@@ -258,16 +247,20 @@ fn group<const ROW: bool>(
     );
     let sign = _mm256_set1_ps(-0.0);
     let (ax, ay) = (_mm256_andnot_ps(sign, sx), _mm256_andnot_ps(sign, sy));
-    // Only where the tent reaches (`|s_x| < 1`, `|s_y| < 1`): elsewhere `add_behind`'s weight
-    // is exactly zero and it returns at once (a NaN offset fails both tests as it would).
+    let (tx, ty) = (tent(ax), tent(ay));
+    // The pixels whose surface the splat is behind, where its tent reaches (`|s_x| < 1`,
+    // `|s_y| < 1`; elsewhere its weight there is exactly zero).
     let in_tent = _mm256_and_ps(
         _mm256_cmp_ps::<_CMP_LT_OS>(ax, one),
         _mm256_cmp_ps::<_CMP_LT_OS>(ay, one),
     );
-    let behind = _mm256_movemask_ps(_mm256_and_ps(
+    let behind = _mm256_and_ps(
         _mm256_and_ps(_mm256_andnot_ps(member, valid), before),
         in_tent,
-    ));
+    );
+    if _mm256_movemask_ps(behind) != 0 {
+        add_behind::<ROW>(sums, p, behind, tx, ty, s);
+    }
     // `kernel_weights`.
     let inside = _mm256_and_ps(
         _mm256_cmp_ps::<_CMP_LT_OS>(ax, s.support_u),
@@ -277,9 +270,8 @@ fn group<const ROW: bool>(
     if _mm256_movemask_ps(take) == 0 {
         // No lane is a sample (a splat of a surface behind, or beyond its support here): every
         // sum would add +0, which leaves it as it is (a sum is never −0).
-        return behind;
+        return;
     }
-    let (tx, ty) = (tent(ax), tent(ay));
     let t = _mm256_mul_ps(tx, ty);
     let k = if s.sharp {
         _mm256_mul_ps(
@@ -341,7 +333,56 @@ fn group<const ROW: bool>(
         p,
         select(take, _mm256_mul_ps(w_c, offset), zero),
     );
-    behind
+}
+
+/// `PixelState::add_behind` in the lanes `behind` of a group (`front.rs`'s `add_behind`, lane
+/// by lane the same operations): `w_c = (α·g·tent(s_x))·tent(s_y)`; where it is not zero, an
+/// observed splat behind a synthesised surface adds it to `reserved`, and a visible one nearer
+/// than the pixel's next surface becomes it.
+#[inline]
+#[target_feature(enable = "avx")]
+fn add_behind<const ROW: bool>(
+    sums: &mut FrontSums,
+    p: usize,
+    behind: __m256,
+    tx: __m256,
+    ty: __m256,
+    s: &Lanes8,
+) {
+    let zero = _mm256_setzero_ps();
+    let one = _mm256_set1_ps(1.0);
+    let w = _mm256_mul_ps(_mm256_mul_ps(s.scale, tx), ty);
+    let behind = _mm256_and_ps(behind, _mm256_cmp_ps::<_CMP_NEQ_UQ>(w, zero));
+    if _mm256_movemask_ps(behind) == 0 {
+        return;
+    }
+    let cur_observed = _mm256_cmp_ps::<_CMP_EQ_OQ>(load::<ROW>(&sums.observed, p), one);
+    let reserve = _mm256_and_ps(_mm256_andnot_ps(cur_observed, s.observed), behind);
+    add_to::<ROW>(&mut sums.reserved, p, select(reserve, w, zero));
+    let (nz, nl) = (
+        load::<ROW>(&sums.next_z, p),
+        load::<ROW>(&sums.next_layer, p),
+    );
+    let nearer = _mm256_or_ps(
+        _mm256_cmp_ps::<_CMP_LT_OS>(s.z, nz),
+        _mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_EQ_OQ>(s.z, nz),
+            _mm256_cmp_ps::<_CMP_LT_OS>(s.layer, nl),
+        ),
+    );
+    let visible = _mm256_cmp_ps::<_CMP_GE_OS>(w, _mm256_set1_ps(MIN_VISIBLE_WEIGHT));
+    let next = _mm256_and_ps(_mm256_and_ps(behind, visible), nearer);
+    if _mm256_movemask_ps(next) == 0 {
+        return;
+    }
+    let no = load::<ROW>(&sums.next_observed, p);
+    store::<ROW>(&mut sums.next_z, p, select(next, s.z, nz));
+    store::<ROW>(&mut sums.next_layer, p, select(next, s.layer, nl));
+    store::<ROW>(
+        &mut sums.next_observed,
+        p,
+        select(next, _mm256_and_ps(s.observed, one), no),
+    );
 }
 
 /// `tent` of `|x|`, eight lanes.

@@ -7,13 +7,15 @@
 //! pixels) to every pixel of its surface. Each lane does exactly the general pass's arithmetic
 //! (the same expressions in the same order per pixel, IEEE operations lane by lane), and a lane
 //! that is no sample adds zero, which leaves a sum unchanged (a sum is never −0: it starts at +0
-//! and an exact cancellation rounds to +0), so the output does not change by a bit. A pixel
-//! that a splat is *behind* (a candidate for the next surface) is rare inside a tile and is
-//! handled one pixel at a time on the tile's [`PixelState`]s.
+//! and an exact cancellation rounds to +0), so the output does not change by a bit. The
+//! pixels a splat is *behind* (candidates for the next surface: `PixelState::add_behind`) are
+//! handled in the same lanes, on arrays of the `reserved` share and the next surface's key, and
+//! so are the splats farther than every surface of the tile (the inpainted layers behind the
+//! front one), which can only be such candidates.
 
 use super::splats::{Splat, TileRect, tile_box};
-use super::surface::{PixelState, Probe, Role};
-use super::{MAX_DEPTH_OFFSET, TILE};
+use super::surface::{PixelState, Probe, SurfaceKey};
+use super::{MAX_DEPTH_OFFSET, MIN_VISIBLE_WEIGHT, TILE};
 use crate::render::SplatKernel;
 use glam::{BVec4A, Vec4};
 
@@ -44,6 +46,13 @@ pub(super) struct FrontSums {
     /// pattern of an `f32` (only ever or-ed, loaded and stored, never used as a number), so one
     /// vector instruction sets them in every lane.
     pub(super) sides: [f32; G],
+    /// The next surface's bookkeeping (`PixelState::add_behind`), kept here during the front
+    /// pass: the `reserved` share, and the nearest visible key behind the front surface
+    /// (depth, layer as `f32`, observed as 0/1).
+    pub(super) reserved: [f32; G],
+    pub(super) next_z: [f32; G],
+    pub(super) next_layer: [f32; G],
+    pub(super) next_observed: [f32; G],
     /// This CPU has AVX: the pass runs eight lanes at a time (`avx.rs`).
     #[cfg(target_arch = "x86_64")]
     avx: bool,
@@ -80,6 +89,10 @@ impl FrontSums {
             kernel_colour: [[0.0; G]; 3],
             depth: [0.0; G],
             sides: [0.0; G],
+            reserved: [0.0; G],
+            next_z: [f32::INFINITY; G],
+            next_layer: [0.0; G],
+            next_observed: [0.0; G],
         })
     }
 
@@ -90,6 +103,11 @@ impl FrontSums {
             self.layer[p] = px.cur.layer as f32;
             self.observed[p] = f32::from(u8::from(px.cur.observed));
             self.inv_front[p] = px.inv_front;
+            self.reserved[p] = px.sums.reserved;
+            self.next_z[p] = px.next.z;
+            // (Exact: layers are `u16`, and `u32::MAX` comes back from `f32` saturated.)
+            self.next_layer[p] = px.next.layer as f32;
+            self.next_observed[p] = f32::from(u8::from(px.next.observed));
         }
         for sums in [
             &mut self.geometry,
@@ -110,8 +128,8 @@ impl FrontSums {
         }
     }
 
-    /// Ends the front pass: the sums go into the open pixels' [`PixelState::sums`] (the
-    /// `reserved` share and the next surface were kept there all along).
+    /// Ends the front pass: the sums, the `reserved` share and the next surface go into the
+    /// open pixels' [`PixelState`]s.
     pub(super) fn store(&self, pixels: &mut [PixelState; N]) {
         for (p, px) in pixels.iter_mut().enumerate() {
             if !px.open() {
@@ -128,6 +146,12 @@ impl FrontSums {
             }
             sums.depth = self.depth[p];
             sums.sides = self.sides[p].to_bits() as u8;
+            sums.reserved = self.reserved[p];
+            px.next = SurfaceKey {
+                z: self.next_z[p],
+                layer: self.next_layer[p] as u32,
+                observed: self.next_observed[p] != 0.0,
+            };
         }
     }
 
@@ -135,7 +159,6 @@ impl FrontSums {
     /// `tile` within its kernel's extent: the `Member` and `Behind` roles of the general pass.
     pub(super) fn add(
         &mut self,
-        pixels: &mut [PixelState; N],
         s: &Splat,
         splat: &SplatLanes,
         tile: &TileRect,
@@ -150,21 +173,19 @@ impl FrontSums {
             // SAFETY: `avx` is set only where the CPU has AVX.
             #[allow(unsafe_code)]
             unsafe {
-                super::avx::add_splat(self, pixels, s, splat, tile, span)
+                super::avx::add_splat(self, s, splat, tile, span)
             };
             return;
         }
         let (x0, x1, y0, y1) = span;
         for y in y0..=y1 {
-            self.add_row(pixels, s, splat, tile, y, x0, x1);
+            self.add_row(s, splat, tile, y, x0, x1);
         }
     }
 
     /// Row `y` of splat `s`'s box, columns `x0..=x1`, four lanes at a time.
-    #[allow(clippy::too_many_arguments)]
     pub(super) fn add_row(
         &mut self,
-        pixels: &mut [PixelState; N],
         s: &Splat,
         splat: &SplatLanes,
         tile: &TileRect,
@@ -177,27 +198,108 @@ impl FrontSums {
         let dy = y as f32 - s.v;
         let (m1dy, m3dy) = (Vec4::splat(m1 * dy), Vec4::splat(m3 * dy));
         let base = (y - tile.y0) * TILE;
-        let mut behind = 0;
         for x in (x0..=x1).step_by(4) {
             let xf = x as f32;
             let xs = Vec4::new(xf, xf + 1.0, xf + 2.0, xf + 3.0);
             let valid = xs.cmple(last);
             let p = base + x - tile.x0;
-            let lanes = if splat.finite {
-                self.add_group::<false>(p, xs, valid, m1dy, m3dy, splat)
+            if splat.finite {
+                self.add_group::<false>(p, xs, valid, m1dy, m3dy, splat);
             } else {
-                self.add_group::<true>(p, xs, valid, m1dy, m3dy, splat)
-            };
-            behind |= lanes << (x - x0);
+                self.add_group::<true>(p, xs, valid, m1dy, m3dy, splat);
+            }
         }
-        behind_pixels(pixels, s, splat, tile, y, x0, behind);
+    }
+
+    /// A splat farther than every open pixel's surface of the tile beyond its tolerance (it can
+    /// only be a candidate for the next surface): the `Behind` role over the pixels of `tile`
+    /// within its tent's extent, four at a time, as the general pass classifies them.
+    pub(super) fn add_behind_only(
+        &mut self,
+        s: &Splat,
+        tile: &TileRect,
+        width: usize,
+        height: usize,
+    ) {
+        let Some((x0, x1, y0, y1)) = tile_box(s, tile, width, height, s.tent_extent) else {
+            return;
+        };
+        let [m0, m1, m2, m3] = s.inverse;
+        let (m0, m2) = (Vec4::splat(m0), Vec4::splat(m2));
+        let u = Vec4::splat(s.u);
+        let key = KeyLanes::of(s);
+        // `Probe::of`.
+        let (lo, hi) = (Vec4::splat(s.z - s.tol), Vec4::splat(s.z + s.tol));
+        let last = Vec4::splat(x1 as f32);
+        for y in y0..=y1 {
+            let dy = y as f32 - s.v;
+            let (m1dy, m3dy) = (Vec4::splat(m1 * dy), Vec4::splat(m3 * dy));
+            let base = (y - tile.y0) * TILE;
+            for x in (x0..=x1).step_by(4) {
+                let xf = x as f32;
+                let xs = Vec4::new(xf, xf + 1.0, xf + 2.0, xf + 3.0);
+                let p = base + x - tile.x0;
+                let dx = xs - u;
+                let (sx, sy) = (m0 * dx + m1dy, m2 * dx + m3dy);
+                let (member, before) = self.roles(p, &key, lo, hi);
+                let behind = xs.cmple(last) & !member & before;
+                if behind.any() {
+                    self.add_behind(p, behind, tent4(sx.abs()), tent4(sy.abs()), &key);
+                }
+            }
+        }
+    }
+
+    /// `SurfaceKey::holds` (`member`) and `SurfaceKey::before` of the four pixels' surfaces
+    /// from `p` on against a splat (`key`, its probe's `lo`, `hi`); a pixel that is not open
+    /// (NaN depth) is neither.
+    #[inline]
+    fn roles(&self, p: usize, key: &KeyLanes, lo: Vec4, hi: Vec4) -> (BVec4A, BVec4A) {
+        let (z, layer) = (lanes(&self.z, p), lanes(&self.layer, p));
+        let observed = lanes(&self.observed, p);
+        let same = layer.cmpeq(key.layer) | (observed.cmpeq(Vec4::ONE) & key.observed);
+        let member = same & lo.cmple(z) & hi.cmpge(z);
+        let before = z.cmplt(key.z) | (z.cmpeq(key.z) & layer.cmplt(key.layer));
+        (member, before)
+    }
+
+    /// `PixelState::add_behind` in the lanes `behind` of the four pixels from `p` on, with the
+    /// tents `tx`, `ty` of their offsets: the weight `w_c = (α·g·tent(s_x))·tent(s_y)` (the
+    /// scalar code's order); where it is not zero, an observed splat behind a synthesised
+    /// surface adds it to `reserved`, and a visible one (`w_c ≥ MIN_VISIBLE_WEIGHT`) nearer than
+    /// the pixel's next surface becomes it. A lane that adds nothing adds `+0` (`reserved` is
+    /// never `−0`) and keeps its key.
+    #[inline]
+    fn add_behind(&mut self, p: usize, behind: BVec4A, tx: Vec4, ty: Vec4, key: &KeyLanes) {
+        let zero = Vec4::ZERO;
+        let w = key.scale * tx * ty;
+        let behind = behind & w.cmpne(zero);
+        if !behind.any() {
+            return;
+        }
+        let synthesised = !lanes(&self.observed, p).cmpeq(Vec4::ONE);
+        add(
+            &mut self.reserved,
+            p,
+            Vec4::select(behind & key.observed & synthesised, w, zero),
+        );
+        let (nz, nl) = (lanes(&self.next_z, p), lanes(&self.next_layer, p));
+        let nearer = key.z.cmplt(nz) | (key.z.cmpeq(nz) & key.layer.cmplt(nl));
+        let next = behind & w.cmpge(Vec4::splat(MIN_VISIBLE_WEIGHT)) & nearer;
+        if !next.any() {
+            return;
+        }
+        let no = lanes(&self.next_observed, p);
+        let ko = Vec4::select(key.observed, Vec4::ONE, zero);
+        Vec4::select(next, key.z, nz).write_to_slice(&mut self.next_z[p..p + 4]);
+        Vec4::select(next, key.layer, nl).write_to_slice(&mut self.next_layer[p..p + 4]);
+        Vec4::select(next, ko, no).write_to_slice(&mut self.next_observed[p..p + 4]);
     }
 
     /// Four pixels of a splat's row: tile pixels `p..p + 4` at pixel columns `xs`, `valid` the
-    /// lanes within the splat's box, `m1dy`/`m3dy` the row's terms of `s = M'⁻¹·d`. Returns
-    /// the valid lanes (bits) whose surface the splat is behind, within its tent's support.
-    /// `SELECT`: add the colour products through selects (a colour that is not finite, where
-    /// `0·c` would be NaN).
+    /// lanes within the splat's box, `m1dy`/`m3dy` the row's terms of `s = M'⁻¹·d`: the `Member`
+    /// and `Behind` roles. `SELECT`: add the colour products through selects (a colour that is
+    /// not finite, where `0·c` would be NaN).
     #[inline]
     fn add_group<const SELECT: bool>(
         &mut self,
@@ -207,30 +309,26 @@ impl FrontSums {
         m1dy: Vec4,
         m3dy: Vec4,
         s: &SplatLanes,
-    ) -> u32 {
+    ) {
         let dx = xs - s.u;
         let sx = s.m0 * dx + m1dy;
         let sy = s.m2 * dx + m3dy;
-        let (z, layer) = (lanes(&self.z, p), lanes(&self.layer, p));
-        // `SurfaceKey::holds` and `SurfaceKey::before` (a NaN depth: neither).
-        let observed = lanes(&self.observed, p);
-        let same = layer.cmpeq(s.layer) | (observed.cmpeq(Vec4::ONE) & s.observed);
-        let member = same & s.lo.cmple(z) & s.hi.cmpge(z);
-        let before = z.cmplt(s.z) | (z.cmpeq(s.z) & layer.cmplt(s.layer));
+        let (member, before) = self.roles(p, &s.key, s.lo, s.hi);
         let (ax, ay) = (sx.abs(), sy.abs());
-        // Only where the tent reaches (`|s_x| < 1`, `|s_y| < 1`): elsewhere `add_behind`'s
-        // weight is exactly zero and it returns at once (a NaN offset fails both tests as it
-        // would).
-        let in_tent = ax.cmplt(Vec4::ONE) & ay.cmplt(Vec4::ONE);
-        let behind = (valid & !member & before & in_tent).bitmask();
+        let (tx, ty) = (tent4(ax), tent4(ay));
+        // The pixels whose surface the splat is behind, where its tent reaches (`|s_x| < 1`,
+        // `|s_y| < 1`; elsewhere its weight there is exactly zero).
+        let behind = valid & !member & before & ax.cmplt(Vec4::ONE) & ay.cmplt(Vec4::ONE);
+        if behind.any() {
+            self.add_behind(p, behind, tx, ty, &s.key);
+        }
         // `kernel_weights`.
         let inside = ax.cmplt(s.support_u) & ay.cmplt(s.support_v);
         let take = valid & member & inside;
         if !take.any() {
             // No lane is a sample: every sum would add +0 (see the module docs).
-            return behind;
+            return;
         }
-        let (tx, ty) = (tent4(ax), tent4(ay));
         let t = tx * ty;
         let k = if s.sharp {
             kernel4(ax, tx, s.gamma_u, s.kernel) * kernel4(ay, ty, s.gamma_v, s.kernel)
@@ -240,7 +338,7 @@ impl FrontSums {
         let zero = Vec4::ZERO;
         let t = Vec4::select(take, t, zero);
         let k = Vec4::select(take, k, zero);
-        let (w_c, w) = (s.scale * t, s.scale * k);
+        let (w_c, w) = (s.key.scale * t, s.key.scale * k);
         let (cw, kw) = (s.rho * w_c, s.rho * w);
         add(&mut self.geometry, p, s.area * t);
         add(&mut self.coverage, p, w_c);
@@ -281,38 +379,10 @@ impl FrontSums {
             let bits = lane_sides(packed, lane) | (((samples >> lane) & 1) * s.sub_pixel);
             *flags = f32::from_bits(flags.to_bits() | bits);
         }
-        let offset = (s.z * lanes(&self.inv_front, p) - Vec4::ONE)
+        let offset = (s.key.z * lanes(&self.inv_front, p) - Vec4::ONE)
             .max(Vec4::splat(-MAX_DEPTH_OFFSET))
             .min(Vec4::splat(MAX_DEPTH_OFFSET));
         add(&mut self.depth, p, Vec4::select(take, w_c * offset, zero));
-        behind
-    }
-}
-
-/// The `Behind` role of splat `s` on row `y` at the columns `x0 + j` for the set bits `j` of
-/// `lanes`: the pixels whose (open) surface the splat is behind, as the front pass's lanes found
-/// them (`!holds && before`: exactly `PixelState::classify`'s `Behind`), one at a time. The
-/// lanes leave out the pixels beyond the splat's tent, where `add_behind` adds nothing.
-pub(super) fn behind_pixels(
-    pixels: &mut [PixelState; N],
-    s: &Splat,
-    splat: &SplatLanes,
-    tile: &TileRect,
-    y: usize,
-    x0: usize,
-    mut lanes: u32,
-) {
-    let [m0, m1, m2, m3] = s.inverse;
-    let dy = y as f32 - s.v;
-    let base = (y - tile.y0) * TILE;
-    while lanes != 0 {
-        let x = x0 + lanes.trailing_zeros() as usize;
-        lanes &= lanes - 1;
-        let dx = x as f32 - s.u;
-        let (sx, sy) = (m0 * dx + m1 * dy, m2 * dx + m3 * dy);
-        let px = &mut pixels[base + x - tile.x0];
-        debug_assert!(px.open() && px.classify(&splat.probe, true) == Role::Behind);
-        px.add_behind(s, &splat.probe, sx, sy);
     }
 }
 
@@ -337,26 +407,45 @@ fn add(sums: &mut [f32; G], p: usize, v: Vec4) {
     (lanes(sums, p) + v).write_to_slice(&mut sums[p..p + 4]);
 }
 
-/// A splat's values for the front pass, broadcast to four lanes.
-pub(super) struct SplatLanes {
-    /// The splat's membership test, for the pixels it is behind (one at a time).
-    pub(super) probe: Probe,
-    pub(super) u: Vec4,
-    pub(super) m0: Vec4,
-    pub(super) m2: Vec4,
+/// A splat's surface key and weight, broadcast to four lanes.
+pub(super) struct KeyLanes {
     pub(super) z: Vec4,
-    pub(super) lo: Vec4,
-    pub(super) hi: Vec4,
+    /// The layer (exact as `f32`).
     pub(super) layer: Vec4,
     /// All lanes set when the splat was observed.
     pub(super) observed: BVec4A,
+    /// `α·g`.
+    pub(super) scale: Vec4,
+}
+
+impl KeyLanes {
+    /// Splat `s`'s.
+    #[inline]
+    pub(super) fn of(s: &Splat) -> Self {
+        Self {
+            z: Vec4::splat(s.z),
+            layer: Vec4::splat(s.layer as f32),
+            observed: BVec4A::splat(s.observed),
+            scale: Vec4::splat(s.scale),
+        }
+    }
+}
+
+/// A splat's values for the front pass, broadcast to four lanes.
+pub(super) struct SplatLanes {
+    pub(super) key: KeyLanes,
+    pub(super) u: Vec4,
+    pub(super) m0: Vec4,
+    pub(super) m2: Vec4,
+    /// Its probe's `lo`, `hi` ([`Probe`]).
+    pub(super) lo: Vec4,
+    pub(super) hi: Vec4,
     pub(super) support_u: Vec4,
     pub(super) support_v: Vec4,
     pub(super) gamma_u: f32,
     pub(super) gamma_v: f32,
     pub(super) sharp: bool,
     pub(super) kernel: SplatKernel,
-    pub(super) scale: Vec4,
     pub(super) area: Vec4,
     pub(super) rho: Vec4,
     pub(super) colour: [Vec4; 3],
@@ -376,24 +465,19 @@ impl SplatLanes {
         supports: [f32; 2],
         kernel: SplatKernel,
     ) -> Self {
-        let o = s.observed;
         Self {
-            probe: *probe,
+            key: KeyLanes::of(s),
             u: Vec4::splat(s.u),
             m0: Vec4::splat(s.inverse[0]),
             m2: Vec4::splat(s.inverse[2]),
-            z: Vec4::splat(s.z),
             lo: Vec4::splat(probe.lo),
             hi: Vec4::splat(probe.hi),
-            layer: Vec4::splat(s.layer as f32),
-            observed: BVec4A::new(o, o, o, o),
             support_u: Vec4::splat(supports[0]),
             support_v: Vec4::splat(supports[1]),
             gamma_u: s.sharpness[0],
             gamma_v: s.sharpness[1],
             sharp: s.sharpness != [0.0; 2],
             kernel,
-            scale: Vec4::splat(s.scale),
             area: Vec4::splat(s.area),
             rho: Vec4::splat(rho),
             colour: c.map(Vec4::splat),

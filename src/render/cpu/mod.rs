@@ -81,7 +81,9 @@
 //! pixel of its surface), keeps its sums as arrays and adds a splat to four pixels of a row at
 //! once (`front.rs`), or, on x86-64 CPUs with AVX (detected at run time), to eight: two rows of
 //! up to four pixels or eight of one row (`avx.rs`), with the same arithmetic per pixel as the
-//! other passes, so the output is the same to the bit.
+//! other passes, so the output is the same to the bit. The next surface's bookkeeping (the
+//! splats *behind* a pixel's front surface, and the inpainted layers' splats farther than every
+//! surface of the tile) runs in the same lanes on arrays of its own.
 //!
 //! **Files.** `footprint.rs`: the footprint `M'`, the prefilter and the kernel; `tolerance.rs`:
 //! which depths are one surface; `surface.rs`: a pixel's surfaces and their compositing;
@@ -350,6 +352,11 @@ fn render_lanes(
                             if open.misses(s, extent) {
                                 continue;
                             }
+                            if surface == 0 && shape.is_none() {
+                                // Farther than every surface: only a candidate for the next.
+                                front.add_behind_only(s, &tile, width, height);
+                                continue;
+                            }
                             let colour = values[s.index as usize];
                             let probe = Probe::of(s);
                             let first = surface == 0;
@@ -363,7 +370,7 @@ fn render_lanes(
                                 let lanes = front::SplatLanes::new(
                                     s, &probe, colour, rho, supports, kernel,
                                 );
-                                front.add(&mut pixels, s, &lanes, &tile, width, height);
+                                front.add(s, &lanes, &tile, width, height);
                                 continue;
                             }
                             for_each_offset(s, &tile, width, height, extent, |p, sx, sy| {
@@ -1207,6 +1214,86 @@ pub(crate) mod tests {
             missed > 1000 && reached > 1000,
             "{missed} missed, {reached} reached"
         );
+    }
+
+    #[test]
+    fn the_front_pass_keeps_the_next_surface_as_the_scalar_rule_does() {
+        // `FrontSums::add_behind_only` (the `Behind` role four pixels at a time, on arrays)
+        // against `PixelState::classify` and `add_behind` pixel by pixel: the same `reserved`
+        // bits and the same next surface, on random surfaces (open or not, observed or
+        // synthesised, ties in depth and layer) and random splats, anisotropic and tiny.
+        let tile = TileRect {
+            x0: 16,
+            y0: 32,
+            w: TILE,
+            h: TILE,
+        };
+        let (width, height) = (64, 64);
+        let mut state = 0x2545_f491_u32;
+        let mut next = |n: u32| {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) % n
+        };
+        let (mut reserved, mut found) = (0, 0);
+        for _ in 0..100 {
+            let mut scalar = [PixelState::default(); TILE * TILE];
+            for px in scalar.iter_mut() {
+                if next(5) == 0 {
+                    continue;
+                }
+                px.cur = SurfaceKey {
+                    z: 1.0 + next(8) as f32 * 0.25,
+                    layer: next(3),
+                    observed: next(2) == 0,
+                };
+                px.inv_front = 1.0 / px.cur.z;
+            }
+            let mut lanes = scalar;
+            let mut front = front::FrontSums::new(false);
+            front.load(&lanes);
+            for _ in 0..40 {
+                let m = [0.2, 0.2, 0.2, 0.2].map(|lo: f32| {
+                    let v = lo + next(40) as f32 * 0.1;
+                    if next(2) == 0 { v } else { -v }
+                });
+                let det = m[0] * m[3] - m[1] * m[2];
+                if det.abs() < 1e-3 {
+                    continue;
+                }
+                let s = splats::Splat {
+                    u: 13.0 + next(88) as f32 / 4.0,
+                    v: 29.0 + next(88) as f32 / 4.0,
+                    z: 1.0 + next(12) as f32 * 0.25,
+                    tol: next(3) as f32 * 0.1,
+                    inverse: [m[3] / det, -m[1] / det, -m[2] / det, m[0] / det],
+                    tent_extent: [m[0].abs() + m[1].abs(), m[2].abs() + m[3].abs()],
+                    scale: [1.0, 0.5, 1e-3, 1e-5][next(4) as usize],
+                    layer: next(3),
+                    observed: next(2) == 0,
+                    ..splats::Splat::default()
+                };
+                let probe = Probe::of(&s);
+                for_each_offset(&s, &tile, width, height, s.tent_extent, |p, sx, sy| {
+                    let px = &mut scalar[p];
+                    if px.open() && px.classify(&probe, true) == Role::Behind {
+                        px.add_behind(&s, &probe, sx, sy);
+                    }
+                });
+                front.add_behind_only(&s, &tile, width, height);
+            }
+            front.store(&mut lanes);
+            for (a, b) in lanes.iter().zip(&scalar) {
+                assert_eq!(a.sums.reserved.to_bits(), b.sums.reserved.to_bits());
+                assert_eq!(
+                    (a.next.z.to_bits(), a.next.layer, a.next.observed),
+                    (b.next.z.to_bits(), b.next.layer, b.next.observed)
+                );
+                reserved += usize::from(b.sums.reserved > 0.0);
+                found += usize::from(b.next.z.is_finite());
+            }
+        }
+        // Both rules were exercised.
+        assert!(reserved > 1000 && found > 1000, "{reserved} {found}");
     }
 
     #[test]
