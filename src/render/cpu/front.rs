@@ -193,22 +193,13 @@ impl FrontSums {
         x0: usize,
         x1: usize,
     ) {
-        let [_, m1, _, m3] = s.inverse;
-        let last = Vec4::splat(x1 as f32);
-        let dy = y as f32 - s.v;
-        let (m1dy, m3dy) = (Vec4::splat(m1 * dy), Vec4::splat(m3 * dy));
-        let base = (y - tile.y0) * TILE;
-        for x in (x0..=x1).step_by(4) {
-            let xf = x as f32;
-            let xs = Vec4::new(xf, xf + 1.0, xf + 2.0, xf + 3.0);
-            let valid = xs.cmple(last);
-            let p = base + x - tile.x0;
+        for_each_group(s, tile, y, x0, x1, |p, xs, valid, m1dy, m3dy| {
             if splat.finite {
                 self.add_group::<false>(p, xs, valid, m1dy, m3dy, splat);
             } else {
                 self.add_group::<true>(p, xs, valid, m1dy, m3dy, splat);
             }
-        }
+        });
     }
 
     /// A splat farther than every open pixel's surface of the tile beyond its tolerance (it can
@@ -224,29 +215,21 @@ impl FrontSums {
         let Some((x0, x1, y0, y1)) = tile_box(s, tile, width, height, s.tent_extent) else {
             return;
         };
-        let [m0, m1, m2, m3] = s.inverse;
-        let (m0, m2) = (Vec4::splat(m0), Vec4::splat(m2));
+        let (m0, m2) = (Vec4::splat(s.inverse[0]), Vec4::splat(s.inverse[2]));
         let u = Vec4::splat(s.u);
         let key = KeyLanes::of(s);
         // `Probe::of`.
         let (lo, hi) = (Vec4::splat(s.z - s.tol), Vec4::splat(s.z + s.tol));
-        let last = Vec4::splat(x1 as f32);
         for y in y0..=y1 {
-            let dy = y as f32 - s.v;
-            let (m1dy, m3dy) = (Vec4::splat(m1 * dy), Vec4::splat(m3 * dy));
-            let base = (y - tile.y0) * TILE;
-            for x in (x0..=x1).step_by(4) {
-                let xf = x as f32;
-                let xs = Vec4::new(xf, xf + 1.0, xf + 2.0, xf + 3.0);
-                let p = base + x - tile.x0;
+            for_each_group(s, tile, y, x0, x1, |p, xs, valid, m1dy, m3dy| {
                 let dx = xs - u;
                 let (sx, sy) = (m0 * dx + m1dy, m2 * dx + m3dy);
                 let (member, before) = self.roles(p, &key, lo, hi);
-                let behind = xs.cmple(last) & !member & before;
+                let behind = valid & !member & before;
                 if behind.any() {
                     self.add_behind(p, behind, tent4(sx.abs()), tent4(sy.abs()), &key);
                 }
-            }
+            });
         }
     }
 
@@ -393,6 +376,30 @@ impl FrontSums {
 #[inline]
 pub(super) fn lane_sides(packed: u32, lane: usize) -> u32 {
     ((((packed >> lane) & 0x1111) * 0x249) >> 9) & 0xf
+}
+
+/// Calls `f(p, xs, valid, m1dy, m3dy)` for row `y` of splat `s`'s box in `tile`, columns
+/// `x0..=x1`, four at a time: `p` the first tile pixel, `xs` the four pixel columns, `valid`
+/// the lanes within the box, `m1dy`, `m3dy` the row's terms of `s = M'⁻¹·d`.
+#[inline]
+fn for_each_group(
+    s: &Splat,
+    tile: &TileRect,
+    y: usize,
+    x0: usize,
+    x1: usize,
+    mut f: impl FnMut(usize, Vec4, BVec4A, Vec4, Vec4),
+) {
+    let [_, m1, _, m3] = s.inverse;
+    let last = Vec4::splat(x1 as f32);
+    let dy = y as f32 - s.v;
+    let (m1dy, m3dy) = (Vec4::splat(m1 * dy), Vec4::splat(m3 * dy));
+    let base = (y - tile.y0) * TILE;
+    for x in (x0..=x1).step_by(4) {
+        let xf = x as f32;
+        let xs = Vec4::new(xf, xf + 1.0, xf + 2.0, xf + 3.0);
+        f(base + x - tile.x0, xs, xs.cmple(last), m1dy, m3dy);
+    }
 }
 
 /// The four values of `sums` from `p` on.

@@ -1162,22 +1162,31 @@ pub(crate) mod tests {
         assert!((f.coverage.at(0, 0) - 0.75).abs() < 1e-6);
     }
 
-    #[test]
-    fn a_splat_missing_the_open_rectangle_reaches_none_of_its_pixels() {
-        // `OpenRect::misses` against the pixels `for_each_offset` visits, on centres and
-        // extents that land on, just before and just after whole pixels.
+    /// A whole tile at (16, 32) of a 64×64 frame: `(tile, width, height)`.
+    fn inner_tile() -> (TileRect, usize, usize) {
         let tile = TileRect {
             x0: 16,
             y0: 32,
             w: TILE,
             h: TILE,
         };
-        let (width, height) = (64, 64);
-        let mut state = 0x9e37_79b9_u32;
-        let mut next = |n: u32| {
+        (tile, 64, 64)
+    }
+
+    /// A deterministic generator of numbers below `n` (a linear congruential one).
+    fn lcg(mut state: u32) -> impl FnMut(u32) -> u32 {
+        move |n| {
             state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
             (state >> 8) % n
-        };
+        }
+    }
+
+    #[test]
+    fn a_splat_missing_the_open_rectangle_reaches_none_of_its_pixels() {
+        // `OpenRect::misses` against the pixels `for_each_offset` visits, on centres and
+        // extents that land on, just before and just after whole pixels.
+        let (tile, width, height) = inner_tile();
+        let mut next = lcg(0x9e37_79b9_u32);
         let (mut missed, mut reached) = (0, 0);
         for _ in 0..20_000 {
             let quarter = |n: u32, next: &mut dyn FnMut(u32) -> u32| next(n) as f32 / 4.0;
@@ -1222,18 +1231,8 @@ pub(crate) mod tests {
         // against `PixelState::classify` and `add_behind` pixel by pixel: the same `reserved`
         // bits and the same next surface, on random surfaces (open or not, observed or
         // synthesised, ties in depth and layer) and random splats, anisotropic and tiny.
-        let tile = TileRect {
-            x0: 16,
-            y0: 32,
-            w: TILE,
-            h: TILE,
-        };
-        let (width, height) = (64, 64);
-        let mut state = 0x2545_f491_u32;
-        let mut next = |n: u32| {
-            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (state >> 8) % n
-        };
+        let (tile, width, height) = inner_tile();
+        let mut next = lcg(0x2545_f491_u32);
         let (mut reserved, mut found) = (0, 0);
         for _ in 0..100 {
             let mut scalar = [PixelState::default(); TILE * TILE];
