@@ -261,7 +261,7 @@ fn group<const ROW: bool>(
     if _mm256_movemask_ps(behind) != 0 {
         add_behind::<ROW>(sums, p, behind, tx, ty, s);
     }
-    // `kernel_weights`.
+    // The kernel (`kernel_1d` along each axis) within its support.
     let inside = _mm256_and_ps(
         _mm256_cmp_ps::<_CMP_LT_OS>(ax, s.support_u),
         _mm256_cmp_ps::<_CMP_LT_OS>(ay, s.support_v),

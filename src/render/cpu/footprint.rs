@@ -273,25 +273,3 @@ pub const SUB_PIXEL: u8 = 16;
 pub fn sub_pixel_bit(sub_pixel: bool) -> u8 {
     if sub_pixel { SUB_PIXEL } else { 0 }
 }
-
-/// `(tent(s_x)·tent(s_y), k_γu(s_x)·k_γv(s_y))` at a source-grid offset ([`kernel_1d`]);
-/// `supports` are `support(γ_u)`, `support(γ_v)` ([`support`]), computed once per splat.
-#[inline]
-pub fn kernel_weights(
-    sx: f32,
-    sy: f32,
-    gamma: [f32; 2],
-    supports: [f32; 2],
-    kernel: SplatKernel,
-) -> (f32, f32) {
-    if !(sx.abs() < supports[0] && sy.abs() < supports[1]) {
-        return (0.0, 0.0);
-    }
-    let w_c = tent(sx) * tent(sy);
-    let w = if gamma == [0.0; 2] {
-        w_c
-    } else {
-        kernel_1d(sx, gamma[0], kernel) * kernel_1d(sy, gamma[1], kernel)
-    };
-    (w_c, w)
-}

@@ -305,7 +305,7 @@ impl FrontSums {
         if behind.any() {
             self.add_behind(p, behind, tx, ty, &s.key);
         }
-        // `kernel_weights`.
+        // The kernel (`kernel_1d` along each axis) within its support.
         let inside = ax.cmplt(s.support_u) & ay.cmplt(s.support_v);
         let take = valid & member & inside;
         if !take.any() {

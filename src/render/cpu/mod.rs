@@ -111,8 +111,8 @@ mod surface;
 mod tolerance;
 
 pub use footprint::{
-    Footprint, MAX_ANISOTROPY, SUB_PIXEL, SURROUNDED, dilation, footprint, kernel_1d,
-    kernel_weights, sharpness, sides_of, source_pixel_size, sub_pixel_bit, support,
+    Footprint, MAX_ANISOTROPY, SUB_PIXEL, SURROUNDED, dilation, footprint, kernel_1d, sharpness,
+    sides_of, source_pixel_size, sub_pixel_bit, support,
 };
 use splats::{Projector, TileRect, for_each_offset, project_and_bin, recycle};
 use surface::{PixelState, Probe, Role, SurfaceKey};
@@ -316,7 +316,6 @@ fn render_lanes(
                     if !pixels.iter().any(PixelState::open) {
                         break;
                     }
-                    let shape = (surface == 0).then_some(kernel);
                     // The tile's nearest and farthest current surface: a splat nearer than
                     // every one (beyond its tolerance) plays no part, and one farther than every
                     // one can only be the next surface (its tent is enough). Neither changes
@@ -343,8 +342,8 @@ fn render_lanes(
                             }
                             // Only the front pass uses the kernel, and only for splats that can be
                             // samples of a pixel's surface; elsewhere the tent is enough.
-                            let shape = if s.z - s.tol > z_hi { None } else { shape };
-                            let extent = if shape.is_some() {
+                            let far = s.z - s.tol > z_hi;
+                            let extent = if surface == 0 && !far {
                                 s.extent
                             } else {
                                 s.tent_extent
@@ -352,48 +351,36 @@ fn render_lanes(
                             if open.misses(s, extent) {
                                 continue;
                             }
-                            if surface == 0 && shape.is_none() {
+                            if surface == 0 && far {
                                 // Farther than every surface: only a candidate for the next.
                                 front.add_behind_only(s, &tile, width, height);
                                 continue;
                             }
                             let colour = values[s.index as usize];
                             let probe = Probe::of(s);
-                            let first = surface == 0;
-                            let supports = s.sharpness.map(|g| support(g, kernel));
                             let rho = if s.observed {
                                 1.0
                             } else {
                                 SYNTHESISED_COLOUR_WEIGHT
                             };
-                            if first && shape.is_some() {
+                            if surface == 0 {
+                                let supports = s.sharpness.map(|g| support(g, kernel));
                                 let lanes = front::SplatLanes::new(
                                     s, &probe, colour, rho, supports, kernel,
                                 );
                                 front.add(s, &lanes, &tile, width, height);
                                 continue;
                             }
+                            // The surfaces behind the front one, with the tent.
                             for_each_offset(s, &tile, width, height, extent, |p, sx, sy| {
                                 let px = &mut pixels[p];
                                 if !px.open() {
                                     return;
                                 }
-                                match px.classify(&probe, first) {
+                                match px.classify(&probe, false) {
                                     Role::Member => {
-                                        let (t, k) = match shape {
-                                            Some(kernel) => kernel_weights(
-                                                sx,
-                                                sy,
-                                                s.sharpness,
-                                                supports,
-                                                kernel,
-                                            ),
-                                            None => {
-                                                let t = tent(sx) * tent(sy);
-                                                (t, t)
-                                            }
-                                        };
-                                        px.add_sample(s, colour, rho, (t, k), (sx, sy));
+                                        let t = tent(sx) * tent(sy);
+                                        px.add_sample(s, colour, rho, (t, t), (sx, sy));
                                     }
                                     Role::Behind => px.add_behind(s, &probe, sx, sy),
                                     Role::None => {}
