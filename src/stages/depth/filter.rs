@@ -19,6 +19,19 @@ fn guided_coefficients(
     radius_px: usize,
     epsilon: f32,
 ) -> (GrayRaster, GrayRaster) {
+    guided_coefficients_with(guide, input, radius_px, epsilon, None)
+}
+
+/// [`guided_coefficients`] with `extra_variance` (box-averaged, same size) added to the guide's
+/// variance in every window: the variance the guide has below `guide`'s resolution when the
+/// coefficients are applied to a finer guide (see [`guided_upsample`]).
+fn guided_coefficients_with(
+    guide: &GrayRaster,
+    input: &GrayRaster,
+    radius_px: usize,
+    epsilon: f32,
+    extra_variance: Option<&GrayRaster>,
+) -> (GrayRaster, GrayRaster) {
     let mean_i = box_mean(guide, radius_px);
     let mean_p = box_mean(input, radius_px);
     let corr_ip = box_mean(&product(guide, input), radius_px);
@@ -31,7 +44,8 @@ fn guided_coefficients(
         let mi = mean_i.data()[i];
         let mp = mean_p.data()[i];
         let cov = corr_ip.data()[i] - mi * mp;
-        let var = (corr_ii.data()[i] - mi * mi).max(0.0);
+        let extra = extra_variance.map_or(0.0, |v| v.data()[i]);
+        let var = (corr_ii.data()[i] - mi * mi).max(0.0) + extra;
         let ai = cov / (var + eps);
         a[i] = ai;
         b[i] = mp - ai * mi;
@@ -112,6 +126,17 @@ pub fn fast_guided_filter(
 /// full-resolution guide, `q = A↑·I + B↑` (the fast guided filter of He & Sun 2015 for an input
 /// that is already small). `radius_px` is in low-resolution pixels. The outputs have the
 /// guide's size; an input of another size than the first is returned resized.
+///
+/// The slope `A` is fitted against the variance the guide has *at full resolution* in each
+/// window: the reduced guide's variance plus the mean variance within its pixels
+/// (`mean(I²) − mean(I)²` over the full-resolution pixels each one averages). Fitted against the
+/// reduced guide alone, `A` meets texture finer than the low resolution (ripples, pebbles,
+/// grain) only when it is applied, and copies it into the output at the full slope: a depth
+/// that follows every ripple's brightness, torn apart by the first camera move. With the fine
+/// variance in the fit, that texture counts as guide variance the input does not follow, so
+/// the slope shrinks by `var / (var + var_fine)`; an edge, whose variance is there at both
+/// resolutions, keeps most of its slope (and texture right beside it is still copied at that
+/// slope: the model is linear).
 pub fn guided_upsample(
     guide: &GrayRaster,
     inputs: &[&GrayRaster],
@@ -128,12 +153,27 @@ pub fn guided_upsample(
     }
     let guide_clean = guide.map(|v| if v.is_finite() { v } else { 0.0 });
     let guide_small = guide_clean.resized(lw, lh);
+    let radius = radius_px.max(1);
+    let fine_variance = (guide.size() != first.size()).then(|| {
+        let mean_sq = guide_clean.map(|v| v * v).resized(lw, lh);
+        let within = Raster::from_fn(lw, lh, |x, y| {
+            let m = guide_small.at(x, y);
+            (mean_sq.at(x, y) - m * m).max(0.0)
+        });
+        box_mean(&within, radius)
+    });
     let coefficients: Vec<Option<(GrayRaster, GrayRaster)>> = inputs
         .iter()
         .map(|input| {
             input.same_size(first).then(|| {
                 let clean = input.map(|v| if v.is_finite() { v } else { 0.0 });
-                guided_coefficients(&guide_small, &clean, radius_px.max(1), epsilon)
+                guided_coefficients_with(
+                    &guide_small,
+                    &clean,
+                    radius,
+                    epsilon,
+                    fine_variance.as_ref(),
+                )
             })
         })
         .collect();
@@ -323,6 +363,48 @@ mod tests {
         let one = Raster::new(1, 1, 0.3f32);
         assert!((guided_upsample(&one, &[&one], 2, 1e-2)[0].at(0, 0) - 0.3).abs() < 1e-6);
         assert!(guided_upsample(&one, &[], 2, 1e-2).is_empty());
+    }
+
+    /// A guide that brightens left to right (0.2 → 0.8 over 80 px) with a checkerboard of ±0.1
+    /// on top, finer than the low resolution (4× reduced: every low pixel averages it away), and
+    /// an input that follows the reduced guide exactly (slope 1). With a negligible ε the fit
+    /// against the reduced guide alone has slope 1 and copies the checkerboard at ±0.1 (a
+    /// neighbour difference of 0.2); with the fine variance in the fit the slope is about
+    /// `var/(var + 0.01)` with the ramp's `var` ≈ 0.002 in a window, so the copy shrinks about
+    /// six-fold, and the output still follows the ramp.
+    #[test]
+    fn guided_upsample_fits_the_slope_against_the_full_resolution_variance() {
+        let (w, h) = (80, 40);
+        let ramp = |x: usize| 0.2 + 0.6 * (x as f32 + 0.5) / w as f32;
+        let checker = |x: usize, y: usize| if (x + y).is_multiple_of(2) { 0.1 } else { -0.1 };
+        let guide = Raster::from_fn(w, h, |x, y| ramp(x) + checker(x, y));
+        let low = guide.resized(20, 10);
+        let out = guided_upsample(&guide, &[&low], 2, 1e-6).remove(0);
+        let (mut ripple, mut n) = (0.0f32, 0.0f32);
+        for y in 8..32 {
+            for x in 8..71 {
+                ripple += (out.at(x + 1, y) - out.at(x, y)).abs();
+                n += 1.0;
+                // The 2×2 mean (the checkerboard cancels) follows the ramp.
+                let mean =
+                    (out.at(x, y) + out.at(x + 1, y) + out.at(x, y + 1) + out.at(x + 1, y + 1))
+                        / 4.0;
+                let expected = (ramp(x) + ramp(x + 1)) / 2.0;
+                assert!(
+                    (mean - expected).abs() < 0.02,
+                    "({x}, {y}): {mean} vs {expected}"
+                );
+            }
+        }
+        let ripple = ripple / n;
+        assert!(
+            ripple < 0.06,
+            "checkerboard copied into the output: {ripple}"
+        );
+        // Without texture the guide is the ramp itself, and so is the output.
+        let smooth = Raster::from_fn(w, h, |x, _| ramp(x));
+        let out = guided_upsample(&smooth, &[&smooth.resized(20, 10)], 2, 1e-6).remove(0);
+        assert!((8..72).all(|x| (out.at(x, 20) - ramp(x)).abs() < 0.01));
     }
 
     #[test]

@@ -102,7 +102,7 @@ pub struct ClassicalDepthParams {
     pub far_plane_factor: f32,
     /// Radius of the edge-aware refinement, fraction of the longer image side. Default 0.0125.
     pub refine_radius: f32,
-    /// Regulariser of the guided filter (squared luma units). Default 0.01.
+    /// Regulariser of the guided filter (squared luma units). Default 0.03.
     pub refine_epsilon: f32,
 }
 
@@ -140,7 +140,7 @@ impl Default for ClassicalDepthParams {
             max_depth_ratio: 100.0,
             far_plane_factor: 100.0,
             refine_radius: 0.0125,
-            refine_epsilon: 0.01,
+            refine_epsilon: 0.03,
         }
     }
 }
