@@ -15,10 +15,17 @@ use image::{DynamicImage, ImageDecoder, ImageReader, Limits};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-/// Largest accepted width or height, pixels.
-pub const MAX_SIDE: u32 = 16_384;
-/// Largest accepted pixel count (40 megapixels: the point cloud needs ~100 bytes a pixel).
-pub const MAX_PIXELS: u64 = 40_000_000;
+/// Largest accepted width or height, pixels (JPEG's own limit): a 20000 × 2000 panorama is a
+/// photo like any other, since the scene is built at a working size
+/// ([`crate::scene::WorkingSize`]), not at the photo's.
+pub const MAX_SIDE: u32 = 65_535;
+/// Largest accepted pixel count (250 megapixels, past every camera sold today): only the decoded
+/// file is held at this size (at most 8 bytes a pixel, 16-bit RGBA), every stage runs at the
+/// working size. Whether a photo's decoded pixels fit the memory budget is the scene builder's
+/// check ([`ImageHeader::decode_bytes`]).
+pub const MAX_PIXELS: u64 = 250_000_000;
+/// Largest decoded buffer the decoders may allocate, bytes (16-bit RGBA at [`MAX_PIXELS`]).
+const MAX_DECODE_BYTES: u64 = MAX_PIXELS * 8;
 
 /// A decoded image.
 #[derive(Clone, Debug)]
@@ -73,16 +80,64 @@ pub fn load_image(path: &Path) -> Result<LoadedImage> {
 
 /// Decodes an image file as [`load_image`] does (regular file, size limits, complete JPEG,
 /// EXIF orientation applied) but keeps the decoded pixels as they are: for masks and other
-/// inputs that are not photos.
+/// inputs that are not photos, and for photos that are downsampled to a working size
+/// ([`load_at_size`]) without a full-resolution float copy.
 pub fn decode_image(path: &Path) -> Result<DynamicImage> {
+    let bytes = read_image_file(path)?;
+    let (decoder, header) = open_decoder(path, &bytes)?;
+    let mut image =
+        DynamicImage::from_decoder(decoder).map_err(|e| Error::file(path, decode_message(&e)))?;
+    image.apply_orientation(header.orientation);
+    Ok(image)
+}
+
+/// What an image file's header says, read without decoding its pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ImageHeader {
+    /// Width and height as the photo is seen (after the EXIF orientation).
+    pub size: (usize, usize),
+    /// Bytes of the decoded pixels in the file's own sample format.
+    pub pixel_bytes: u64,
+    /// The EXIF orientation.
+    orientation: image::metadata::Orientation,
+}
+
+impl ImageHeader {
+    /// Peak bytes of decoding: the decoded pixels, twice when the EXIF orientation turns the
+    /// image a quarter (the rotation copies it).
+    pub fn decode_bytes(&self) -> u64 {
+        use image::metadata::Orientation as O;
+        let turned = matches!(
+            self.orientation,
+            O::Rotate90 | O::Rotate270 | O::Rotate90FlipH | O::Rotate270FlipH
+        );
+        self.pixel_bytes * if turned { 2 } else { 1 }
+    }
+}
+
+/// Reads an image file's header (size after the EXIF orientation, decoded bytes) with the same
+/// checks as [`decode_image`], without decoding the pixels.
+pub fn read_header(path: &Path) -> Result<ImageHeader> {
+    let bytes = read_image_file(path)?;
+    Ok(open_decoder(path, &bytes)?.1)
+}
+
+fn read_image_file(path: &Path) -> Result<Vec<u8>> {
     check_regular_file(path)?;
-    let bytes = std::fs::read(path).map_err(|e| Error::file(path, e))?;
-    let mut reader = ImageReader::new(std::io::Cursor::new(&bytes[..]))
+    std::fs::read(path).map_err(|e| Error::file(path, e))
+}
+
+/// The decoder of `bytes` (the contents of `path`) with its header checked against the limits.
+fn open_decoder<'a>(
+    path: &Path,
+    bytes: &'a [u8],
+) -> Result<(Box<dyn ImageDecoder + 'a>, ImageHeader)> {
+    let mut reader = ImageReader::new(std::io::Cursor::new(bytes))
         .with_guessed_format()
         .map_err(|e| Error::file(path, e))?;
     match reader.format() {
         None => return Err(Error::file(path, "is not a recognised image format")),
-        Some(image::ImageFormat::Jpeg) if !jpeg_is_complete(&bytes) => {
+        Some(image::ImageFormat::Jpeg) if !jpeg_is_complete(bytes) => {
             return Err(Error::file(
                 path,
                 "corrupt or truncated JPEG (no end-of-image marker after the last scan)",
@@ -93,7 +148,7 @@ pub fn decode_image(path: &Path) -> Result<DynamicImage> {
     // Width and height are checked by `check_size` right after the header is read (so the
     // message can name the size); the allocation limit guards the decoders themselves.
     let mut limits = Limits::default();
-    limits.max_alloc = Some(MAX_PIXELS * 16);
+    limits.max_alloc = Some(MAX_DECODE_BYTES);
     reader.limits(limits);
     let mut decoder = reader
         .into_decoder()
@@ -103,10 +158,15 @@ pub fn decode_image(path: &Path) -> Result<DynamicImage> {
     let orientation = decoder
         .orientation()
         .map_err(|e| Error::file(path, decode_message(&e)))?;
-    let mut image =
-        DynamicImage::from_decoder(decoder).map_err(|e| Error::file(path, decode_message(&e)))?;
-    image.apply_orientation(orientation);
-    Ok(image)
+    let mut header = ImageHeader {
+        size: (width as usize, height as usize),
+        pixel_bytes: decoder.total_bytes(),
+        orientation,
+    };
+    if header.decode_bytes() != header.pixel_bytes {
+        header.size = (height as usize, width as usize);
+    }
+    Ok((Box::new(decoder), header))
 }
 
 /// True when a JPEG byte stream has an end-of-image marker (`FF D9`) after its last
@@ -134,14 +194,7 @@ fn decode_message(e: &image::ImageError) -> String {
 /// Converts a decoded image into rasters.
 pub fn from_dynamic(image: &DynamicImage) -> LoadedImage {
     let (w, h) = (image.width() as usize, image.height() as usize);
-    let bits_per_channel = match image {
-        DynamicImage::ImageLuma8(_)
-        | DynamicImage::ImageLumaA8(_)
-        | DynamicImage::ImageRgb8(_)
-        | DynamicImage::ImageRgba8(_) => 8,
-        DynamicImage::ImageRgb32F(_) | DynamicImage::ImageRgba32F(_) => 32,
-        _ => 16,
-    };
+    let bits_per_channel = bits_of(image);
     let rgb32 = image.to_rgb32f();
     let rgb = Raster::from_vec(
         w,
@@ -167,6 +220,171 @@ pub fn from_dynamic(image: &DynamicImage) -> LoadedImage {
         rgb,
         alpha,
         bits_per_channel,
+    }
+}
+
+/// The photo `image` at `size`: [`from_dynamic`] when `size` is the image's own (the same
+/// bytes), else an area-weighted downsample (each output pixel the mean of the source area it
+/// covers, fractional pixels weighted by their overlap; colour averaged with alpha as weight,
+/// so a transparent pixel's colour does not bleed) read straight from the decoded samples:
+/// no full-resolution float copy is made. `size` is clamped to `1 ..= ` the image's size.
+pub fn load_at_size(image: &DynamicImage, size: (usize, usize)) -> LoadedImage {
+    let (w, h) = (image.width() as usize, image.height() as usize);
+    let size = (size.0.clamp(1, w.max(1)), size.1.clamp(1, h.max(1)));
+    if size == (w, h) {
+        return from_dynamic(image);
+    }
+    let bits_per_channel = bits_of(image);
+    let has_alpha = image.color().has_alpha();
+    let area =
+        |raw: &(dyn Fn(usize, usize, &mut [f32; 4]) + Sync)| area_downsample(w, h, size, raw);
+    let (rgb, alpha) = match image {
+        DynamicImage::ImageLuma8(b) => {
+            area(&|x, y, px| px_of(&b.as_raw()[y * w + x..][..1], px, 255.0))
+        }
+        DynamicImage::ImageLumaA8(b) => {
+            area(&|x, y, px| px_of(&b.as_raw()[2 * (y * w + x)..][..2], px, 255.0))
+        }
+        DynamicImage::ImageRgb8(b) => {
+            area(&|x, y, px| px_of(&b.as_raw()[3 * (y * w + x)..][..3], px, 255.0))
+        }
+        DynamicImage::ImageRgba8(b) => {
+            area(&|x, y, px| px_of(&b.as_raw()[4 * (y * w + x)..][..4], px, 255.0))
+        }
+        DynamicImage::ImageLuma16(b) => {
+            area(&|x, y, px| px_of(&b.as_raw()[y * w + x..][..1], px, 65535.0))
+        }
+        DynamicImage::ImageLumaA16(b) => {
+            area(&|x, y, px| px_of(&b.as_raw()[2 * (y * w + x)..][..2], px, 65535.0))
+        }
+        DynamicImage::ImageRgb16(b) => {
+            area(&|x, y, px| px_of(&b.as_raw()[3 * (y * w + x)..][..3], px, 65535.0))
+        }
+        DynamicImage::ImageRgba16(b) => {
+            area(&|x, y, px| px_of(&b.as_raw()[4 * (y * w + x)..][..4], px, 65535.0))
+        }
+        DynamicImage::ImageRgb32F(b) => {
+            area(&|x, y, px| px_of(&b.as_raw()[3 * (y * w + x)..][..3], px, 1.0))
+        }
+        DynamicImage::ImageRgba32F(b) => {
+            area(&|x, y, px| px_of(&b.as_raw()[4 * (y * w + x)..][..4], px, 1.0))
+        }
+        other => {
+            let rgba = other.to_rgba32f();
+            area(&|x, y, px| px_of(&rgba.as_raw()[4 * (y * w + x)..][..4], px, 1.0))
+        }
+    };
+    LoadedImage {
+        rgb,
+        alpha: has_alpha.then_some(alpha),
+        bits_per_channel,
+    }
+}
+
+/// One pixel's samples (grey, grey + alpha, RGB or RGBA) as sanitised `[r, g, b, a]` in
+/// `[0, 1]`.
+#[inline]
+fn px_of<T: Copy + Into<f64>>(samples: &[T], px: &mut [f32; 4], full: f64) {
+    let v = |i: usize| sanitise_unit((samples[i].into() / full) as f32);
+    *px = match samples.len() {
+        1 => [v(0), v(0), v(0), 1.0],
+        2 => [v(0), v(0), v(0), v(1)],
+        3 => [v(0), v(1), v(2), 1.0],
+        _ => [v(0), v(1), v(2), v(3)],
+    };
+}
+
+/// Per output index: the first source index and the weights of the consecutive sources whose
+/// cells `[j, j + 1)` overlap the output cell `[i·s, (i + 1)·s)`, `s = src/dst`; the weights are
+/// the overlaps, normalised (computed in `f64`: source indices past 2²⁴ stay exact).
+fn area_taps(src: usize, dst: usize) -> Vec<(usize, Vec<f32>)> {
+    let scale = src as f64 / dst as f64;
+    (0..dst)
+        .map(|i| {
+            let (a, b) = (i as f64 * scale, ((i + 1) as f64 * scale).min(src as f64));
+            let first = (a.floor() as usize).min(src - 1);
+            let last = ((b.ceil() as usize).max(first + 1)).min(src);
+            let weights: Vec<f64> = (first..last)
+                .map(|j| (b.min(j as f64 + 1.0) - a.max(j as f64)).max(0.0))
+                .collect();
+            let sum: f64 = weights.iter().sum();
+            let weights = if sum > 0.0 {
+                weights.iter().map(|w| (w / sum) as f32).collect()
+            } else {
+                vec![1.0 / weights.len() as f32; weights.len()]
+            };
+            (first, weights)
+        })
+        .collect()
+}
+
+/// The area-weighted downsample of a `w × h` image read pixel by pixel through `pixel` (writes
+/// `[r, g, b, a]`) to `size`: colour (alpha-weighted; plain where the area is all transparent)
+/// and alpha. Output rows are made in parallel.
+fn area_downsample(
+    w: usize,
+    h: usize,
+    size: (usize, usize),
+    pixel: &(dyn Fn(usize, usize, &mut [f32; 4]) + Sync),
+) -> (RgbRaster, GrayRaster) {
+    use rayon::prelude::*;
+    let (ow, oh) = size;
+    let (xtaps, ytaps) = (area_taps(w, ow), area_taps(h, oh));
+    let rows: Vec<(Vec<[f32; 3]>, Vec<f32>)> = ytaps
+        .par_iter()
+        .map(|(y0, wy)| {
+            // Per output pixel: Σ w·a·rgb, Σ w·a, Σ w·rgb.
+            let mut acc = vec![[0.0f32; 7]; ow];
+            let mut px = [0.0f32; 4];
+            for (dy, &wy) in wy.iter().enumerate() {
+                for ((x0, wx), a) in xtaps.iter().zip(acc.iter_mut()) {
+                    for (dx, &wx) in wx.iter().enumerate() {
+                        pixel(x0 + dx, y0 + dy, &mut px);
+                        let k = wx * wy;
+                        let ka = k * px[3];
+                        a[0] += ka * px[0];
+                        a[1] += ka * px[1];
+                        a[2] += ka * px[2];
+                        a[3] += ka;
+                        a[4] += k * px[0];
+                        a[5] += k * px[1];
+                        a[6] += k * px[2];
+                    }
+                }
+            }
+            acc.iter()
+                .map(|a| {
+                    let rgb = if a[3] > 1e-6 {
+                        [a[0] / a[3], a[1] / a[3], a[2] / a[3]]
+                    } else {
+                        [a[4], a[5], a[6]]
+                    };
+                    (rgb.map(sanitise_unit), sanitise_unit(a[3]))
+                })
+                .unzip()
+        })
+        .collect();
+    let mut rgb = Vec::with_capacity(ow * oh);
+    let mut alpha = Vec::with_capacity(ow * oh);
+    for (c, a) in rows {
+        rgb.extend(c);
+        alpha.extend(a);
+    }
+    (
+        Raster::from_vec(ow, oh, rgb).unwrap_or_else(|| Raster::new(ow, oh, [0.0; 3])),
+        Raster::from_vec(ow, oh, alpha).unwrap_or_else(|| Raster::new(ow, oh, 1.0)),
+    )
+}
+
+/// Bits per channel of a decoded image's samples.
+fn bits_of(image: &DynamicImage) -> u8 {
+    match image {
+        DynamicImage::ImageLuma8(_)
+        | DynamicImage::ImageLumaA8(_)
+        | DynamicImage::ImageRgb8(_)
+        | DynamicImage::ImageRgba8(_) => 8,
+        DynamicImage::ImageRgb32F(_) | DynamicImage::ImageRgba32F(_) => 32,
+        _ => 16,
     }
 }
 
@@ -401,6 +619,125 @@ mod tests {
         let e = load_image(&text).unwrap_err().to_string();
         assert!(e.contains("text.png"), "{e}");
         assert!(!e.contains('\n'));
+    }
+
+    #[test]
+    fn load_at_the_own_size_is_from_dynamic() {
+        let img = DynamicImage::ImageRgb8(image::RgbImage::from_fn(5, 3, |x, y| {
+            image::Rgb([(x * 40) as u8, (y * 80) as u8, 7])
+        }));
+        let a = load_at_size(&img, (5, 3));
+        let b = from_dynamic(&img);
+        assert_eq!(a.rgb.data(), b.rgb.data());
+        assert!(a.alpha.is_none());
+        assert_eq!(a.bits_per_channel, 8);
+    }
+
+    #[test]
+    fn area_downsample_averages_what_each_pixel_covers() {
+        // 4×2 → 2×1: each output pixel the mean of a 2×2 block.
+        let v = [[0u8, 10, 20, 30], [40, 50, 60, 70]];
+        let img = DynamicImage::ImageLuma8(image::GrayImage::from_fn(4, 2, |x, y| {
+            image::Luma([v[y as usize][x as usize]])
+        }));
+        let out = load_at_size(&img, (2, 1));
+        assert_eq!(out.rgb.size(), (2, 1));
+        let want = [25.0 / 255.0, 45.0 / 255.0];
+        for (got, want) in out.rgb.data().iter().zip(want) {
+            for c in got {
+                assert!((c - want).abs() < 1e-6, "{got:?} vs {want}");
+            }
+        }
+        // 3 → 2: the middle source pixel is split half and half.
+        let img = DynamicImage::ImageLuma8(image::GrayImage::from_fn(3, 1, |x, _| {
+            image::Luma([[0u8, 30, 60][x as usize]])
+        }));
+        let out = load_at_size(&img, (2, 1));
+        let got: Vec<f32> = out.rgb.data().iter().map(|p| p[0] * 255.0).collect();
+        assert!(
+            (got[0] - 10.0).abs() < 1e-4 && (got[1] - 50.0).abs() < 1e-4,
+            "{got:?}"
+        );
+    }
+
+    #[test]
+    fn area_downsample_weights_colour_by_alpha() {
+        // A transparent red pixel beside an opaque blue one: the mean is blue, half covered.
+        let img = DynamicImage::ImageRgba16(image::ImageBuffer::from_fn(2, 1, |x, _| {
+            if x == 0 {
+                image::Rgba([65535u16, 0, 0, 0])
+            } else {
+                image::Rgba([0, 0, 65535, 65535])
+            }
+        }));
+        let out = load_at_size(&img, (1, 1));
+        assert_eq!(out.bits_per_channel, 16);
+        let c = out.rgb.data()[0];
+        assert!(c[0].abs() < 1e-6 && (c[2] - 1.0).abs() < 1e-6, "{c:?}");
+        let a = out.alpha.expect("alpha kept").data()[0];
+        assert!((a - 0.5).abs() < 1e-6, "{a}");
+        // All transparent: the plain mean of the colour, alpha 0.
+        let img = DynamicImage::ImageRgba8(image::RgbaImage::from_fn(2, 2, |_, _| {
+            image::Rgba([200, 100, 0, 0])
+        }));
+        let out = load_at_size(&img, (1, 1));
+        assert!((out.rgb.data()[0][0] - 200.0 / 255.0).abs() < 1e-6);
+        assert_eq!(out.alpha.unwrap().data()[0], 0.0);
+    }
+
+    #[test]
+    fn area_downsample_to_one_pixel_and_odd_sizes() {
+        let img = DynamicImage::ImageRgb8(image::RgbImage::from_fn(7, 5, |x, y| {
+            image::Rgb([((x * 7 + y * 13) % 256) as u8, 128, 255])
+        }));
+        let one = load_at_size(&img, (1, 1));
+        let mean: f32 = (0..5)
+            .flat_map(|y| (0..7).map(move |x| ((x * 7 + y * 13) % 256) as f32 / 255.0))
+            .sum::<f32>()
+            / 35.0;
+        assert!((one.rgb.data()[0][0] - mean).abs() < 1e-5);
+        assert!((one.rgb.data()[0][2] - 1.0).abs() < 1e-6);
+        // A size of zero or above the image is clamped.
+        assert_eq!(load_at_size(&img, (0, 0)).rgb.size(), (1, 1));
+        assert_eq!(load_at_size(&img, (9, 9)).rgb.size(), (7, 5));
+        let odd = load_at_size(&img, (3, 4));
+        assert_eq!(odd.rgb.size(), (3, 4));
+        assert!(
+            odd.rgb
+                .data()
+                .iter()
+                .all(|p| p.iter().all(|c| (0.0..=1.0).contains(c)))
+        );
+    }
+
+    #[test]
+    fn area_taps_cover_every_source_once() {
+        for (src, dst) in [(7, 3), (4000, 1897), (20000, 447), (5, 5)] {
+            let taps = area_taps(src, dst);
+            let mut cover = vec![0.0f64; src];
+            let scale = src as f64 / dst as f64;
+            for (first, w) in &taps {
+                for (j, &wj) in w.iter().enumerate() {
+                    cover[first + j] += f64::from(wj) * scale;
+                }
+            }
+            for c in cover {
+                assert!((c - 1.0).abs() < 1e-4, "{src}→{dst}: {c}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_header_gives_the_oriented_size_without_decoding() {
+        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/exif_rotated.jpg");
+        let header = read_header(&p).unwrap();
+        let decoded = load_image(&p).unwrap();
+        assert_eq!(header.size, decoded.rgb.size());
+        assert!(header.decode_bytes() >= header.pixel_bytes);
+        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/evening_glow_320.jpg");
+        let header = read_header(&p).unwrap();
+        assert_eq!(header.size, (320, 200));
+        assert_eq!(header.decode_bytes(), 320 * 200 * 3);
     }
 
     #[test]

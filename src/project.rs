@@ -58,6 +58,81 @@ pub struct Project {
     /// folder as an argument).
     #[serde(default)]
     pub export: ExportSettings,
+    /// The working size the scene is built at and the memory budget.
+    #[serde(default)]
+    pub working: WorkingSettings,
+}
+
+/// Default cap on the automatic working size, megapixels (see `scene/working.rs`).
+pub const DEFAULT_MAX_MEGAPIXELS: f64 = 2.7;
+
+/// The project's working-size settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct WorkingSettings {
+    /// Force the working size: its long side in pixels (at most the photo's; the other side
+    /// keeps the photo's aspect). `None`: automatic.
+    pub long_side: Option<usize>,
+    /// Cap of the automatic working size, megapixels.
+    pub max_megapixels: f64,
+    /// Memory budget of a build and one frame, MiB. `None`: 60 % of the
+    /// machine's memory.
+    pub memory_budget_mib: Option<u64>,
+    /// The size (`[width, height]`) the project's pixel coordinates (depth strokes, motion
+    /// strokes, arrows and anchors) were made at; they are scaled to the working size when it
+    /// differs. `None`: they are in working pixels already.
+    pub coordinates_size: Option<[usize; 2]>,
+}
+
+impl Default for WorkingSettings {
+    fn default() -> Self {
+        Self {
+            long_side: None,
+            max_megapixels: DEFAULT_MAX_MEGAPIXELS,
+            memory_budget_mib: None,
+            coordinates_size: None,
+        }
+    }
+}
+
+impl WorkingSettings {
+    /// The factor from the project's pixel coordinates to those of a scene built at `size`;
+    /// `None` when they are the same (or the project does not say, [`Self::coordinates_size`]).
+    pub fn coordinate_scale(&self, size: [usize; 2]) -> Option<f32> {
+        let [w, h] = self.coordinates_size?;
+        if [w, h] == size || w == 0 || h == 0 {
+            return None;
+        }
+        // The aspect is the photo's on both sides: one factor, the mean of the two axes'.
+        let s = 0.5 * (size[0] as f64 / w as f64 + size[1] as f64 / h as f64);
+        Some(s as f32)
+    }
+
+    /// Checks the settings; the message names the field.
+    pub fn validate(&self) -> Result<()> {
+        if self.long_side == Some(0) {
+            return Err(Error::invalid("working.long_side = 0 must be at least 1"));
+        }
+        if !(self.max_megapixels.is_finite() && (0.01..=1000.0).contains(&self.max_megapixels)) {
+            return Err(Error::invalid(format!(
+                "working.max_megapixels = {} is outside [0.01, 1000]",
+                self.max_megapixels
+            )));
+        }
+        if self.memory_budget_mib == Some(0) {
+            return Err(Error::invalid(
+                "working.memory_budget_mib = 0 must be at least 1",
+            ));
+        }
+        if let Some([w, h]) = self.coordinates_size
+            && (w == 0 || h == 0)
+        {
+            return Err(Error::invalid(format!(
+                "working.coordinates_size = [{w}, {h}] has a zero side"
+            )));
+        }
+        Ok(())
+    }
 }
 
 /// Export settings kept with the project.
@@ -187,6 +262,7 @@ impl Project {
             motion: MotionSpec::default(),
             render: SplatSettings::default(),
             export: ExportSettings::default(),
+            working: WorkingSettings::default(),
         }
     }
 
@@ -238,7 +314,27 @@ impl Project {
         self.camera.autocruise.validate()?;
         self.camera.diagnostics.validate()?;
         self.layers.params.validate()?;
+        self.working.validate()?;
         self.render.validate()
+    }
+
+    /// True when the project holds pixel coordinates (depth strokes, painted motion).
+    pub fn has_pixel_content(&self) -> bool {
+        let m = &self.motion;
+        !self.depth.strokes.is_empty()
+            || !m.regions.is_empty()
+            || !m.anchors.is_empty()
+            || !m.freeze.is_empty()
+    }
+
+    /// Moves the project's pixel coordinates to a scene built at `size`: scaled from
+    /// `working.coordinates_size` (taken as `size` when unset), which becomes `size`.
+    pub fn rebase_coordinates(&mut self, size: [usize; 2]) {
+        if let Some(s) = self.working.coordinate_scale(size) {
+            self.depth.strokes = self.depth.strokes.iter().map(|k| k.scaled(s)).collect();
+            self.motion = self.motion.scaled(s);
+        }
+        self.working.coordinates_size = Some(size);
     }
 
     /// Applies `f` to every file path the project refers to (input, models, imports); a
@@ -377,6 +473,71 @@ fn relative_to(target: &Path, base: &Path) -> PathBuf {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pixel_coordinates_move_to_another_working_size() {
+        use crate::stages::depth::paint::{DepthStroke, DepthStrokeKind};
+        use crate::stages::motion::{Anchor, Arrow, MotionRegion, Stroke};
+        let mut p = Project::new("a.jpg");
+        assert!(!p.has_pixel_content());
+        p.depth.strokes.push(DepthStroke {
+            kind: DepthStrokeKind::Push,
+            points: vec![[9.5, 19.5]],
+            radius_px: 8.0,
+            strength: 0.5,
+        });
+        p.motion.regions.push(MotionRegion {
+            name: "sky".into(),
+            strokes: vec![Stroke {
+                points: vec![[1.5, 3.5]],
+                radius: 4.0,
+                ..Default::default()
+            }],
+            arrows: vec![Arrow {
+                start: [-0.5, -0.5],
+                end: [199.5, 99.5],
+                speed: 1.0,
+            }],
+        });
+        p.motion.anchors.push(Anchor {
+            centre: [39.5, 39.5],
+            radius: 10.0,
+        });
+        assert!(p.has_pixel_content());
+        // Unset: taken as made at the target size, only stamped.
+        let mut q = p.clone();
+        q.rebase_coordinates([100, 50]);
+        assert_eq!(q.depth.strokes, p.depth.strokes);
+        assert_eq!(q.working.coordinates_size, Some([100, 50]));
+        // Made at 200 × 100, moved to 100 × 50: x' = (x + ½)·½ − ½.
+        let mut q = p.clone();
+        q.working.coordinates_size = Some([200, 100]);
+        q.rebase_coordinates([100, 50]);
+        assert_eq!(q.depth.strokes[0].points, vec![[4.5, 9.5]]);
+        assert_eq!(q.depth.strokes[0].radius_px, 4.0);
+        let r = &q.motion.regions[0];
+        assert_eq!(r.strokes[0].points, vec![[0.5, 1.5]]);
+        assert_eq!(r.strokes[0].radius, 2.0);
+        assert_eq!(r.arrows[0].start, [-0.5, -0.5]);
+        assert_eq!(r.arrows[0].end, [99.5, 49.5]);
+        assert_eq!(r.arrows[0].speed, 0.5);
+        assert_eq!(q.motion.anchors[0].centre, [19.5, 19.5]);
+        assert_eq!(q.motion.anchors[0].radius, 5.0);
+        assert_eq!(q.working.coordinates_size, Some([100, 50]));
+        // And back.
+        q.rebase_coordinates([200, 100]);
+        assert_eq!(q.depth.strokes, p.depth.strokes);
+        assert_eq!(q.motion.anchors, p.motion.anchors);
+        // A malformed coordinates size is refused by name.
+        let bad = Project::from_json(
+            r#"{"version": 1, "input": "a.jpg", "working": {"coordinates_size": [0, 10]}}"#,
+        );
+        let e = bad
+            .and_then(|p| p.validate().map(|_| p))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("working.coordinates_size"), "{e}");
+    }
 
     #[test]
     fn minimal_project_gets_defaults() {

@@ -83,7 +83,7 @@ pub fn render_project(
         p
     };
     // Decode and validate everything before anything is written.
-    let mut builder = SceneBuilder::new();
+    let mut builder = SceneBuilder::for_render();
     let mut scene = builder.build(&project, &next_step())?;
     if job.size_preset {
         let sizing = crate::scene::size_preset(&project, &scene, &next_step())?;
@@ -118,6 +118,10 @@ pub fn render_project(
             Some(&scene.canvas.depth),
             None,
         )?;
+        // In the working size's canvas pixels.
+        if !scene.working.is_photo() {
+            project.working.coordinates_size = Some([scene.working.size.0, scene.working.size.1]);
+        }
         scene = builder.build(&project, &next_step())?;
     }
     for w in &scene.warnings {
@@ -137,14 +141,18 @@ pub fn render_project(
         note(Note::Warning(line));
     }
     note(Note::Info(format!("renderer: {why}")));
-    render_sequence(
+    let mut summary = render_sequence(
         &project,
         &scene,
         renderer.as_mut(),
         out,
         export,
         &progress.sub(0.1, 1.0),
-    )
+    )?;
+    if !scene.working.is_photo() {
+        summary.working = Some(scene.working.to_string());
+    }
+    Ok(summary)
 }
 
 /// The path's diagnostics: the whole report (said at once) with `full`, else only the warnings

@@ -499,3 +499,87 @@ fn a_named_preset_is_sized_to_the_scene_unless_an_amplitude_is_given() {
     assert!(err.contains("--amplitude"), "{err}");
     assert!(!d.join("bad2").exists(), "nothing written");
 }
+
+/// A photo past 2²⁴ pixels (the old `f32` quantile rank's limit, where a 24 MP photo panicked):
+/// built at a working size, reported on the summary line; the memory budget refuses up front
+/// what cannot fit, naming what it needs, and writes nothing.
+#[test]
+fn a_camera_sized_photo_renders_at_a_working_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let small = image::open(data("evening_glow_320.jpg")).unwrap();
+    // 4200 × 4000 = 16.8 M pixels > 2²⁴ (16.78 M).
+    let big = small.resize_exact(4200, 4000, image::imageops::FilterType::Triangle);
+    let photo = d.join("big.jpg");
+    big.to_rgb8().save(&photo).unwrap();
+    drop(big);
+
+    let out = d.join("out");
+    let o = render(
+        &photo,
+        &out,
+        &[
+            "--frames",
+            "10",
+            "--range",
+            "9..10",
+            "--size",
+            "160x100",
+            "--max-megapixels",
+            "0.2",
+        ],
+    );
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary = stdout.lines().last().unwrap_or_default();
+    assert!(
+        summary.contains("working size") && summary.contains("of the 4200×4000 photo"),
+        "{stdout}"
+    );
+    let frames = frames_in(&out);
+    assert_eq!(frames.len(), 1, "{frames:?}");
+    let f = image::open(&frames[0]).unwrap();
+    assert_eq!((f.width(), f.height()), (160, 100));
+
+    // A forced working size of one pixel: a correct (tiny) scene, no panic.
+    let out1 = d.join("out1");
+    let o = render(
+        &photo,
+        &out1,
+        &["--frames", "2", "--size", "32x20", "--working-size", "1"],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("working size 1×1"));
+
+    // The photo's own output size (16.8 MP frames) does not fit 600 MiB: refused up front.
+    let refused = d.join("refused");
+    let o = render(
+        &photo,
+        &refused,
+        &["--frames", "2", "--memory-budget", "600"],
+    );
+    assert_clean_failure(
+        &o,
+        &[
+            "not enough memory",
+            "4200×4000 frame",
+            "600 MiB",
+            "--memory-budget",
+        ],
+    );
+    assert!(!refused.exists());
+
+    // Bad values of the new flags are refused by name.
+    for (flag, value) in [
+        ("--working-size", "0"),
+        ("--working-size", "huge"),
+        ("--memory-budget", "0"),
+        ("--max-megapixels", "nan"),
+    ] {
+        let o = render(&photo, &d.join("bad"), &[flag, value]);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{flag} {value}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        assert!(!d.join("bad").exists());
+    }
+}

@@ -440,3 +440,73 @@ fn presets_are_sized_to_what_the_scene_supports() {
             .is_none()
     );
 }
+
+/// A photo built smaller than it is: every stage runs at the working size, the default output is
+/// still the photo's own size, a new output size re-uses the decoded photo, and a depth stroke
+/// made at the photo's size lands where it was painted.
+#[test]
+fn a_big_photo_is_built_at_its_working_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let small = image::open(photo("evening_glow_320.jpg")).unwrap();
+    let path = dir.path().join("big.png");
+    small
+        .resize_exact(1920, 1200, image::imageops::FilterType::Triangle)
+        .to_rgb8()
+        .save(&path)
+        .unwrap();
+    let mut p = Project::new(&path);
+    p.output.frames = 4;
+    p.inpaint.preset = InpaintPreset::Draft;
+    p.working.max_megapixels = 0.1;
+    let mut builder = SceneBuilder::new();
+    let scene = builder.build(&p, &Progress::none()).expect("build");
+    let working = scene.working.clone();
+    assert_eq!(working.photo, (1920, 1200));
+    assert!(!working.is_photo());
+    let (w, h) = working.size;
+    assert!(w * h <= 100_000 && w * h > 95_000, "{working:?}");
+    assert_eq!(scene.input.rgb.size(), (w, h));
+    assert_eq!(scene.depth.estimate.depth.size(), (w, h));
+    // The default output is the photo's size, seen through the working camera scaled to it.
+    let camera = scene.output_camera(&p);
+    assert_eq!(camera.size, (1920, 1200));
+    let ratio = camera.intrinsics.fx / scene.intrinsics.fx;
+    assert!((ratio - 1920.0 / w as f32).abs() < 1e-3, "{ratio}");
+    // Forced to the photo's own size: the photo as it is.
+    let mut full = p.clone();
+    full.working.long_side = Some(65_535);
+    full.working.max_megapixels = 0.1;
+    full.layers.enabled = false;
+    full.canvas.enabled = false;
+    let scene_full = builder.build(&full, &Progress::none()).expect("full build");
+    assert!(scene_full.working.is_photo());
+    assert_eq!(scene_full.input.rgb.size(), (1920, 1200));
+
+    // A pull stroke painted at the photo's size (its coordinates say so) acts at the same place
+    // of the working-size depth.
+    let mut stroked = p.clone();
+    stroked.working.coordinates_size = Some([1920, 1200]);
+    stroked
+        .depth
+        .strokes
+        .push(makeit4d::stages::depth::paint::DepthStroke {
+            kind: makeit4d::stages::depth::paint::DepthStrokeKind::Pull,
+            points: vec![[1440.0, 900.0]],
+            radius_px: 120.0,
+            strength: 0.7,
+        });
+    let painted = builder.build(&stroked, &Progress::none()).expect("stroke");
+    let before = &scene.depth.estimate.depth;
+    let after = &painted.depth.estimate.depth;
+    let (sx, sy) = (w as f32 / 1920.0, h as f32 / 1200.0);
+    let at = |x: f32, y: f32| {
+        (
+            ((x + 0.5) * sx - 0.5) as usize,
+            ((y + 0.5) * sy - 0.5) as usize,
+        )
+    };
+    let (cx, cy) = at(1440.0, 900.0);
+    assert!(after.at(cx, cy) < 0.7 * before.at(cx, cy));
+    let (fx, fy) = at(300.0, 200.0);
+    assert_eq!(after.at(fx, fy), before.at(fx, fy));
+}

@@ -333,19 +333,27 @@ fn one_by_one_input() {
 }
 
 #[test]
-fn an_8000_by_8000_input_is_refused_by_the_size_limit() {
-    // The test assumes the 40 MP limit.
-    const { assert!(8000u64 * 8000 > MAX_PIXELS) };
+fn a_20000_by_20000_input_is_refused_by_the_size_limit() {
+    // The test assumes the 250 MP limit.
+    const { assert!(20_000u64 * 20_000 > MAX_PIXELS) };
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("huge.png");
-    std::fs::write(&path, common::png_header(8000, 8000)).unwrap();
-    let e = load_image(&path).expect_err("8000×8000 must be refused");
-    assert_clear_error(&e, &["huge.png", "8000×8000", "limit"]);
+    std::fs::write(&path, common::png_header(20_000, 20_000)).unwrap();
+    let e = load_image(&path).expect_err("20000×20000 must be refused");
+    assert_clear_error(&e, &["huge.png", "20000×20000", "limit"]);
     // The same through the scene builder (what the command line and the editor call).
     let e = SceneBuilder::new()
         .build(&project(&path, 3), &Progress::none())
-        .expect_err("8000×8000 must be refused");
-    assert_clear_error(&e, &["8000×8000", "megapixels"]);
+        .expect_err("20000×20000 must be refused");
+    assert_clear_error(&e, &["20000×20000", "megapixels"]);
+    // 8000×8000 passes the limit (a camera-sized photo is built at a working size); a header
+    // with no pixel data behind it is a clear decoding error, not a panic.
+    let path = dir.path().join("empty8000.png");
+    std::fs::write(&path, common::png_header(8000, 8000)).unwrap();
+    let e = SceneBuilder::new()
+        .build(&project(&path, 3), &Progress::none())
+        .expect_err("a header without pixels must be refused");
+    assert_clear_error(&e, &["empty8000.png"]);
 }
 
 #[test]

@@ -303,7 +303,26 @@ impl PanelContext<'_> {
             Some((_, p)) => p,
             None => self.project.clone(),
         };
+        // Pixel coordinates are made at the scene's working size: the project says which, and
+        // what it holds from another working size is moved to this one first.
+        let working = self
+            .snapshot
+            .map(|s| &s.scene.working)
+            .filter(|w| !w.is_photo())
+            .map(|w| [w.size.0, w.size.1]);
+        if let Some(size) = working
+            && next.working.coordinates_size != Some(size)
+            && next.has_pixel_content()
+        {
+            next.rebase_coordinates(size);
+        }
         change(&mut next);
+        if let Some(size) = working
+            && next.working.coordinates_size.is_none()
+            && next.has_pixel_content()
+        {
+            next.working.coordinates_size = Some(size);
+        }
         if next != *self.project {
             *self.pending_edit = Some((label.to_string(), next));
         }

@@ -34,16 +34,27 @@ impl EditorApp {
                 None => {
                     let text = match (&self.snapshot, &self.build_error) {
                         (_, Some((_, e))) => format!("build failed: {e}"),
-                        (Some(s), None) => format!(
-                            "ready · {} · {} layer(s) · {} points",
-                            quality_label(s),
-                            s.scene.layers.layers.len(),
-                            s.scene.cloud.len()
-                        ),
+                        (Some(s), None) => {
+                            let (w, h) = s.scene.working.size;
+                            let working = if s.scene.working.is_photo() {
+                                String::new()
+                            } else {
+                                format!(" · working {w}×{h}")
+                            };
+                            format!(
+                                "ready · {} · {} layer(s) · {} points{working}",
+                                quality_label(s),
+                                s.scene.layers.layers.len(),
+                                s.scene.cloud.len()
+                            )
+                        }
                         (None, None) if self.doc.is_some() => "waiting…".to_string(),
                         (None, None) => "no photo open".to_string(),
                     };
-                    ui.label(text);
+                    let label = ui.label(text);
+                    if let Some(s) = &self.snapshot {
+                        label.on_hover_text(s.scene.working.to_string());
+                    }
                 }
             }
             ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {

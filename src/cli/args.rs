@@ -556,6 +556,18 @@ pub(crate) struct RenderArgs {
     /// Do not outpaint: the canvas is the photo.
     #[arg(long)]
     pub(crate) no_outpaint: bool,
+    /// The size the scene is built at: `auto` (what the output shows at the path's largest
+    /// magnification, photos up to 2 MP as they are, at most --max-megapixels), `full` (the
+    /// photo's own), or the working long side in pixels.
+    #[arg(long, value_name = "auto|full|PIXELS", value_parser = parse_working_size)]
+    pub(crate) working_size: Option<WorkingSizeArg>,
+    /// Cap of the automatic working size, megapixels (default 2.7).
+    #[arg(long, value_name = "MP")]
+    pub(crate) max_megapixels: Option<f64>,
+    /// Memory budget of the build and one frame, MiB (default: 60 % of the machine's memory);
+    /// a smaller working size is chosen to fit, or the render is refused up front.
+    #[arg(long, value_name = "MIB", value_parser = clap::value_parser!(u64).range(1..))]
+    pub(crate) memory_budget: Option<u64>,
     /// Inpainting quality: draft, preview or final.
     #[arg(long)]
     pub(crate) inpaint_preset: Option<String>,
@@ -578,6 +590,31 @@ pub(crate) enum LayersArg {
     Count(usize),
     Auto,
     Off,
+}
+
+/// `--working-size`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum WorkingSizeArg {
+    Auto,
+    Full,
+    LongSide(usize),
+}
+
+/// Parses `--working-size`.
+pub(crate) fn parse_working_size(s: &str) -> Result<WorkingSizeArg, String> {
+    match s.trim() {
+        "auto" => Ok(WorkingSizeArg::Auto),
+        "full" => Ok(WorkingSizeArg::Full),
+        n => match n.parse::<usize>() {
+            Ok(n) if (1..=makeit4d::image_io::MAX_SIDE as usize).contains(&n) => {
+                Ok(WorkingSizeArg::LongSide(n))
+            }
+            _ => Err(format!(
+                "working size must be auto, full or a long side of 1..={} pixels, got '{s}'",
+                makeit4d::image_io::MAX_SIDE
+            )),
+        },
+    }
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]

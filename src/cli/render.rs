@@ -1,6 +1,6 @@
 //! `makeit4d render`: one project or a batch, through the library's render workflow.
 
-use super::args::{LayersArg, MotionArg, RenderArgs, VideoArg};
+use super::args::{LayersArg, MotionArg, RenderArgs, VideoArg, WorkingSizeArg};
 use super::progress_bar;
 use anyhow::{Context, bail};
 use makeit4d::export::{ExportOptions, FramePattern, Passes, VideoFormat, VideoOptions};
@@ -199,6 +199,20 @@ fn apply_scene_flags(args: &RenderArgs, project: &mut Project) -> anyhow::Result
     }
     if args.no_outpaint {
         project.canvas.enabled = false;
+    }
+    match args.working_size {
+        Some(WorkingSizeArg::Auto) => project.working.long_side = None,
+        Some(WorkingSizeArg::Full) => {
+            project.working.long_side = Some(makeit4d::image_io::MAX_SIDE as usize)
+        }
+        Some(WorkingSizeArg::LongSide(n)) => project.working.long_side = Some(n),
+        None => {}
+    }
+    if let Some(mp) = args.max_megapixels {
+        project.working.max_megapixels = mp;
+    }
+    if let Some(mib) = args.memory_budget {
+        project.working.memory_budget_mib = Some(mib);
     }
     if let Some(p) = &args.inpaint_preset {
         project.inpaint.preset = match p.as_str() {

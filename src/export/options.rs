@@ -259,6 +259,9 @@ pub struct RenderSummary {
     pub warnings: Vec<String>,
     /// The pass folders written besides the colour (`depth`, `layer0`, …, `camera`).
     pub pass_dirs: Vec<String>,
+    /// The scene's working size and why, when it is not the photo's own
+    /// ([`crate::scene::WorkingSize`]).
+    pub working: Option<String>,
 }
 
 impl std::fmt::Display for RenderSummary {
@@ -283,6 +286,9 @@ impl std::fmt::Display for RenderSummary {
         }
         if let Some(v) = &self.video {
             write!(f, "; video {}", v.display())?;
+        }
+        if let Some(w) = &self.working {
+            write!(f, "; {w}")?;
         }
         Ok(())
     }

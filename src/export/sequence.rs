@@ -261,6 +261,7 @@ pub fn render_sequence(
         video: video_path,
         warnings,
         pass_dirs,
+        working: None,
     })
 }
 

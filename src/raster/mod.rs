@@ -385,9 +385,39 @@ pub fn quantile(values: &[f32], q: f32) -> Option<f32> {
     if finite.is_empty() {
         return None;
     }
-    let k = ((finite.len() - 1) as f32 * q.clamp(0.0, 1.0)).round() as usize;
+    let k = quantile_rank(finite.len(), q);
     let (_, v, _) = finite.select_nth_unstable_by(k, f32::total_cmp);
     Some(*v)
+}
+
+/// The rank `round((n − 1)·q)` of the `q`-quantile among `n ≥ 1` sorted values, computed in
+/// `f64` and clamped to `0..n` (in `f32`, `n − 1` rounds up to `n` past 2²⁴ values and the rank
+/// could land one past the end). A NaN `q` is the median.
+pub fn quantile_rank(n: usize, q: f32) -> usize {
+    let last = n.saturating_sub(1);
+    let q = if q.is_nan() {
+        0.5
+    } else {
+        f64::from(q).clamp(0.0, 1.0)
+    };
+    ((last as f64 * q).round() as usize).min(last)
+}
+
+/// `share · n` rounded down, computed in `f64` (a count that is a share of a pixel count: in
+/// `f32` a count past 2²⁴ is rounded). A NaN or negative share is 0; the result is at most `n`.
+pub fn share_of(n: usize, share: f64) -> usize {
+    if share.is_nan() || share <= 0.0 {
+        return 0;
+    }
+    ((n as f64 * share).floor() as usize).min(n)
+}
+
+/// `share · n` rounded up, computed in `f64` (see [`share_of`]); at most `n`.
+pub fn share_of_ceil(n: usize, share: f64) -> usize {
+    if share.is_nan() || share <= 0.0 {
+        return 0;
+    }
+    ((n as f64 * share).ceil() as usize).min(n)
 }
 
 /// The Keys cubic convolution kernel with `a = −½` (Catmull-Rom; PIL's and torchvision's
@@ -572,5 +602,44 @@ mod tests {
         assert_eq!(quantile(&v, 1.0), Some(3.0));
         assert_eq!(quantile(&v, 0.5), Some(2.0));
         assert_eq!(quantile(&[f32::NAN], 0.5), None);
+    }
+
+    #[test]
+    fn quantile_rank_stays_in_the_slice_past_two_to_the_24() {
+        let n = (1usize << 24) + 1;
+        assert_eq!(quantile_rank(n, 0.0), 0);
+        assert_eq!(quantile_rank(n, 0.5), 1 << 23);
+        assert_eq!(quantile_rank(n, 1.0), n - 1);
+        // 2²⁴ + 3 values: in f32, (n − 1)·1 = 2²⁴ + 2 is exact but 2²⁴ + 1 is not.
+        assert_eq!(quantile_rank(n + 2, 1.0), n + 1);
+        assert_eq!(quantile_rank(1, 1.0), 0);
+        assert_eq!(quantile_rank(7, f32::NAN), 3);
+        assert_eq!(quantile_rank(7, 2.0), 6);
+        assert_eq!(quantile_rank(7, -1.0), 0);
+    }
+
+    #[test]
+    fn quantile_of_two_to_the_24_plus_one_values() {
+        // The 24-megapixel panic: `(n − 1) as f32` rounded to `n` and indexed one past the end.
+        let n = (1usize << 24) + 1;
+        let values: Vec<f32> = (0..n).map(|i| (i % 1000) as f32).collect();
+        assert_eq!(quantile(&values, 0.0), Some(0.0));
+        assert_eq!(quantile(&values, 1.0), Some(999.0));
+        let median = quantile(&values, 0.5).unwrap();
+        assert!((498.0..=501.0).contains(&median), "{median}");
+    }
+
+    #[test]
+    fn shares_of_counts_past_two_to_the_24_are_exact() {
+        let n = (1usize << 24) + 1;
+        assert_eq!(share_of(n, 1.0), n);
+        assert_eq!(share_of_ceil(n, 1.0), n);
+        assert_eq!(share_of(n, 0.5), 1 << 23);
+        assert_eq!(share_of_ceil(n, 0.5), (1 << 23) + 1);
+        assert_eq!(share_of(n, f64::NAN), 0);
+        assert_eq!(share_of(n, -0.5), 0);
+        assert_eq!(share_of(10, 7.0), 10);
+        // In f32 this count is off by one: (2²⁴ + 1)·1 rounds to 2²⁴.
+        assert_ne!(((n as f32) * 1.0) as usize, n);
     }
 }

@@ -8,10 +8,13 @@ use super::camera::{OutputCamera, scene_scale};
 use super::canvas::{build_canvas, canvas_layout, grow_canvas, layout_covers, layout_union};
 use super::cloud::{make_cloud, uninpainted_layers};
 use super::tools::{layer_depth_estimator, make_inpainter};
+use super::working::{
+    WorkingReason, WorkingSettings, WorkingSize, choose_working_size, proxy_magnification,
+};
 use super::{Canvas, PreparedMotion, SKETCH_STRIDE, Scene, Stage};
 use crate::error::Result;
 use crate::geometry::Intrinsics;
-use crate::image_io::{LoadedImage, load_image};
+use crate::image_io::{LoadedImage, decode_image, load_at_size, load_image, read_header};
 use crate::path::SceneScale;
 use crate::progress::Progress;
 use crate::project::Project;
@@ -30,6 +33,20 @@ use std::sync::Arc;
 #[derive(Default)]
 pub struct SceneBuilder {
     load: StageCache<LoadedImage>,
+    /// The last decoded photo at its full resolution, by input key: a new working size is
+    /// downsampled from it without decoding again. Only kept for photos built smaller than
+    /// they are.
+    decoded: Option<(u64, Arc<image::DynamicImage>)>,
+    /// Headers of the inputs, by input key.
+    headers: Vec<(u64, crate::image_io::ImageHeader)>,
+    /// Working sizes by the settings that decide them, least recently used first.
+    working: Vec<(u64, WorkingSize)>,
+    /// The largest working size chosen so far by input key (a growing builder never shrinks
+    /// it: a camera edit that asks for less keeps every stage).
+    working_grown: Vec<(u64, WorkingSize)>,
+    /// The memory budget also holds one output frame (a render; the editor's preview is
+    /// small).
+    budget_frame: bool,
     depth: StageCache<DepthStageOutput>,
     canvas: StageCache<Canvas>,
     layers: StageCache<crate::stages::layers::LayerPlan>,
@@ -70,6 +87,14 @@ impl SceneBuilder {
     pub fn growing() -> Self {
         Self {
             grow_canvas: true,
+            ..Self::default()
+        }
+    }
+
+    /// A builder for a render: the memory budget holds the build and one output frame.
+    pub fn for_render() -> Self {
+        Self {
+            budget_frame: true,
             ..Self::default()
         }
     }
@@ -148,7 +173,7 @@ impl SceneBuilder {
         progress: &Progress,
     ) -> Result<Arc<DepthStageOutput>> {
         project.validate()?;
-        let (_, _, _, depth) = built(self.load_and_depth(
+        let (_, _, _, depth, _) = built(self.load_and_depth(
             project,
             &progress.sub(0.0, 0.2),
             &progress.sub(0.2, 1.0),
@@ -157,8 +182,90 @@ impl SceneBuilder {
         Ok(depth)
     }
 
-    /// Stages 1 and 2: `(depth key, photo, input camera, depth)`, or the stage a dry run would
-    /// have to run.
+    /// The decoded photo of input key `key` (decoded once, kept while it is the last one).
+    fn decoded_photo(
+        &mut self,
+        key: u64,
+        path: &std::path::Path,
+    ) -> Result<Arc<image::DynamicImage>> {
+        if let Some((k, image)) = &self.decoded
+            && *k == key
+        {
+            return Ok(image.clone());
+        }
+        self.decoded = None;
+        let image = Arc::new(decode_image(path)?);
+        self.decoded = Some((key, image.clone()));
+        Ok(image)
+    }
+
+    /// The working size of `project`'s scene ([`choose_working_size`]): remembered per the
+    /// settings that decide it; a growing builder keeps the largest so far for the photo.
+    fn working_size(&mut self, project: &Project, key: u64, p: &Progress) -> Result<WorkingSize> {
+        let header = remembered(&mut self.headers, key, CACHE_ENTRIES, || {
+            read_header(&project.input)
+        })?;
+        let decides = key_of(
+            key,
+            &(
+                project.working.long_side,
+                project.working.max_megapixels,
+                project.working.memory_budget_mib,
+                &project.output,
+                &project.camera,
+                &project.depth.method,
+                &project.depth.model,
+                &project.depth.import,
+                &project.depth.classical,
+                self.budget_frame,
+            ),
+        );
+        if let Some(i) = self.working.iter().position(|e| e.0 == decides) {
+            let entry = self.working.remove(i);
+            self.working.push(entry.clone());
+            return Ok(entry.1);
+        }
+        let budget_frame = self.budget_frame;
+        let mut chosen = choose_working_size(
+            project,
+            header.size,
+            header.decode_bytes(),
+            budget_frame,
+            || {
+                let photo = self.decoded_photo(key, &project.input)?;
+                proxy_magnification(project, &photo, p)
+            },
+        )?;
+        if self.grow_canvas
+            && matches!(
+                chosen.reason,
+                WorkingReason::Output { .. } | WorkingReason::Floor { .. }
+            )
+        {
+            if let Some((_, grown)) = self.working_grown.iter().find(|e| e.0 == key)
+                && grown.size.0 * grown.size.1 > chosen.size.0 * chosen.size.1
+                && matches!(
+                    grown.reason,
+                    WorkingReason::Output { .. } | WorkingReason::Floor { .. }
+                )
+            {
+                chosen = grown.clone();
+            }
+            self.working_grown.retain(|e| e.0 != key);
+            self.working_grown.push((key, chosen.clone()));
+            if self.working_grown.len() > CACHE_ENTRIES {
+                self.working_grown.remove(0);
+            }
+        }
+        self.working.push((decides, chosen.clone()));
+        if self.working.len() > 4 * CACHE_ENTRIES {
+            self.working.remove(0);
+        }
+        Ok(chosen)
+    }
+
+    /// Stages 1 and 2: `(depth key, photo at the working size, input camera, depth, working
+    /// size)`, or the stage a dry run would have to run.
     #[allow(clippy::type_complexity)]
     fn load_and_depth(
         &mut self,
@@ -167,10 +274,36 @@ impl SceneBuilder {
         p_depth: &Progress,
         dry: bool,
     ) -> Result<
-        std::result::Result<(u64, Arc<LoadedImage>, Intrinsics, Arc<DepthStageOutput>), Stage>,
+        std::result::Result<
+            (
+                u64,
+                Arc<LoadedImage>,
+                Intrinsics,
+                Arc<DepthStageOutput>,
+                WorkingSize,
+            ),
+            Stage,
+        >,
     > {
+        let photo_key = key_of(0, &project.input);
+        let working = self.working_size(project, photo_key, p_load)?;
+        let key = if working.is_photo() {
+            // The key of a photo built at its own size, as before working sizes existed.
+            photo_key
+        } else {
+            key_of(photo_key, &working.size)
+        };
+        let in_load = self.load.peek(key).is_some();
+        let photo = if in_load || dry || working.is_photo() {
+            None
+        } else {
+            Some(self.decoded_photo(photo_key, &project.input)?)
+        };
+        if working.is_photo() {
+            // Nothing is downsampled from it later.
+            self.decoded = None;
+        }
         let stats = &mut self.stats;
-        let key = key_of(0, &project.input);
         let input = match cached(
             &mut self.load,
             stats,
@@ -178,12 +311,17 @@ impl SceneBuilder {
             (key, 0),
             dry,
             p_load,
-            |_| load_image(&project.input),
+            |_| match &photo {
+                Some(photo) => Ok(load_at_size(photo, working.size)),
+                None => load_image(&project.input),
+            },
         )? {
             Ok(v) => v,
             Err(stage) => return Ok(Err(stage)),
         };
         p_load.check()?;
+        let strokes = scaled_strokes(&project.depth.strokes, &project.working, &working);
+        let strokes = &strokes;
         let (w, h) = input.rgb.size();
         let intrinsics = Intrinsics::from_hfov(w, h, project.camera.hfov_deg);
         // A stroke paints over the estimate without strokes, which is the depth stage's own
@@ -194,8 +332,14 @@ impl SceneBuilder {
             ..project.depth.clone()
         };
         let unpainted_key = key_of(key, &(&unpainted_settings, project.camera.hfov_deg));
-        let key = key_of(key, &(&project.depth, project.camera.hfov_deg));
-        let strokes = &project.depth.strokes;
+        let key = key_of(
+            key,
+            &(
+                &project.depth,
+                project.camera.hfov_deg,
+                project.working.coordinates_size,
+            ),
+        );
         let unpainted = if strokes.is_empty() {
             None
         } else {
@@ -238,7 +382,7 @@ impl SceneBuilder {
         if let Some(bare) = estimated {
             self.depth.put(unpainted_key, 0, bare);
         }
-        Ok(Ok((key, input, intrinsics, depth)))
+        Ok(Ok((key, input, intrinsics, depth, working)))
     }
 
     fn build_inner(
@@ -268,7 +412,7 @@ impl SceneBuilder {
 
         // 1–2. Load and depth.
         let (p_load, p_depth) = (step(Stage::Load), step(Stage::Depth));
-        let (key, input, intrinsics, depth) =
+        let (key, input, intrinsics, depth, working) =
             match self.load_and_depth(project, &p_load, &p_depth, dry)? {
                 Ok(v) => v,
                 Err(stage) => return Ok(Err(stage)),
@@ -295,7 +439,14 @@ impl SceneBuilder {
         // 3. Canvas: the layout the path needs, then a cached canvas that covers it, one grown
         // from a cached canvas, or a new one.
         let p = step(Stage::Canvas);
-        let needed = canvas_layout(project, (w, h), &intrinsics, depth_range, &scale)?;
+        let needed = canvas_layout(
+            project,
+            (w, h),
+            working.photo,
+            &intrinsics,
+            depth_range,
+            &scale,
+        )?;
         let base = key_of(key, &(&project.canvas, &project.inpaint, sketch));
         let exact_key = key_of(base, &(needed, 0u64));
         let reused = match self.canvas.get(exact_key) {
@@ -488,7 +639,8 @@ impl SceneBuilder {
                 &(&project.camera, output.width, output.height, output.frames),
             );
             remembered(&mut self.strides, memo_key, 4 * CACHE_ENTRIES, || {
-                let views = OutputCamera::of(project, (w, h)).views(project, &scale)?;
+                let views = OutputCamera::of_photo(project, (w, h), working.photo)
+                    .views(project, &scale)?;
                 Ok(density_strides(&layered, &canvas.intrinsics, &views))
             })?
         } else {
@@ -517,7 +669,8 @@ impl SceneBuilder {
 
         // 8. Motion.
         let p = step(Stage::Motion);
-        let key = key_of(key, &project.motion);
+        let motion_spec = scaled_motion(&project.motion, &project.working, &working);
+        let key = key_of(key, &motion_spec);
         let motion = stage!(cached(
             &mut self.motion,
             stats,
@@ -526,11 +679,11 @@ impl SceneBuilder {
             dry,
             &p,
             |p| {
-                if project.motion.is_still() {
+                if motion_spec.is_still() {
                     return Ok(None);
                 }
                 let (field, motion_loop) = prepare_motion(
-                    &project.motion,
+                    &motion_spec,
                     &cloud,
                     canvas.image.width(),
                     canvas.image.height(),
@@ -554,7 +707,32 @@ impl SceneBuilder {
             motion,
             inpainter: inpainter_name,
             warnings,
+            working,
         }))
+    }
+}
+
+/// The project's depth strokes in working pixels.
+fn scaled_strokes(
+    strokes: &[crate::stages::depth::paint::DepthStroke],
+    settings: &WorkingSettings,
+    working: &WorkingSize,
+) -> Vec<crate::stages::depth::paint::DepthStroke> {
+    match settings.coordinate_scale([working.size.0, working.size.1]) {
+        Some(s) => strokes.iter().map(|k| k.scaled(s)).collect(),
+        None => strokes.to_vec(),
+    }
+}
+
+/// The project's motion in working pixels (positions, radii and speeds in pixels per frame).
+fn scaled_motion(
+    motion: &crate::stages::motion::MotionSpec,
+    settings: &WorkingSettings,
+    working: &WorkingSize,
+) -> crate::stages::motion::MotionSpec {
+    match settings.coordinate_scale([working.size.0, working.size.1]) {
+        Some(s) => motion.scaled(s),
+        None => motion.clone(),
     }
 }
 

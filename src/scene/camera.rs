@@ -50,10 +50,20 @@ impl OutputCamera {
     /// `project`'s output camera for a photo of `input_size` (the input camera is
     /// `project.camera.hfov_deg` across the photo, as the scene's is).
     pub fn of(project: &Project, input_size: (usize, usize)) -> Self {
+        Self::of_photo(project, input_size, input_size)
+    }
+
+    /// `project`'s output camera for a scene built at `input_size` from a photo of
+    /// `photo_size` (the default output size is the photo's own, whatever the working size).
+    pub fn of_photo(
+        project: &Project,
+        input_size: (usize, usize),
+        photo_size: (usize, usize),
+    ) -> Self {
         let (w, h) = input_size;
         let size = match (project.output.width, project.output.height) {
             (Some(ow), Some(oh)) => (ow, oh),
-            _ => (w, h),
+            _ => photo_size,
         };
         let intrinsics = Intrinsics::from_hfov(w, h, project.camera.hfov_deg)
             .scaled(size.0 as f32 / w as f32, size.1 as f32 / h as f32);

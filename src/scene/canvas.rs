@@ -44,11 +44,13 @@ pub(super) fn layout_union(
     }
 }
 
-/// The canvas layout `project` needs for a photo `input_size`: the photo itself when
-/// outpainting is off, the fixed factor, or the footprint of the camera path.
+/// The canvas layout `project` needs for a photo built at `input_size` (from a photo of
+/// `photo_size`, which is the default output size): the photo itself when outpainting is off,
+/// the fixed factor, or the footprint of the camera path.
 pub fn canvas_layout(
     project: &Project,
     input_size: (usize, usize),
+    photo_size: (usize, usize),
     intrinsics: &Intrinsics,
     depth_range: DepthRange,
     scale: &SceneScale,
@@ -61,7 +63,7 @@ pub fn canvas_layout(
             CanvasLayout::fixed(input_size, factor, placement)
         }
         CanvasSizing::FromPath(options) => {
-            let camera = OutputCamera::of(project, input_size);
+            let camera = OutputCamera::of_photo(project, input_size, photo_size);
             let views = camera.views(project, scale)?;
             canvas_from_views(
                 input_size,

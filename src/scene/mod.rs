@@ -33,6 +33,7 @@ mod canvas;
 mod cloud;
 mod sizing;
 mod tools;
+mod working;
 
 pub use builder::{SceneBuilder, build_scene};
 pub use cache::CACHE_ENTRIES;
@@ -40,6 +41,12 @@ pub use camera::{OutputCamera, autocruise, scene_scale};
 pub use canvas::canvas_layout;
 pub use sizing::{MIN_SIZED_AMPLITUDE, PresetSizing, SIZING_MARGIN, size_preset};
 pub use tools::make_inpainter;
+pub use working::{
+    BUILD_BYTES_PER_PIXEL, DEFAULT_BUDGET_SHARE, DEFAULT_MAX_MEGAPIXELS, FLOOR_MEGAPIXELS,
+    FRAME_BYTES_PER_PIXEL, MIN_WORKING_PIXELS, PROXY_LONG_SIDE, WorkingReason, WorkingSettings,
+    WorkingSize, budget_mib, build_bytes, choose_working_size, frame_bytes, machine_memory_mib,
+    path_magnification, proxy_magnification,
+};
 
 use crate::error::Result;
 use crate::geometry::{Intrinsics, View};
@@ -175,6 +182,8 @@ pub struct Scene {
     pub inpainter: String,
     /// One line per fallback or adjustment the user should hear about.
     pub warnings: Vec<String>,
+    /// The size every stage ran at, of the photo's, and why.
+    pub working: WorkingSize,
 }
 
 /// The density stride of a sketch's cloud ([`SceneBuilder::build_sketch`]): the largest any
@@ -183,9 +192,10 @@ pub struct Scene {
 pub const SKETCH_STRIDE: usize = crate::stages::layers::MAX_DENSITY_STRIDE;
 
 impl Scene {
-    /// `project`'s output camera for this scene's photo ([`OutputCamera::of`]).
+    /// `project`'s output camera for this scene's photo ([`OutputCamera::of_photo`]: the
+    /// default output size is the photo's own, whatever the working size).
     pub fn output_camera(&self, project: &Project) -> OutputCamera {
-        OutputCamera::of(project, self.input.rgb.size())
+        OutputCamera::of_photo(project, self.input.rgb.size(), self.working.photo)
     }
 
     /// Every output frame's view of `project`'s camera path over this scene.

@@ -42,8 +42,14 @@ impl StagePanel for InputPanel {
         ui.heading("Photo");
         ui.label(cx.project.input.display().to_string());
         if let Some(s) = cx.snapshot {
-            let (w, h) = s.scene.input.rgb.size();
+            let working = &s.scene.working;
+            let (w, h) = working.photo;
             ui.label(format!("{w} × {h} px"));
+            if !working.is_photo() {
+                let (ww, wh) = working.size;
+                ui.label(format!("built at {ww} × {wh} px"))
+                    .on_hover_text(working.to_string());
+            }
         }
         ui.separator();
         ui.heading("Camera");

@@ -40,6 +40,20 @@ pub struct DepthStroke {
 }
 
 impl DepthStroke {
+    /// The same stroke on a photo scaled by `s` (another working size): points (pixel centres
+    /// at integers, `x' = (x + ½)·s − ½`) and radius (at least ½ px).
+    pub fn scaled(&self, s: f32) -> Self {
+        Self {
+            points: self
+                .points
+                .iter()
+                .map(|p| p.map(|v| (v + 0.5) * s - 0.5))
+                .collect(),
+            radius_px: (self.radius_px * s).max(0.5),
+            ..self.clone()
+        }
+    }
+
     /// Checks the stroke; the message says what is wrong.
     pub fn validate(&self) -> Result<()> {
         if !(self.radius_px.is_finite() && self.radius_px > 0.0) {

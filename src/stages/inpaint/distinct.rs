@@ -107,7 +107,10 @@ pub fn distinctive(image: &[[f32; 3]], inside: &[bool], w: usize, h: usize) -> V
 /// border or the outside of the region), up to [`MAX_ENCLOSED_SHARE`] of the region each: a
 /// unique object's plain interior matches itself, only its outline and details are distinctive.
 fn fill_enclosed(marked: &mut [bool], inside: &[bool], w: usize, h: usize) {
-    let limit = (MAX_ENCLOSED_SHARE * inside.iter().filter(|&&b| b).count() as f32) as usize;
+    let limit = crate::raster::share_of(
+        inside.iter().filter(|&&b| b).count(),
+        f64::from(MAX_ENCLOSED_SHARE),
+    );
     let unmarked = MaskRaster::from_fn(w, h, |x, y| !marked[y * w + x]);
     for part in crate::raster::connected_components(&unmarked) {
         let open = part.iter().any(|&i| {

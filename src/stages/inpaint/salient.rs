@@ -167,7 +167,7 @@ pub fn unique_objects(image: &RgbRaster, within: Option<&MaskRaster>) -> MaskRas
         .collect();
     // The largest objects first: they are the ones a viewer would see twice.
     kept.sort_by_key(|(_, part, _)| std::cmp::Reverse(part.len()));
-    let budget = (MAX_TOTAL_SHARE * n as f32) as usize;
+    let budget = crate::raster::share_of(n, f64::from(MAX_TOTAL_SHARE));
     let mut objects = vec![false; w * h];
     let mut used = 0usize;
     let mut distinct_objects = vec![false; w * h];

@@ -129,6 +129,49 @@ pub struct MotionSpec {
     pub speed: f32,
 }
 
+impl MotionSpec {
+    /// The same motion on a canvas scaled by `s` (a working size other than the one it was
+    /// painted at): positions (pixel centres at integers, `x' = (x + ½)·s − ½`), radii and
+    /// speeds in pixels per frame.
+    pub fn scaled(&self, s: f32) -> Self {
+        let at = |p: [f32; 2]| p.map(|v| (v + 0.5) * s - 0.5);
+        let stroke = |k: &Stroke| Stroke {
+            points: k.points.iter().map(|&p| at(p)).collect(),
+            radius: k.radius * s,
+            ..k.clone()
+        };
+        Self {
+            regions: self
+                .regions
+                .iter()
+                .map(|r| MotionRegion {
+                    name: r.name.clone(),
+                    strokes: r.strokes.iter().map(stroke).collect(),
+                    arrows: r
+                        .arrows
+                        .iter()
+                        .map(|a| Arrow {
+                            start: at(a.start),
+                            end: at(a.end),
+                            speed: a.speed * s,
+                        })
+                        .collect(),
+                })
+                .collect(),
+            anchors: self
+                .anchors
+                .iter()
+                .map(|a| Anchor {
+                    centre: at(a.centre),
+                    radius: a.radius * s,
+                })
+                .collect(),
+            freeze: self.freeze.iter().map(stroke).collect(),
+            ..self.clone()
+        }
+    }
+}
+
 impl Default for MotionSpec {
     fn default() -> Self {
         Self {

@@ -184,7 +184,10 @@ pub fn suggest_motion(
             min_run(loop_travel(SKY_DRIFT_PER_WIDTH), radius),
             false,
         );
-        drop_small_parts(&runs, (MIN_SKY_PART * (w * h) as f32).ceil() as usize)
+        drop_small_parts(
+            &runs,
+            crate::raster::share_of_ceil(w * h, f64::from(MIN_SKY_PART)),
+        )
     } else {
         sky_mask
     };

@@ -46,7 +46,7 @@ pub(super) fn estimate_horizon(sky: &MaskRaster) -> f32 {
 /// edge, lie entirely above `horizon` and cover at most [`MAX_SKY_HOLE_AREA`] of the canvas.
 pub(super) fn fill_sky_holes(sky: &MaskRaster, horizon: f32) -> MaskRaster {
     let (w, h) = sky.size();
-    let max_area = (MAX_SKY_HOLE_AREA * (w * h) as f32) as usize;
+    let max_area = crate::raster::share_of(w * h, f64::from(MAX_SKY_HOLE_AREA));
     let mut out = sky.clone();
     for part in connected_components(&sky.map(|s| !s)) {
         let enclosed = part.iter().all(|&i| {

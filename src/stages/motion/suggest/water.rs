@@ -58,7 +58,7 @@ pub(super) fn estimate_water(
     let voted = Raster::from_fn(w, h, |x, y| {
         candidate.at(x, y) || (below.at(x, y) && vote.at(x, y) > 0.5)
     });
-    let min_part = (MIN_WATER_PART * (w * h) as f32).ceil() as usize;
+    let min_part = crate::raster::share_of_ceil(w * h, f64::from(MIN_WATER_PART));
     // Large parts, each cut below its neck.
     let parts: Vec<Vec<usize>> = connected_components(&voted)
         .into_iter()
@@ -127,7 +127,7 @@ pub(super) fn estimate_water(
             right = right.max(i % w);
         }
     }
-    let min_area = (MIN_WATER_AREA * (w * h) as f32).ceil() as usize;
+    let min_area = crate::raster::share_of_ceil(w * h, f64::from(MIN_WATER_AREA));
     let min_width = (MIN_WATER_WIDTH * w as f32).ceil() as usize;
     if area < min_area.max(1) || right + 1 < left + min_width {
         return empty;
