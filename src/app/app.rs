@@ -216,6 +216,8 @@ pub struct EditorApp {
     pub(super) stage_runs: std::collections::BTreeMap<Stage, usize>,
     /// The depth of the build in flight, once its depth stage is done.
     pub(super) early_depth: Option<super::worker::EarlyDepth>,
+    /// A new photo's working-size image while its first scene builds.
+    pub(super) early_photo: Option<super::worker::EarlyPhoto>,
     pub(super) ctx: egui::Context,
     /// An action waiting for the answer to "save the changes?".
     pub(super) confirm: Option<Pending>,
@@ -464,6 +466,7 @@ impl EditorApp {
             gpu_renders_seen: 0,
             stage_runs: Default::default(),
             early_depth: None,
+            early_photo: None,
             ctx: ctx.clone(),
             confirm: None,
             after_save: None,

@@ -293,6 +293,8 @@ pub struct PanelContext<'a> {
     /// The depth of the build in flight when it is newer than the scene on screen (a depth
     /// edit shows before the later stages finish).
     pub early_depth: Option<&'a crate::app::worker::EarlyDepth>,
+    /// A new photo's image while its first scene builds (newer than the snapshot).
+    pub early_photo: Option<&'a crate::app::worker::EarlyPhoto>,
 }
 
 impl PanelContext<'_> {

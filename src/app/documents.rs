@@ -38,6 +38,7 @@ impl EditorApp {
         let generation = self.generation() + 1;
         self.history.clear();
         self.snapshot = None;
+        self.early_photo = None;
         self.build_error = None;
         self.timeline = TimelineState {
             looping: true,

@@ -56,6 +56,7 @@ impl EditorApp {
                     }
                     self.size_if_ready();
                 }
+                Event::PhotoReady(early) => self.early_photo = Some(*early),
                 Event::DepthReady(early) => self.early_depth = Some(*early),
                 Event::BuildFailed {
                     generation,

@@ -104,6 +104,11 @@ impl EditorApp {
                         .as_ref()
                         .is_none_or(|s| e.generation > s.generation)
                 }),
+                early_photo: self.early_photo.as_ref().filter(|e| {
+                    self.snapshot
+                        .as_ref()
+                        .is_none_or(|s| e.generation > s.generation)
+                }),
             };
             let panel = &mut self.panels[index];
             egui::Panel::bottom("timeline")

@@ -165,6 +165,41 @@ impl SceneBuilder {
         (inpainter, name)
     }
 
+    /// The photo at `project`'s working size (the load stage only, cached like a build's): the
+    /// editor shows a newly opened photo with it before its depth exists.
+    pub fn photo_output(
+        &mut self,
+        project: &Project,
+        progress: &Progress,
+    ) -> Result<(Arc<LoadedImage>, WorkingSize)> {
+        project.validate()?;
+        let photo_key = key_of(0, &project.input);
+        let working = self.working_size(project, photo_key, progress)?;
+        let key = if working.is_photo() {
+            photo_key
+        } else {
+            key_of(photo_key, &working.size)
+        };
+        let photo = if self.load.peek(key).is_some() || working.is_photo() {
+            None
+        } else {
+            Some(self.decoded_photo(photo_key, &project.input)?)
+        };
+        let input = built(cached(
+            &mut self.load,
+            &mut self.stats,
+            Stage::Load,
+            (key, 0),
+            false,
+            progress,
+            |_| match &photo {
+                Some(photo) => Ok(load_at_size(photo, working.size)),
+                None => load_image(&project.input),
+            },
+        )?)?;
+        Ok((input, working))
+    }
+
     /// The depth stage's output for `project` (load and depth only, cached like a build's):
     /// the editor shows a depth edit with it before the stages after it have run.
     pub fn depth_output(

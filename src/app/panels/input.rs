@@ -4,7 +4,7 @@
 use super::{
     PanelContext, StagePanel, Tab, committed, frames_and_fps_ui, labelled, scene_image_ui,
 };
-use crate::app::viewport::ViewTransform;
+use crate::app::viewport::{ViewTransform, image_view_ui};
 use crate::stages::inpaint::InpaintPreset;
 use eframe::egui::{self, Sense, Ui};
 
@@ -12,6 +12,8 @@ use eframe::egui::{self, Sense, Ui};
 #[derive(Default)]
 pub struct InputPanel {
     transform: ViewTransform,
+    /// The texture of a new photo shown before its first scene, by generation.
+    early: Option<(u64, egui::TextureHandle)>,
 }
 
 impl StagePanel for InputPanel {
@@ -24,6 +26,33 @@ impl StagePanel for InputPanel {
     }
 
     fn view_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>) {
+        if let Some(early) = cx.early_photo
+            && cx.snapshot.is_none()
+        {
+            // A new photo, decoded: shown while its first scene builds.
+            let texture = match &self.early {
+                Some((g, t)) if *g == early.generation => t.clone(),
+                _ => {
+                    let t = ui.ctx().load_texture(
+                        "input-early",
+                        early.image.clone(),
+                        egui::TextureOptions::LINEAR,
+                    );
+                    self.early = Some((early.generation, t.clone()));
+                    t
+                }
+            };
+            let (w, h) = early.working.size;
+            image_view_ui(
+                ui,
+                texture.id(),
+                [w, h],
+                &mut self.transform,
+                Sense::hover(),
+            );
+            return;
+        }
+        self.early = None;
         scene_image_ui(
             ui,
             cx,
@@ -41,8 +70,11 @@ impl StagePanel for InputPanel {
     fn inspector_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>) {
         ui.heading("Photo");
         ui.label(cx.project.input.display().to_string());
-        if let Some(s) = cx.snapshot {
-            let working = &s.scene.working;
+        let working = cx
+            .snapshot
+            .map(|s| &s.scene.working)
+            .or(cx.early_photo.map(|e| &e.working));
+        if let Some(working) = working {
             let (w, h) = working.photo;
             ui.label(format!("{w} × {h} px"));
             if !working.is_photo() {

@@ -71,6 +71,40 @@ impl DepthImages {
     }
 }
 
+/// The photo of a build still running, for the Input view.
+#[derive(Clone)]
+pub struct EarlyPhoto {
+    /// The generation it belongs to.
+    pub generation: u64,
+    /// The photo, at most [`DISPLAY_MAX_SIDE`] px a side.
+    pub image: ColorImage,
+    /// The working size (the Input view's pixel size) and why.
+    pub working: crate::scene::WorkingSize,
+}
+
+impl std::fmt::Debug for EarlyPhoto {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EarlyPhoto")
+            .field("generation", &self.generation)
+            .field("working", &self.working.size)
+            .finish_non_exhaustive()
+    }
+}
+
+impl EarlyPhoto {
+    pub(super) fn new(
+        generation: u64,
+        photo: &crate::image_io::LoadedImage,
+        working: crate::scene::WorkingSize,
+    ) -> Self {
+        Self {
+            generation,
+            image: rgb_image(&photo.rgb, DISPLAY_MAX_SIDE),
+            working,
+        }
+    }
+}
+
 /// The depth of a build still running, for the depth view.
 #[derive(Clone)]
 pub struct EarlyDepth {

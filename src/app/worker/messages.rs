@@ -92,6 +92,9 @@ pub enum Event {
         /// A draft scene (the project's preset follows).
         draft: bool,
     },
+    /// A newly opened photo is decoded (at its working size), before its depth: what the
+    /// Input view shows until the first scene.
+    PhotoReady(Box<EarlyPhoto>),
     /// The depth stage of a build finished before the stages after it: its display images,
     /// so the depth view shows a depth edit at once.
     DepthReady(Box<EarlyDepth>),

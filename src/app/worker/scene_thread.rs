@@ -451,6 +451,14 @@ fn run_build(
             // The first answer, on every core: a depth edit's new depth as soon as it exists
             // (its display images made while the sketch builds), then the sketch.
             let sketch = on_pool(sketch_pool, || {
+                if stale == Some(Stage::Load) {
+                    // A new photo: on screen as soon as it is decoded.
+                    let (photo, working) =
+                        builder.photo_output(&project, &progress.sub(0.0, 0.02))?;
+                    send(Event::PhotoReady(Box::new(EarlyPhoto::new(
+                        generation, &photo, working,
+                    ))));
+                }
                 let depth = if depth_edit {
                     Some(builder.depth_output(&project, &progress.sub(0.0, 0.05))?)
                 } else {

@@ -26,6 +26,7 @@ fn events_until(worker: &SceneWorker, mut done: impl FnMut(&Event) -> bool) -> V
                 Event::SceneReady {
                     generation, draft, ..
                 } => format!("scene {generation} draft={draft}"),
+                Event::PhotoReady(p) => format!("photo {}", p.generation),
                 Event::DepthReady(d) => format!("depth {}", d.generation),
                 Event::BuildFailed { message, .. } => panic!("build failed: {message}"),
                 // The path check after each final scene is not part of these sequences.
@@ -62,8 +63,13 @@ fn a_depth_edit_shows_its_depth_then_a_sketch_then_the_final_scene() {
     });
     assert_eq!(
         first,
-        ["depth 1", "scene 1 draft=true", "scene 1 draft=false"],
-        "a new photo: depth, sketch, final"
+        [
+            "photo 1",
+            "depth 1",
+            "scene 1 draft=true",
+            "scene 1 draft=false"
+        ],
+        "a new photo: the photo, depth, sketch, final"
     );
     project
         .depth
