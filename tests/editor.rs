@@ -1037,3 +1037,65 @@ fn the_timeline_and_camera_tab_show_holes_and_synthesised_share() {
     assert_eq!(app.path_diagnostics().unwrap().1.synth_threshold, 1.0);
     assert_eq!(app.camera_warning(), None);
 }
+
+/// The path prompt takes the keyboard when it opens: a path typed at once (with W, A, S and D
+/// in it, the fly camera's keys) lands in the field, Enter saves, and the camera did not move.
+#[test]
+fn the_path_prompt_has_the_keyboard_when_it_opens() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(mut h) = harness_options(move || EditorOptions {
+        open: Some(sample()),
+        ephemeral: true,
+        preview_renderer: RendererChoice::Cpu,
+        no_native_dialogs: true,
+        ..Default::default()
+    }) else {
+        return;
+    };
+    wait_idle(&mut h, Duration::from_secs(600));
+    h.state_mut().select_tab(Tab::Preview);
+    for _ in 0..3 {
+        h.step();
+    }
+    let view = h.state().preview_view();
+    assert!(view.is_some(), "the preview has a camera");
+
+    // Save as: nothing clicked, the keys go straight to the field.
+    h.key_press_modifiers(
+        egui::Modifiers::COMMAND | egui::Modifiers::SHIFT,
+        egui::Key::S,
+    );
+    h.step();
+    h.step();
+    let target = dir.path().join("was dsaw.json");
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::A);
+    h.step();
+    for key in [egui::Key::W, egui::Key::A, egui::Key::S, egui::Key::D] {
+        h.key_down(key);
+    }
+    h.event(egui::Event::Text(target.display().to_string()));
+    h.step();
+    h.step();
+    for key in [egui::Key::W, egui::Key::A, egui::Key::S, egui::Key::D] {
+        h.event(egui::Event::Key {
+            key,
+            physical_key: None,
+            pressed: false,
+            repeat: false,
+            modifiers: egui::Modifiers::NONE,
+        });
+    }
+    h.key_press(egui::Key::Enter);
+    h.step();
+    h.step();
+    assert!(
+        target.is_file(),
+        "Enter saved {}; notices {:?}",
+        target.display(),
+        h.state().notices()
+    );
+    for _ in 0..3 {
+        h.step();
+    }
+    assert_eq!(h.state().preview_view(), view, "the fly camera moved");
+}

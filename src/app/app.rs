@@ -80,6 +80,8 @@ pub(super) struct PathPrompt {
     pub(super) kind: DialogKind,
     pub(super) text: String,
     pub(super) error: Option<String>,
+    /// The field has been given the keyboard focus (once, when the prompt opens).
+    pub(super) focused: bool,
 }
 
 /// Settings kept between sessions (eframe storage, key [`STORAGE_KEY`]).

@@ -190,6 +190,7 @@ impl EditorApp {
             kind,
             text,
             error: None,
+            focused: false,
         });
     }
 
@@ -285,6 +286,12 @@ impl EditorApp {
                     .id(egui::Id::unique("path-prompt-field"))
                     .desired_width(f32::INFINITY),
             );
+            if !prompt.focused {
+                // Typing goes to the path at once (not to the editor's shortcuts), the cursor
+                // at its end.
+                field.request_focus();
+                prompt.focused = true;
+            }
             if field.lost_focus() && ui.input(|i| i.key_pressed(Key::Enter)) {
                 done = Some(true);
             }

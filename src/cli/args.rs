@@ -5,10 +5,18 @@ use makeit4d::export::Pass;
 use makeit4d::render::RendererChoice;
 use std::path::PathBuf;
 
+/// `--version`: the crate's version and the git revision it was built from (`build.rs`).
+pub(crate) const VERSION: &str = concat!(
+    env!("CARGO_PKG_VERSION"),
+    " (",
+    env!("MAKEIT4D_GIT_REVISION"),
+    ")"
+);
+
 #[derive(Parser, Debug)]
 #[command(
     name = "makeit4d",
-    version,
+    version = VERSION,
     about = "One still photo to a consistent, living fly-through video (Make-It-4D)."
 )]
 pub(crate) struct Cli {
@@ -38,6 +46,31 @@ pub(crate) enum Command {
     /// The built-in catalogue of learned models: list, install, remove, print a manifest.
     #[command(subcommand)]
     Models(ModelsCommand),
+    /// Print a shell completion script (e.g. `makeit4d completions bash >
+    /// ~/.local/share/bash-completion/completions/makeit4d`).
+    Completions(CompletionsArgs),
+    /// Print the manual page (roff; `makeit4d manpage > makeit4d.1 && man ./makeit4d.1`).
+    Manpage,
+    /// Install the desktop entry, the icons and the project file type into the user's XDG
+    /// folders (a launcher entry that opens photos and `.makeit4d.json` projects).
+    InstallDesktop(InstallDesktopArgs),
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct CompletionsArgs {
+    /// The shell.
+    #[arg(value_enum)]
+    pub(crate) shell: clap_complete::Shell,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct InstallDesktopArgs {
+    /// The data folder to install into (default: $XDG_DATA_HOME, else ~/.local/share).
+    #[arg(long)]
+    pub(crate) data_dir: Option<PathBuf>,
+    /// The program the launcher runs (default: this executable).
+    #[arg(long)]
+    pub(crate) exec: Option<PathBuf>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -697,4 +730,70 @@ pub(crate) fn parse_size(s: &str) -> Result<(usize, usize), String> {
         return Err(format!("size {w}x{h} is outside 1..={max} per side"));
     }
     Ok((w, h))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The commands of the README's code blocks (`makeit4d …` and `cargo run … -- …` lines,
+    /// comments and shell redirections dropped), as argument lists.
+    fn readme_commands(readme: &str) -> Vec<Vec<String>> {
+        let mut in_code = false;
+        let mut commands = Vec::new();
+        for line in readme.lines() {
+            if line.trim_start().starts_with("```") {
+                in_code = !in_code;
+                continue;
+            }
+            if !in_code {
+                continue;
+            }
+            let line = line.split(" #").next().unwrap_or("").trim();
+            let line = line.split(" > ").next().unwrap_or("").trim();
+            let args = if let Some(rest) = line.strip_prefix("makeit4d") {
+                rest
+            } else if line.starts_with("cargo run") {
+                match line.split_once(" -- ") {
+                    Some((_, rest)) => rest,
+                    None => continue,
+                }
+            } else {
+                continue;
+            };
+            let mut argv = vec!["makeit4d".to_string()];
+            argv.extend(args.split_whitespace().map(str::to_string));
+            commands.push(argv);
+        }
+        commands
+    }
+
+    #[test]
+    fn every_command_in_the_readme_parses() {
+        let readme = include_str!("../../README.md");
+        let commands = readme_commands(readme);
+        assert!(commands.len() >= 6, "{commands:?}");
+        for argv in commands {
+            if let Err(e) = Cli::try_parse_from(&argv) {
+                // --help and --version end parsing early on purpose.
+                use clap::error::ErrorKind;
+                assert!(
+                    matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion),
+                    "README: `{}` does not parse: {e}",
+                    argv.join(" ")
+                );
+            }
+        }
+        // And a wrong one would be caught.
+        assert!(Cli::try_parse_from(["makeit4d", "render", "--no-such-flag"]).is_err());
+    }
+
+    #[test]
+    fn the_readme_stays_short() {
+        let lines = include_str!("../../README.md").lines().count();
+        assert!(
+            lines <= 300,
+            "README.md has {lines} lines; the rest belongs in docs/"
+        );
+    }
 }

@@ -6,6 +6,7 @@ mod args;
 mod bench;
 mod doctor;
 mod eval;
+mod install;
 mod models;
 mod render;
 mod stages;
@@ -75,6 +76,9 @@ pub fn main() -> ExitCode {
         Command::Bench(BenchCommand::SceneCase(args)) => bench::bench_scene_case(args),
         Command::Bench(BenchCommand::Download(args)) => bench::bench_download(args),
         Command::Doctor(args) => doctor::doctor(args),
+        Command::Completions(args) => install::print_bytes(&install::completions(args.shell)),
+        Command::Manpage => install::manpage().and_then(|m| install::print_bytes(&m)),
+        Command::InstallDesktop(args) => install::install_desktop(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

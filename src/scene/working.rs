@@ -18,7 +18,7 @@
 //!
 //! The **memory estimate** of a build at `N` working pixels (canvas and layers included) is
 //! [`BUILD_BYTES_PER_PIXEL`]` · N`, plus the decoded photo ([`crate::image_io::ImageHeader`]);
-//! a frame at `P` output pixels adds [`FRAME_BYTES_PER_PIXEL`]` · P` (both measured: the README
+//! a frame at `P` output pixels adds [`FRAME_BYTES_PER_PIXEL`]` · P` (both measured: `docs/cli.md`
 //! has the figures). Over the budget (the project's `working.memory_budget_mib`, else
 //! [`DEFAULT_BUDGET_SHARE`] of the machine's memory) the working size shrinks until the build
 //! fits, down to [`MIN_WORKING_PIXELS`]; what still does not fit is refused with what it needs.
