@@ -797,3 +797,27 @@ mod tests {
         );
     }
 }
+
+#[cfg(test)]
+mod docs_tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    /// docs/cli.md documents every flag `render --help` lists (the same clap definitions).
+    #[test]
+    fn docs_cli_names_every_render_flag() {
+        let docs = include_str!("../../docs/cli.md");
+        let command = Cli::command();
+        let render = command
+            .find_subcommand("render")
+            .expect("render subcommand");
+        let missing: Vec<String> = render
+            .get_arguments()
+            .filter_map(|a| a.get_long())
+            .filter(|long| *long != "help")
+            .map(|long| format!("--{long}"))
+            .filter(|flag| !docs.contains(&format!("`{flag}")))
+            .collect();
+        assert!(missing.is_empty(), "docs/cli.md lacks {missing:?}");
+    }
+}
