@@ -138,6 +138,16 @@ fn eval_nvs_on_quarter_aloe_with_oracle_depth() {
     ] {
         assert!(text.contains(name), "{text}");
     }
+
+    // Knowing nothing: the aligned vertical ramp as the scene's depth, said in the header.
+    let ramp = nvs(&["--depth", "ramp"]);
+    let text = String::from_utf8_lossy(&ramp.stdout);
+    assert!(
+        ramp.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ramp.stderr)
+    );
+    assert!(text.contains("ramp depth (aligned"), "{text}");
 }
 
 #[test]

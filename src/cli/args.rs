@@ -339,6 +339,8 @@ pub(crate) struct EvalNvsArgs {
 pub(crate) enum NvsDepthArg {
     Oracle,
     Estimated,
+    /// An aligned vertical ramp: the baseline of knowing nothing.
+    Ramp,
 }
 
 #[derive(Args, Debug)]

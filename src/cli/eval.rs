@@ -83,6 +83,7 @@ pub(crate) fn eval_nvs(args: EvalNvsArgs, cancel: Arc<AtomicBool>) -> anyhow::Re
         depth: match args.depth {
             NvsDepthArg::Oracle => NvsDepth::Oracle,
             NvsDepthArg::Estimated => NvsDepth::Estimated,
+            NvsDepthArg::Ramp => NvsDepth::Ramp,
         },
         border_px: (args.border as f32 * args.scale).round() as usize,
         steps: args.steps,

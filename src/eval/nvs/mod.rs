@@ -124,19 +124,39 @@ fn scene_depth(
             settings.import = None;
             let stage = run_depth_stage(&settings, &pair.left, &pair.intrinsics(), progress)?;
             let seconds = started.elapsed().as_secs_f64();
-            let known = pair.disparity.map(|d| if is_known(d) { d } else { 0.0 });
-            let m = depth_metrics(&stage.estimate.depth, &known, 0.0)?;
-            let d_max = known.data().iter().copied().fold(0.0f32, f32::max);
-            let floor = 1e-3 * d_max;
-            let depth = stage.estimate.depth.map(|z| {
-                let p = 1.0 / z as f64;
-                let a = (m.scale * p + m.shift) as f32;
-                let a = if a.is_finite() { a.max(floor) } else { floor };
-                fb / a
-            });
+            let (depth, m) = aligned_depth(pair, &stage.estimate.depth)?;
             Ok((depth, Some(m), seconds))
         }
+        NvsDepth::Ramp => {
+            let (depth, m) =
+                aligned_depth(pair, &vertical_ramp(pair.left.width(), pair.left.height()))?;
+            Ok((depth, Some(m), 0.0))
+        }
     }
+}
+
+/// The vertical ramp: disparity `1 + y/(h − 1)` (the bottom row nearest), as depth.
+pub fn vertical_ramp(w: usize, h: usize) -> GrayRaster {
+    let last = (h.max(2) - 1) as f32;
+    GrayRaster::from_fn(w, h, |_, y| 1.0 / (1.0 + y as f32 / last))
+}
+
+/// `depth` aligned to the pair's ground truth by scale and shift in disparity (as
+/// [`depth_metrics`] fits them), as depth `f·B/d`; disparities below a thousandth of the
+/// largest known one are raised to it. With the fit's metrics.
+fn aligned_depth(pair: &StereoPair, depth: &GrayRaster) -> Result<(GrayRaster, DepthMetrics)> {
+    let fb = pair.focal_px * pair.baseline;
+    let known = pair.disparity.map(|d| if is_known(d) { d } else { 0.0 });
+    let m = depth_metrics(depth, &known, 0.0)?;
+    let d_max = known.data().iter().copied().fold(0.0f32, f32::max);
+    let floor = 1e-3 * d_max;
+    let aligned = depth.map(|z| {
+        let p = 1.0 / z as f64;
+        let a = (m.scale * p + m.shift) as f32;
+        let a = if a.is_finite() { a.max(floor) } else { floor };
+        fb / a
+    });
+    Ok((aligned, m))
 }
 
 /// The project of a scene method: the left image, the imported depth, a two-key path from the
@@ -318,6 +338,29 @@ mod tests {
     use super::*;
     use crate::geometry::{Intrinsics, View};
     use crate::raster::Raster;
+
+    #[test]
+    fn the_ramp_is_nearest_at_the_bottom_row_and_aligns_to_a_ramp_truth() {
+        let r = vertical_ramp(3, 5);
+        assert_eq!(r.at(0, 0), 1.0);
+        assert_eq!(r.at(2, 4), 0.5);
+        assert!((r.at(1, 2) - 1.0 / 1.5).abs() < 1e-6);
+        // A degenerate one-row image stays finite.
+        assert!(
+            vertical_ramp(4, 1)
+                .data()
+                .iter()
+                .all(|z| z.is_finite() && *z > 0.0)
+        );
+        // A truth that is itself a ramp (disparity 3 + 2·y/(h − 1)) is recovered exactly.
+        let mut pair = toy_pair();
+        let (w, h) = pair.left.size();
+        pair.disparity = Raster::from_fn(w, h, |_, y| 3.0 + 2.0 * y as f32 / (h - 1) as f32);
+        let (depth, m) = aligned_depth(&pair, &vertical_ramp(w, h)).unwrap();
+        assert!(m.abs_rel < 1e-4, "{m:?}");
+        let fb = pair.focal_px * pair.baseline;
+        assert!((depth.at(0, h - 1) - fb / 5.0).abs() < 1e-3 * fb);
+    }
 
     fn toy_pair() -> StereoPair {
         // A fronto-parallel wall at disparity 2 with a nearer block (disparity 4); the right

@@ -18,6 +18,9 @@ pub enum NvsDepth {
     Oracle,
     /// The depth stage's estimate, aligned to the ground truth by scale and shift in disparity.
     Estimated,
+    /// Knowing nothing: a vertical ramp (disparity growing linearly toward the bottom row),
+    /// aligned to the ground truth as the estimate is. The baseline a depth estimate must beat.
+    Ramp,
 }
 
 impl NvsDepth {
@@ -26,6 +29,7 @@ impl NvsDepth {
         match self {
             NvsDepth::Oracle => "oracle",
             NvsDepth::Estimated => "estimated",
+            NvsDepth::Ramp => "ramp",
         }
     }
 }
