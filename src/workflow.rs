@@ -11,7 +11,7 @@ use crate::export::{ExportOptions, RenderSummary, render_sequence};
 use crate::path::{CameraPath, Preset, PresetKind};
 use crate::progress::Progress;
 use crate::project::Project;
-use crate::render::{RendererChoice, select_renderer};
+use crate::render::RendererChoice;
 use crate::scene::{Scene, SceneBuilder};
 use crate::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -136,7 +136,11 @@ pub fn render_project(
     }
     // Chosen once the inputs are known to be good: opening a GPU adapter can be slow and some
     // Vulkan layers print to stderr, which would spoil the one-line error of a bad input.
-    let (mut renderer, why) = select_renderer(job.renderer, project.render)?;
+    let (mut renderer, why) = crate::render::select_renderer_for(
+        job.renderer,
+        project.render,
+        Some(scene.output_camera(&project).size),
+    )?;
     for line in path_warnings {
         note(Note::Warning(line));
     }

@@ -65,6 +65,17 @@ pub fn select_renderer(
     choice: RendererChoice,
     settings: SplatSettings,
 ) -> Result<(Box<dyn FrameRenderer>, String)> {
+    select_renderer_for(choice, settings, None)
+}
+
+/// [`select_renderer`] for frames of `size`: `auto` takes the CPU renderer when a frame of that
+/// size does not fit the GPU adapter's largest buffer (a camera-sized output on an adapter with
+/// small limits), and says so.
+pub fn select_renderer_for(
+    choice: RendererChoice,
+    settings: SplatSettings,
+    size: Option<(usize, usize)>,
+) -> Result<(Box<dyn FrameRenderer>, String)> {
     match choice {
         RendererChoice::Cpu => Ok((
             Box::new(CpuRenderer::new(settings)),
@@ -79,6 +90,21 @@ pub fn select_renderer(
             Ok((Box::new(renderer), why))
         }
         RendererChoice::Auto => match GpuContext::new() {
+            Ok(context)
+                if choice.uses_gpu(&context)
+                    && size.is_some_and(|(w, h)| !context.frame_fits(w, h)) =>
+            {
+                let (w, h) = size.unwrap_or_default();
+                Ok((
+                    Box::new(CpuRenderer::new(settings)),
+                    format!(
+                        "cpu renderer: a {w}×{h} frame needs a {} MiB buffer, {} allows {} MiB",
+                        GpuContext::frame_buffer_bytes(w, h).div_ceil(1 << 20),
+                        context.describe(),
+                        context.max_binding_bytes() >> 20
+                    ),
+                ))
+            }
             Ok(context) if choice.uses_gpu(&context) => {
                 let why = format!("gpu renderer on {}", context.describe());
                 Ok((Box::new(GpuRenderer::with_context(context, settings)?), why))

@@ -15,7 +15,7 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
-pub use choice::{RendererChoice, select_renderer};
+pub use choice::{RendererChoice, select_renderer, select_renderer_for};
 
 /// One rendered view. All rasters have the output size.
 #[derive(Clone, Debug, PartialEq)]

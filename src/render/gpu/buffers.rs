@@ -62,7 +62,7 @@ pub(super) struct SlotBuffers {
 
 /// Bytes of one frame: colour (3 floats), coverage and depth per pixel.
 pub(super) fn frame_bytes(width: usize, height: usize) -> u64 {
-    (width * height * 5 * 4) as u64
+    width as u64 * height as u64 * 5 * 4
 }
 
 /// Rounds a size up to a multiple of 16 bytes, at least 16.

@@ -13,6 +13,25 @@ pub struct GpuContext {
 }
 
 impl GpuContext {
+    /// The largest buffer a binding may have on this device, bytes.
+    pub fn max_binding_bytes(&self) -> u64 {
+        let limits = self.device.limits();
+        limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size)
+    }
+
+    /// True when a `width × height` frame's buffer can be bound on this device (see
+    /// [`GpuContext::frame_buffer_bytes`]).
+    pub fn frame_fits(&self, width: usize, height: usize) -> bool {
+        Self::frame_buffer_bytes(width, height) <= self.max_binding_bytes()
+    }
+
+    /// Bytes of a `width × height` frame's buffer on the GPU.
+    pub fn frame_buffer_bytes(width: usize, height: usize) -> u64 {
+        super::buffers::frame_bytes(width, height)
+    }
+
     /// Opens the best adapter of any enabled back end (`WGPU_BACKEND` and the other wgpu
     /// environment variables are honoured). Errors with [`Error::Gpu`] when there is none.
     pub fn new() -> Result<Self> {

@@ -147,6 +147,24 @@ pub(crate) mod tests {
         LOCK.lock().unwrap_or_else(|e| e.into_inner())
     }
 
+    #[test]
+    fn a_frame_fits_the_adapter_only_within_its_largest_buffer() {
+        let Some(context) = context() else { return };
+        let max = context.max_binding_bytes();
+        assert_eq!(GpuContext::frame_buffer_bytes(6000, 4000), 6000 * 4000 * 20);
+        // Sizes past u32 pixels do not wrap.
+        assert_eq!(
+            GpuContext::frame_buffer_bytes(65_535, 65_535),
+            65_535 * 65_535 * 20
+        );
+        assert!(context.frame_fits(1, 1));
+        assert!(!context.frame_fits(65_535, 65_535));
+        // The largest square that fits, and one pixel row more that does not.
+        let side = ((max / 20) as f64).sqrt() as usize;
+        assert!(context.frame_fits(side, side));
+        assert!(!context.frame_fits(side, side + (max / 20) as usize / side + 1));
+    }
+
     fn splatter(settings: SplatSettings) -> Option<GpuSplatter> {
         let context = context()?;
         Some(GpuSplatter::new(context, settings).expect("splatter"))
