@@ -306,6 +306,33 @@ pub fn choose_working_size(
     })
 }
 
+/// Checks that rendering `output` frames of a scene built at `working` fits `settings`' memory
+/// budget (the editor's export: its scene is already built, the frames are not).
+pub fn check_render_budget(
+    settings: &WorkingSettings,
+    working: &WorkingSize,
+    output: (usize, usize),
+) -> Result<()> {
+    let budget = budget_mib(settings).saturating_mul(MIB);
+    let scene = build_bytes(working.size, 0);
+    let frame = frame_bytes(output);
+    let needs = scene.saturating_add(frame);
+    if needs > budget {
+        return Err(Error::invalid(format!(
+            "not enough memory: exporting {}×{} frames needs about {} MiB (the scene {} MiB, one \
+             frame {} MiB) but the budget is {} MiB; export at a smaller size, or raise \
+             working.memory_budget_mib",
+            output.0,
+            output.1,
+            needs.div_ceil(MIB),
+            scene.div_ceil(MIB),
+            frame.div_ceil(MIB),
+            budget / MIB
+        )));
+    }
+    Ok(())
+}
+
 fn cap_reason(settings: &WorkingSettings, photo: (usize, usize), cap_px: f64) -> WorkingReason {
     if cap_px >= photo.0 as f64 * photo.1 as f64 {
         WorkingReason::Photo
@@ -510,6 +537,21 @@ mod tests {
         p.output.height = Some(65_535);
         let e = choose_working_size(&p, (8064, 6048), decode, true, || Ok(1.0)).unwrap_err();
         assert!(e.to_string().contains("65535×65535 frame"), "{e}");
+    }
+
+    #[test]
+    fn an_export_is_checked_against_the_budget() {
+        let settings = WorkingSettings {
+            memory_budget_mib: Some(1024),
+            ..Default::default()
+        };
+        let working = WorkingSize::photo((1280, 800));
+        assert!(check_render_budget(&settings, &working, (1920, 1080)).is_ok());
+        let e = check_render_budget(&settings, &working, (8064, 6048))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("8064×6048") && e.contains("1024 MiB"), "{e}");
+        assert!(!e.contains('\n'));
     }
 
     #[test]

@@ -365,6 +365,12 @@ fn scene_thread(
                 let result = job(&shared, &ctx, JobKind::Export, pool, |progress| {
                     // Exactly the canvas the path needs: the frames the command line renders.
                     let scene = builder.build_exact(&project, &progress.sub(0.0, 0.1))?;
+                    // Refused before any frame is written when the frames cannot fit.
+                    crate::scene::check_render_budget(
+                        &project.working,
+                        &scene.working,
+                        scene.output_camera(&project).size,
+                    )?;
                     let mut renderer = CpuRenderer::new(project.render);
                     render_sequence(
                         &project,
