@@ -114,15 +114,72 @@ fn catalogue_models_install_check_and_run_by_name() {
         .arg(&models));
     server.join().unwrap();
     assert!(String::from_utf8_lossy(&out.stdout).contains("installed lama"));
-    // Depth Anything from a file "downloaded by hand".
-    run(exe()
+    // Depth Anything from a file "downloaded by hand": the fixture is far from the published
+    // 99.1 MB, so it needs --skip-checksum; 5 MB of random bytes are refused either way, by
+    // name, as not an ONNX model, and leave nothing behind.
+    let out = exe()
         .args(["models", "install", "depth-anything-v2-small", "--file"])
+        .arg(fixture("catalogue_depth_anything_v2_small.onnx"))
+        .arg("--dir")
+        .arg(&models)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("published as 99.1 MB"),
+        "{err}"
+    );
+    let random = dir.path().join("random.bin");
+    let mut s = 0x9E37_79B9u32;
+    let bytes: Vec<u8> = (0..5_000_000)
+        .map(|_| {
+            s ^= s << 13;
+            s ^= s >> 17;
+            s ^= s << 5;
+            s as u8
+        })
+        .collect();
+    std::fs::write(&random, bytes).unwrap();
+    let out = exe()
+        .args([
+            "models",
+            "install",
+            "depth-anything-v2-small",
+            "--skip-checksum",
+            "--file",
+        ])
+        .arg(&random)
+        .arg("--dir")
+        .arg(&models)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("random.bin") && err.contains("not an ONNX model"),
+        "{err}"
+    );
+    assert!(!models.join("depth-anything-v2-small").exists());
+    run(exe()
+        .args([
+            "models",
+            "install",
+            "depth-anything-v2-small",
+            "--skip-checksum",
+            "--file",
+        ])
         .arg(fixture("catalogue_depth_anything_v2_small.onnx"))
         .arg("--dir")
         .arg(&models));
     // Depth Anything V2 Base shares Small's interface; its licence is said at install.
     let base = run(exe()
-        .args(["models", "install", "depth-anything-v2-base", "--file"])
+        .args([
+            "models",
+            "install",
+            "depth-anything-v2-base",
+            "--skip-checksum",
+            "--file",
+        ])
         .arg(fixture("catalogue_depth_anything_v2_small.onnx"))
         .arg("--dir")
         .arg(&models));
@@ -153,7 +210,13 @@ fn catalogue_models_install_check_and_run_by_name() {
     if ready {
         // A graph that does not match the entry's manifest is refused and leaves nothing.
         let out = exe()
-            .args(["models", "install", "lama-opencv", "--file"])
+            .args([
+                "models",
+                "install",
+                "lama-opencv",
+                "--skip-checksum",
+                "--file",
+            ])
             .arg(fixture("catalogue_depth_anything_v2_small.onnx"))
             .arg("--dir")
             .arg(&models)
@@ -235,7 +298,13 @@ fn catalogue_models_install_check_and_run_by_name() {
         // Every inpainting entry through the `inpaint` command by name (LaMa's two exports
         // share the fixture: same names, shapes and ranges).
         run(exe()
-            .args(["models", "install", "lama-opencv", "--file"])
+            .args([
+                "models",
+                "install",
+                "lama-opencv",
+                "--skip-checksum",
+                "--file",
+            ])
             .arg(fixture("catalogue_lama.onnx"))
             .arg("--dir")
             .arg(&models));

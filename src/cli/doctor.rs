@@ -37,13 +37,27 @@ pub(crate) fn doctor(args: DoctorArgs) -> anyhow::Result<()> {
                 .iter()
                 .filter_map(|e| makeit4d::models::installed(&dir, e))
                 .map(|m| {
-                    let check = makeit4d::ml::ModelManifest::load(&m.manifest_path)
-                        .and_then(|manifest| check_model_graph(&manifest));
-                    match check {
-                        Ok(()) => {
-                            format!("{} ({:.1} MB, checked)", m.entry.name, m.bytes as f64 / 1e6)
+                    // Say exactly what was checked: the file's ONNX structure always, the graph
+                    // against its manifest only through ONNX Runtime.
+                    let structure = makeit4d::ml::check_onnx_file(&m.model_path);
+                    let graph = if !makeit4d::ml::ort_available() {
+                        Ok("graph not checked: no ONNX Runtime")
+                    } else {
+                        makeit4d::ml::ModelManifest::load(&m.manifest_path)
+                            .and_then(|manifest| check_model_graph(&manifest))
+                            .map(|()| "graph matches its manifest")
+                    };
+                    match (structure, graph) {
+                        (Ok(s), Ok(graph)) => format!(
+                            "{} ({:.1} MB; ONNX ir_version {}, {} nodes; {graph})",
+                            m.entry.name,
+                            m.bytes as f64 / 1e6,
+                            s.ir_version,
+                            s.nodes
+                        ),
+                        (Err(e), _) | (_, Err(e)) => {
+                            format!("{} (broken: {e:#})", m.entry.name)
                         }
-                        Err(e) => format!("{} (broken: {e:#})", m.entry.name),
                     }
                 })
                 .collect();

@@ -22,10 +22,12 @@
 //! claims against what the session itself reports and refuses a mismatch.
 
 mod manifest;
+mod proto;
 mod runtime;
 mod session;
 
 pub use manifest::*;
+pub use proto::{OnnxStructure, check_onnx_bytes, check_onnx_file};
 pub use runtime::*;
 pub use session::*;
 

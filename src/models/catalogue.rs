@@ -15,7 +15,9 @@ pub struct CatalogueEntry {
     pub file: &'static str,
     /// Where it is downloaded from.
     pub url: &'static str,
-    /// Its size as published (for the listing; not a check).
+    /// Its size as published, e.g. `"99.1 MB"` (the listing; without an exact
+    /// [`CatalogueEntry::size_bytes`], a file more than [`PUBLISHED_SIZE_TOLERANCE`] away from
+    /// it is refused unless `--skip-checksum`).
     pub published_size: &'static str,
     /// Exact size in bytes, when known from a public source.
     pub size_bytes: Option<u64>,
@@ -27,6 +29,19 @@ pub struct CatalogueEntry {
     pub non_commercial: bool,
     /// The manifest, JSON, `"file"` naming [`CatalogueEntry::file`].
     pub manifest: &'static str,
+}
+
+/// How far a file may be from its entry's published size (which is rounded, e.g. to 0.1 MB).
+pub const PUBLISHED_SIZE_TOLERANCE: f64 = 0.05;
+
+impl CatalogueEntry {
+    /// The published size in bytes (`"99.1 MB"` → 99 100 000), when it is a number of MB.
+    pub fn published_bytes(&self) -> Option<u64> {
+        let text = self.published_size.trim();
+        let number = text.strip_suffix("MB")?.trim().trim_start_matches("about ");
+        let mb: f64 = number.trim().parse().ok()?;
+        (mb.is_finite() && mb > 0.0).then(|| (mb * 1e6).round() as u64)
+    }
 }
 
 /// The manifest of onnx-community's Depth Anything V2 exports (fp32 and fp16 share it).

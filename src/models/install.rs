@@ -64,6 +64,17 @@ fn verify(
                 entry.name
             )));
         }
+        if entry.size_bytes.is_none()
+            && let Some(about) = entry.published_bytes()
+            && (bytes as f64 - about as f64).abs() > PUBLISHED_SIZE_TOLERANCE * about as f64
+        {
+            return Err(Error::invalid(format!(
+                "{source} is {:.1} MB; {} is published as {}; {other_export}",
+                bytes as f64 / 1e6,
+                entry.name,
+                entry.published_size
+            )));
+        }
         if let Some(want) = entry.sha256 {
             let got = sha256_file(file)?;
             if got != want {
@@ -74,6 +85,9 @@ fn verify(
             }
         }
     }
+    // Whatever the byte checks said: an ONNX model at all (read without ONNX Runtime).
+    crate::ml::check_onnx_bytes(&std::fs::read(file).map_err(|e| Error::file(file, e))?)
+        .map_err(|why| Error::invalid(format!("{source} {why}")))?;
     let manifest = ModelManifest::parse(entry.manifest, manifest_path)?;
     let manifest = ModelManifest {
         model_path: file.to_path_buf(),

@@ -77,9 +77,25 @@ fn ok(body: &[u8]) -> Vec<u8> {
     r
 }
 
-/// The payload, and a reply that honours `Range: bytes=N-` with 206.
+/// The payload: a real (tiny) ONNX model padded to 200 000 bytes with an unknown protobuf
+/// field (field 100, length-delimited), which protobuf readers skip; and a reply that honours
+/// `Range: bytes=N-` with 206.
 fn payload() -> Vec<u8> {
-    (0..200_000u32).map(|i| (i * 7 % 251) as u8).collect()
+    let mut bytes = std::fs::read(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/depth_constant.onnx"),
+    )
+    .unwrap();
+    let pad = 200_000 - bytes.len() - 5;
+    bytes.extend_from_slice(&[0xA2, 0x06]);
+    let mut n = pad;
+    while n >= 0x80 {
+        bytes.push((n as u8 & 0x7f) | 0x80);
+        n >>= 7;
+    }
+    bytes.push(n as u8);
+    bytes.extend((0..pad as u32).map(|i| (i * 7 % 251) as u8));
+    assert!(crate::ml::check_onnx_bytes(&bytes).is_ok());
+    bytes
 }
 
 fn ranged(body: Vec<u8>) -> Reply {
@@ -333,6 +349,71 @@ fn a_file_by_hand_is_checked_like_a_download() {
         &no_graph_check,
     );
     assert!(missing.unwrap_err().to_string().contains("no such file"));
+
+    // Random bytes of the published size are refused by name, with or without the byte
+    // checks: they are not an ONNX model. Nothing is left behind.
+    let random = dir.path().join("random.bin");
+    std::fs::write(
+        &random,
+        (0..200_000u32)
+            .map(|i| (i * 7 % 251) as u8)
+            .collect::<Vec<_>>(),
+    )
+    .unwrap();
+    for check in [ByteCheck::Catalogue, ByteCheck::Skip] {
+        let models = dir.path().join("models-random");
+        let err = install_from_file(&models, &TEST_ENTRY, &random, check, &no_graph_check)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("random.bin") && err.contains("not an ONNX model"),
+            "{err}"
+        );
+        assert!(files_in(&models).is_empty());
+    }
+    // A real model far from the published size: refused unless --skip-checksum.
+    let small = dir.path().join("small.onnx");
+    std::fs::copy(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/depth_constant.onnx"),
+        &small,
+    )
+    .unwrap();
+    let models = dir.path().join("models-small");
+    let err = install_from_file(
+        &models,
+        &TEST_ENTRY,
+        &small,
+        ByteCheck::Catalogue,
+        &no_graph_check,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("published as 0.2 MB") && err.contains("--skip-checksum"),
+        "{err}"
+    );
+    install_from_file(
+        &models,
+        &TEST_ENTRY,
+        &small,
+        ByteCheck::Skip,
+        &no_graph_check,
+    )
+    .unwrap();
+}
+
+#[test]
+fn published_sizes_read_as_bytes() {
+    assert_eq!(TEST_ENTRY.published_bytes(), Some(200_000));
+    let dav2 = find("depth-anything-v2-small").unwrap();
+    assert_eq!(dav2.published_bytes(), Some(99_100_000));
+    for e in CATALOGUE {
+        assert!(
+            e.size_bytes.is_some() || e.published_bytes().is_some(),
+            "{}: no size to check against",
+            e.name
+        );
+    }
 }
 
 #[test]
