@@ -173,31 +173,54 @@ impl SceneBuilder {
         progress: &Progress,
     ) -> Result<(Arc<LoadedImage>, WorkingSize)> {
         project.validate()?;
+        let (_, input, working) = built(self.load_working(project, progress, false)?)?;
+        Ok((input, working))
+    }
+
+    /// Stage 1: `(load key, photo at the working size, working size)`, or the stage a dry run
+    /// would have to run.
+    #[allow(clippy::type_complexity)]
+    fn load_working(
+        &mut self,
+        project: &Project,
+        p_load: &Progress,
+        dry: bool,
+    ) -> Result<std::result::Result<(u64, Arc<LoadedImage>, WorkingSize), Stage>> {
         let photo_key = key_of(0, &project.input);
-        let working = self.working_size(project, photo_key, progress)?;
+        let working = self.working_size(project, photo_key, p_load)?;
         let key = if working.is_photo() {
+            // The key of a photo built at its own size, as before working sizes existed.
             photo_key
         } else {
             key_of(photo_key, &working.size)
         };
-        let photo = if self.load.peek(key).is_some() || working.is_photo() {
+        let in_load = self.load.peek(key).is_some();
+        let photo = if in_load || dry || working.is_photo() {
             None
         } else {
             Some(self.decoded_photo(photo_key, &project.input)?)
         };
-        let input = built(cached(
+        if working.is_photo() {
+            // Nothing is downsampled from it later.
+            self.decoded = None;
+        }
+        let input = match cached(
             &mut self.load,
             &mut self.stats,
             Stage::Load,
             (key, 0),
-            false,
-            progress,
+            dry,
+            p_load,
             |_| match &photo {
                 Some(photo) => Ok(load_at_size(photo, working.size)),
                 None => load_image(&project.input),
             },
-        )?)?;
-        Ok((input, working))
+        )? {
+            Ok(v) => v,
+            Err(stage) => return Ok(Err(stage)),
+        };
+        p_load.check()?;
+        Ok(Ok((key, input, working)))
     }
 
     /// The depth stage's output for `project` (load and depth only, cached like a build's):
@@ -320,41 +343,10 @@ impl SceneBuilder {
             Stage,
         >,
     > {
-        let photo_key = key_of(0, &project.input);
-        let working = self.working_size(project, photo_key, p_load)?;
-        let key = if working.is_photo() {
-            // The key of a photo built at its own size, as before working sizes existed.
-            photo_key
-        } else {
-            key_of(photo_key, &working.size)
-        };
-        let in_load = self.load.peek(key).is_some();
-        let photo = if in_load || dry || working.is_photo() {
-            None
-        } else {
-            Some(self.decoded_photo(photo_key, &project.input)?)
-        };
-        if working.is_photo() {
-            // Nothing is downsampled from it later.
-            self.decoded = None;
-        }
-        let stats = &mut self.stats;
-        let input = match cached(
-            &mut self.load,
-            stats,
-            Stage::Load,
-            (key, 0),
-            dry,
-            p_load,
-            |_| match &photo {
-                Some(photo) => Ok(load_at_size(photo, working.size)),
-                None => load_image(&project.input),
-            },
-        )? {
+        let (key, input, working) = match self.load_working(project, p_load, dry)? {
             Ok(v) => v,
             Err(stage) => return Ok(Err(stage)),
         };
-        p_load.check()?;
         let strokes = scaled_strokes(&project.depth.strokes, &project.working, &working);
         let strokes = &strokes;
         let (w, h) = input.rgb.size();
@@ -383,7 +375,7 @@ impl SceneBuilder {
         let mut estimated = None;
         let depth = match cached(
             &mut self.depth,
-            stats,
+            &mut self.stats,
             Stage::Depth,
             (key, 0),
             dry,
