@@ -84,7 +84,12 @@ pub fn load_image(path: &Path) -> Result<LoadedImage> {
 /// ([`load_at_size`]) without a full-resolution float copy.
 pub fn decode_image(path: &Path) -> Result<DynamicImage> {
     let bytes = read_image_file(path)?;
-    let (decoder, header) = open_decoder(path, &bytes)?;
+    decode_image_bytes(path, &bytes)
+}
+
+/// [`decode_image`] of a file's bytes already read (`path` names it in messages).
+pub fn decode_image_bytes(path: &Path, bytes: &[u8]) -> Result<DynamicImage> {
+    let (decoder, header) = open_decoder(path, bytes)?;
     let mut image =
         DynamicImage::from_decoder(decoder).map_err(|e| Error::file(path, decode_message(&e)))?;
     image.apply_orientation(header.orientation);
@@ -181,14 +186,16 @@ pub fn jpeg_is_complete(bytes: &[u8]) -> bool {
     }
 }
 
-/// Turns an `image` error into one line a user understands.
+/// Turns an `image` error into one line a user understands (decoders' own messages may hold
+/// line breaks: whitespace runs become one space).
 fn decode_message(e: &image::ImageError) -> String {
-    match e {
+    let text = match e {
         image::ImageError::Limits(_) => format!("too large to decode safely ({e})"),
         image::ImageError::Unsupported(_) => format!("unsupported image ({e})"),
         image::ImageError::Decoding(_) => format!("corrupt or truncated image ({e})"),
         _ => e.to_string(),
-    }
+    };
+    text.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
 /// Converts a decoded image into rasters.
@@ -619,6 +626,21 @@ mod tests {
         let e = load_image(&text).unwrap_err().to_string();
         assert!(e.contains("text.png"), "{e}");
         assert!(!e.contains('\n'));
+    }
+
+    #[test]
+    fn a_decoder_message_with_line_breaks_becomes_one_line() {
+        // Found by `bench fuzz` (seed 1): a mutated JPEG whose decoder error held a newline.
+        let bytes = std::fs::read(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/fuzz/jpeg_newline.jpg"),
+        )
+        .unwrap();
+        let e = decode_image_bytes(Path::new("fuzz.jpg"), &bytes).unwrap_err();
+        let text = format!("{e:#}");
+        assert!(
+            !text.contains('\n') && text.contains("fuzz.jpg"),
+            "{text:?}"
+        );
     }
 
     #[test]

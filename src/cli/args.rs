@@ -385,6 +385,31 @@ pub(crate) enum BenchCommand {
     /// `models install`'s download against curl, from a server on 127.0.0.1: seconds, MB/s
     /// and peak memory.
     Download(BenchDownloadArgs),
+    /// Mutated inputs of every format makeit4d reads (JPEG, PNG, projects and recovery files,
+    /// model manifests, ordinal annotations, ONNX files): cases read, refused, panics, slow.
+    Fuzz(BenchFuzzArgs),
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct BenchFuzzArgs {
+    /// Cases per format.
+    #[arg(long, default_value_t = 10_000)]
+    pub(crate) cases: usize,
+    /// Seed of the mutations (same seed, same cases).
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
+    /// A case slower than this counts as slow, milliseconds.
+    #[arg(long, default_value_t = 2000)]
+    pub(crate) limit_ms: u64,
+    /// The repository, whose test files are the seeds (generated seeds are used anyway).
+    #[arg(long, default_value = ".")]
+    pub(crate) root: PathBuf,
+    /// Write each format's first failing case here (for a regression file).
+    #[arg(long)]
+    pub(crate) save_failures: Option<PathBuf>,
+    /// Print JSON instead of a markdown table.
+    #[arg(long)]
+    pub(crate) json: bool,
 }
 
 #[derive(Args, Debug)]

@@ -280,3 +280,38 @@ pub(crate) fn bench_render(args: BenchRenderArgs) -> anyhow::Result<()> {
     print!("{table}");
     Ok(())
 }
+
+/// `makeit4d bench fuzz`.
+pub(crate) fn bench_fuzz(args: super::args::BenchFuzzArgs) -> anyhow::Result<()> {
+    use makeit4d::eval::fuzz;
+    let limit = std::time::Duration::from_millis(args.limit_ms);
+    let started = std::time::Instant::now();
+    let reports = fuzz::fuzz_all(&args.root, args.cases, args.seed, limit);
+    if let Some(dir) = &args.save_failures {
+        std::fs::create_dir_all(dir)?;
+        for r in &reports {
+            if let Some(bytes) = &r.first_failure {
+                let name = r.format.replace([' ', '/'], "_");
+                makeit4d::image_io::write_atomic(&dir.join(format!("{name}.bin")), bytes)?;
+            }
+        }
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&reports)?);
+    } else {
+        print!("{}", fuzz::to_markdown(&reports, limit));
+        println!(
+            "\n{} cases per format, seed {}, {:.1} s; peak memory {}",
+            args.cases,
+            args.seed,
+            started.elapsed().as_secs_f64(),
+            makeit4d::metrics::peak_memory_mib()
+                .map_or_else(|| "unknown".to_string(), |m| format!("{m:.0} MiB"))
+        );
+    }
+    let bad: usize = reports.iter().map(|r| r.panics + r.multi_line).sum();
+    if bad > 0 {
+        anyhow::bail!("{bad} case(s) panicked or gave an error of more than one line");
+    }
+    Ok(())
+}

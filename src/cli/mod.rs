@@ -75,6 +75,7 @@ pub fn main() -> ExitCode {
         Command::Bench(BenchCommand::Scene(args)) => bench::bench_scene(args, cancel),
         Command::Bench(BenchCommand::SceneCase(args)) => bench::bench_scene_case(args),
         Command::Bench(BenchCommand::Download(args)) => bench::bench_download(args),
+        Command::Bench(BenchCommand::Fuzz(args)) => bench::bench_fuzz(args),
         Command::Doctor(args) => doctor::doctor(args),
         Command::Completions(args) => install::print_bytes(&install::completions(args.shell)),
         Command::Manpage => install::manpage().and_then(|m| install::print_bytes(&m)),

@@ -6,6 +6,7 @@
 //! the command line and the editor do, and score frames with [`crate::metrics`].
 
 pub mod bench;
+pub mod fuzz;
 pub mod nvs;
 pub mod plot;
 pub mod zoom;
