@@ -583,3 +583,85 @@ fn a_camera_sized_photo_renders_at_a_working_size() {
         assert!(!d.join("bad").exists());
     }
 }
+
+/// Stereo frames: each packing has its size, resuming keeps the bytes, an interaxial of 0 gives
+/// two identical eyes, an absurd one is clamped with a warning, and what is not supported yet is
+/// refused in one line.
+#[test]
+fn stereo_frames_pack_both_eyes() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let photo = data("evening_glow_320.jpg");
+    for (mode, size) in [
+        ("sbs", (640, 200)),
+        ("sbs-half", (320, 200)),
+        ("tb", (320, 400)),
+        ("anaglyph", (320, 200)),
+    ] {
+        let out = d.join(mode);
+        let o = render(&photo, &out, &["--frames", "2", "--stereo", mode]);
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            o.status.success(),
+            "{mode}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(
+            stdout.contains(&format!("stereo {mode}: interaxial")) && stdout.contains("px"),
+            "{stdout}"
+        );
+        let frames = frames_in(&out);
+        assert_eq!(frames.len(), 2, "{frames:?}");
+        let f = image::open(&frames[1]).unwrap();
+        assert_eq!((f.width(), f.height()), size, "{mode}");
+    }
+    // Resumed: the frames on disk are complete, nothing is rendered again, same bytes.
+    let sbs = d.join("sbs");
+    let before = std::fs::read(sbs.join("frame_0001.png")).unwrap();
+    let o = render(
+        &photo,
+        &sbs,
+        &["--frames", "2", "--stereo", "sbs", "--resume"],
+    );
+    assert!(String::from_utf8_lossy(&o.stdout).contains("2 already complete"));
+    assert_eq!(std::fs::read(sbs.join("frame_0001.png")).unwrap(), before);
+    // No interaxial: both halves the same picture.
+    let flat = d.join("flat");
+    let o = render(
+        &photo,
+        &flat,
+        &["--frames", "2", "--stereo", "sbs", "--interaxial", "0"],
+    );
+    assert!(o.status.success());
+    let f = image::open(flat.join("frame_0001.png")).unwrap().to_rgb8();
+    for y in (0..200).step_by(17) {
+        for x in (0..320).step_by(13) {
+            assert_eq!(f.get_pixel(x, y), f.get_pixel(x + 320, y), "({x}, {y})");
+        }
+    }
+    // An absurd interaxial is clamped, with a warning.
+    let o = render(
+        &photo,
+        &d.join("wide"),
+        &[
+            "--frames",
+            "2",
+            "--stereo",
+            "anaglyph",
+            "--interaxial",
+            "1e9",
+        ],
+    );
+    assert!(o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("clamped"));
+    // Refused in one line, nothing written.
+    let bad = d.join("bad");
+    let o = render(&photo, &bad, &["--stereo", "sbs", "--pass", "depth"]);
+    assert_clean_failure(&o, &["--stereo"]);
+    assert!(frames_in(&bad).is_empty());
+    let o = render(&photo, &bad, &["--interaxial", "0.1"]);
+    assert_clean_failure(&o, &["--stereo"]);
+    let o = render(&photo, &bad, &["--stereo", "sbs", "--convergence=-1"]);
+    assert_clean_failure(&o, &["convergence"]);
+    assert!(frames_in(&bad).is_empty());
+}

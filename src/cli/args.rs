@@ -624,6 +624,17 @@ pub(crate) struct RenderArgs {
     /// Cap of the automatic working size, megapixels (default 2.7).
     #[arg(long, value_name = "MP")]
     pub(crate) max_megapixels: Option<f64>,
+    /// Stereo frames: two eyes a frame packed side by side (`sbs`, 2W×H), squeezed side by side
+    /// (`sbs-half`, W×H), top-bottom (`tb`, W×2H) or a red-cyan anaglyph (`anaglyph`, Dubois).
+    #[arg(long, value_enum)]
+    pub(crate) stereo: Option<StereoArg>,
+    /// Distance between the eyes, scene units (default: the scene's near depth / 30).
+    #[arg(long)]
+    pub(crate) interaxial: Option<f32>,
+    /// Depth that appears at the screen (zero disparity), scene units (default: the scene's
+    /// median depth, the subject).
+    #[arg(long)]
+    pub(crate) convergence: Option<f32>,
     /// Memory budget of the build and one frame, MiB (default: 60 % of the machine's memory);
     /// a smaller working size is chosen to fit, or the render is refused up front.
     #[arg(long, value_name = "MIB", value_parser = clap::value_parser!(u64).range(1..))]
@@ -675,6 +686,15 @@ pub(crate) fn parse_working_size(s: &str) -> Result<WorkingSizeArg, String> {
             )),
         },
     }
+}
+
+/// `--stereo`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum StereoArg {
+    Sbs,
+    SbsHalf,
+    Tb,
+    Anaglyph,
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]

@@ -1,6 +1,6 @@
 //! `makeit4d render`: one project or a batch, through the library's render workflow.
 
-use super::args::{LayersArg, MotionArg, RenderArgs, VideoArg, WorkingSizeArg};
+use super::args::{LayersArg, MotionArg, RenderArgs, StereoArg, VideoArg, WorkingSizeArg};
 use super::progress_bar;
 use anyhow::{Context, bail};
 use makeit4d::export::{ExportOptions, FramePattern, Passes, VideoFormat, VideoOptions};
@@ -137,7 +137,24 @@ fn render_one(
     };
     apply_scene_flags(args, &mut project)?;
     workflow::prepare_project(&mut project, &job)?;
+    if args.stereo.is_none() && (args.interaxial.is_some() || args.convergence.is_some()) {
+        bail!(
+            "--interaxial and --convergence set up stereo frames: add --stereo sbs|sbs-half|tb|anaglyph"
+        );
+    }
     let options = ExportOptions {
+        stereo: args
+            .stereo
+            .map(|layout| makeit4d::export::stereo::StereoOptions {
+                layout: match layout {
+                    StereoArg::Sbs => makeit4d::export::stereo::StereoLayout::SideBySide,
+                    StereoArg::SbsHalf => makeit4d::export::stereo::StereoLayout::SideBySideHalf,
+                    StereoArg::Tb => makeit4d::export::stereo::StereoLayout::TopBottom,
+                    StereoArg::Anaglyph => makeit4d::export::stereo::StereoLayout::Anaglyph,
+                },
+                interaxial: args.interaxial,
+                convergence: args.convergence,
+            }),
         pattern: FramePattern::parse(&args.pattern)?,
         sixteen_bit: args.bit_depth == 16,
         resume: args.resume,

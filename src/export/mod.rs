@@ -32,6 +32,7 @@
 mod options;
 pub mod passes;
 mod sequence;
+pub mod stereo;
 mod video;
 
 pub use options::*;

@@ -230,6 +230,8 @@ pub struct ExportOptions {
     pub range: Option<(usize, usize)>,
     /// Also encode a video (`out/video.<ext>`).
     pub video: Option<VideoOptions>,
+    /// Render two eyes per frame and pack them ([`super::stereo`]).
+    pub stereo: Option<super::stereo::StereoOptions>,
 }
 
 /// What a finished (or cancelled) render did.
@@ -262,6 +264,8 @@ pub struct RenderSummary {
     /// The scene's working size and why, when it is not the photo's own
     /// ([`crate::scene::WorkingSize`]).
     pub working: Option<String>,
+    /// The stereo rig and the disparities it gives, when the frames are stereo.
+    pub stereo: Option<String>,
 }
 
 impl std::fmt::Display for RenderSummary {
@@ -286,6 +290,9 @@ impl std::fmt::Display for RenderSummary {
         }
         if let Some(v) = &self.video {
             write!(f, "; video {}", v.display())?;
+        }
+        if let Some(s) = &self.stereo {
+            write!(f, "; {s}")?;
         }
         if let Some(w) = &self.working {
             write!(f, "; {w}")?;

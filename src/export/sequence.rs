@@ -77,8 +77,29 @@ pub fn render_sequence(
     progress: &Progress,
 ) -> Result<RenderSummary> {
     let start = Instant::now();
-    let (width, height) = scene.output_camera(project).size;
+    let camera = scene.output_camera(project);
+    let (eye_width, eye_height) = camera.size;
     let views = scene.output_views(project)?;
+    let mut warnings = Vec::new();
+    // Stereo: two eyes a frame, packed; the frame files have the packed size.
+    let stereo = match &options.stereo {
+        Some(o) => {
+            if options.passes != Passes::default() {
+                return Err(Error::invalid(
+                    "--pass with --stereo is not supported yet: render the passes without --stereo",
+                ));
+            }
+            let (rig, warning) =
+                super::stereo::StereoRig::new(o, scene.scale.near_depth, scene.scale.median_depth)?;
+            warnings.extend(warning);
+            Some((o.layout, rig))
+        }
+        None => None,
+    };
+    let (width, height) = match &stereo {
+        Some((layout, _)) => layout.packed_size((eye_width, eye_height)),
+        None => (eye_width, eye_height),
+    };
     let (first, end) = options.range.unwrap_or((0, views.len()));
     if first >= end || end > views.len() {
         return Err(Error::invalid(format!(
@@ -138,7 +159,6 @@ pub fn render_sequence(
         write_atomic(&dir.join("camera.py"), script.as_bytes())?;
     }
 
-    let mut warnings = Vec::new();
     let mut video = match &options.video {
         Some(v) => {
             let target = out_dir.join(format!("video.{}", v.format.extension()));
@@ -191,6 +211,16 @@ pub fn render_sequence(
                     enc.push(img.to_rgb8().as_raw())?;
                 }
                 resumed += 1;
+            } else if let Some((layout, rig)) = &stereo {
+                let [l, r] = rig.eyes(&views[i]);
+                let left = scene.render_frame(renderer, &l, i, eye_width, eye_height)?;
+                let right = scene.render_frame(renderer, &r, i, eye_width, eye_height)?;
+                let packed = super::stereo::pack(*layout, &left.colour, &right.colour)?;
+                save_rgb_png(&colour_path, &packed, options.sixteen_bit)?;
+                if let Some(enc) = video.as_mut() {
+                    enc.push(crate::image_io::to_rgb8(&packed).as_raw())?;
+                }
+                holes.push((i, 0.5 * (left.hole_fraction() + right.hole_fraction())));
             } else {
                 let frame = scene.render_frame(renderer, &views[i], i, width, height)?;
                 write_frame(&frame, &colour_path, options.sixteen_bit)?;
@@ -262,6 +292,26 @@ pub fn render_sequence(
         warnings,
         pass_dirs,
         working: None,
+        stereo: stereo.map(|(layout, rig)| {
+            let far = scene
+                .cloud
+                .source_depth
+                .iter()
+                .copied()
+                .filter(|d| d.is_finite() && *d > 0.0)
+                .fold(0.0f32, f32::max);
+            let fx = camera.intrinsics.fx;
+            format!(
+                "stereo {}: interaxial {:.4}, convergence at depth {:.3}; disparity {:+.1} px at the near depth {:.3}, {:+.1} px at the farthest {:.3}",
+                layout.name(),
+                rig.interaxial,
+                rig.convergence,
+                rig.disparity_px(fx, scene.scale.near_depth),
+                scene.scale.near_depth,
+                rig.disparity_px(fx, far.max(rig.convergence)),
+                far
+            )
+        }),
     })
 }
 

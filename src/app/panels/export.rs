@@ -43,6 +43,7 @@ impl ExportPanel {
     /// The export options the panel describes for a path of `frames` frames.
     pub fn options(&self, frames: usize) -> ExportOptions {
         ExportOptions {
+            stereo: None,
             sixteen_bit: self.sixteen_bit,
             passes: self.passes,
             range: self.range_on.then(|| {
