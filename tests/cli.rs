@@ -665,3 +665,41 @@ fn stereo_frames_pack_both_eyes() {
     assert_clean_failure(&o, &["convergence"]);
     assert!(frames_in(&bad).is_empty());
 }
+
+/// `export-scene` writes the layered cloud as a whole binary PLY whose header counts its
+/// records; another format is refused by name and nothing is written.
+#[test]
+fn export_scene_writes_a_whole_ply() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("scene.ply");
+    let o = exe()
+        .args(["export-scene"])
+        .arg(data("evening_glow_320.jpg"))
+        .arg("--out")
+        .arg(&ply)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let bytes = std::fs::read(&ply).unwrap();
+    let text = String::from_utf8_lossy(&bytes);
+    let end = text.find("end_header\n").expect("a PLY header") + "end_header\n".len();
+    let n: usize = text[..end]
+        .lines()
+        .find_map(|l| l.strip_prefix("element vertex "))
+        .and_then(|n| n.trim().parse().ok())
+        .expect("a vertex count");
+    assert!(n > 10_000, "{n} points");
+    assert_eq!(bytes.len(), end + n * 19);
+    assert!(String::from_utf8_lossy(&o.stdout).contains(&format!("{n} points")));
+    // glTF is not built yet: refused, nothing written.
+    let glb = dir.path().join("scene.glb");
+    let o = exe()
+        .args(["export-scene"])
+        .arg(data("evening_glow_320.jpg"))
+        .arg("--out")
+        .arg(&glb)
+        .output()
+        .unwrap();
+    assert_clean_failure(&o, &["scene.glb", "PLY"]);
+    assert!(!glb.exists());
+}

@@ -46,6 +46,9 @@ pub(crate) enum Command {
     /// The built-in catalogue of learned models: list, install, remove, print a manifest.
     #[command(subcommand)]
     Models(ModelsCommand),
+    /// Write the scene's layered point cloud (the frame-0 scene) as a PLY file for point-cloud
+    /// tools: position, colour, opacity, layer and a synthesised flag per point.
+    ExportScene(ExportSceneArgs),
     /// Print a shell completion script (e.g. `makeit4d completions bash >
     /// ~/.local/share/bash-completion/completions/makeit4d`).
     Completions(CompletionsArgs),
@@ -54,6 +57,19 @@ pub(crate) enum Command {
     /// Install the desktop entry, the icons and the project file type into the user's XDG
     /// folders (a launcher entry that opens photos and `.makeit4d.json` projects).
     InstallDesktop(InstallDesktopArgs),
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct ExportSceneArgs {
+    /// The photo (or give --project).
+    #[arg(required_unless_present = "project")]
+    pub(crate) image: Option<PathBuf>,
+    /// A project file: its scene, path and settings.
+    #[arg(long, conflicts_with = "image")]
+    pub(crate) project: Option<PathBuf>,
+    /// The file to write (.ply).
+    #[arg(long)]
+    pub(crate) out: PathBuf,
 }
 
 #[derive(Args, Debug)]

@@ -39,8 +39,13 @@ pub fn main() -> ExitCode {
             }
             // One line: clap's first line names the argument and the problem.
             let text = e.render().to_string();
-            let first = text.lines().next().unwrap_or("invalid arguments");
-            eprintln!("{first}");
+            let mut lines = text.lines().map(str::trim).filter(|l| !l.is_empty());
+            let first = lines.next().unwrap_or("invalid arguments");
+            // "the following required arguments were not provided:" names them on the next line.
+            match lines.next().filter(|_| first.ends_with(':')) {
+                Some(next) => eprintln!("{first} {next}"),
+                None => eprintln!("{first}"),
+            }
             return ExitCode::from(EXIT_ERROR);
         }
     };
@@ -77,6 +82,7 @@ pub fn main() -> ExitCode {
         Command::Bench(BenchCommand::Download(args)) => bench::bench_download(args),
         Command::Bench(BenchCommand::Fuzz(args)) => bench::bench_fuzz(args),
         Command::Doctor(args) => doctor::doctor(args),
+        Command::ExportScene(args) => stages::export_scene(args, cancel),
         Command::Completions(args) => install::print_bytes(&install::completions(args.shell)),
         Command::Manpage => install::manpage().and_then(|m| install::print_bytes(&m)),
         Command::InstallDesktop(args) => install::install_desktop(args),

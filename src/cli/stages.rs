@@ -136,3 +136,37 @@ fn write_cues(
     );
     Ok(())
 }
+
+/// `makeit4d export-scene`: the scene's layered cloud as PLY.
+pub(crate) fn export_scene(
+    args: super::args::ExportSceneArgs,
+    cancel: Arc<AtomicBool>,
+) -> anyhow::Result<()> {
+    let is_ply = args
+        .out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
+    if !is_ply {
+        anyhow::bail!(
+            "{}: export-scene writes PLY (.ply); glTF is not built yet",
+            args.out.display()
+        );
+    }
+    let project = match (&args.project, &args.image) {
+        (Some(p), _) => makeit4d::project::Project::load(p)?,
+        (None, Some(image)) => makeit4d::project::Project::new(image),
+        (None, None) => anyhow::bail!("give a photo or --project"),
+    };
+    let (bar, progress) = super::progress_bar(cancel);
+    let scene = makeit4d::scene::SceneBuilder::new().build(&project, &progress);
+    bar.finish_and_clear();
+    let scene = scene?;
+    makeit4d::export::ply::write_ply(&scene.cloud, &args.out)?;
+    println!(
+        "wrote {} ({} points in {} layers; axes: the photo's camera, OpenCV x right, y down, z forward)",
+        args.out.display(),
+        scene.cloud.len(),
+        scene.layers.layers.len().max(1)
+    );
+    Ok(())
+}

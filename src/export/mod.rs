@@ -31,6 +31,7 @@
 
 mod options;
 pub mod passes;
+pub mod ply;
 mod sequence;
 pub mod stereo;
 mod video;
