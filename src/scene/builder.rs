@@ -9,7 +9,7 @@ use super::canvas::{build_canvas, canvas_layout, grow_canvas, layout_covers, lay
 use super::cloud::{make_cloud, uninpainted_layers};
 use super::tools::{layer_depth_estimator, make_inpainter};
 use super::working::{
-    WorkingReason, WorkingSettings, WorkingSize, choose_working_size, proxy_magnification,
+    ProxyDepth, WorkingReason, WorkingSettings, WorkingSize, choose_working_size,
 };
 use super::{Canvas, PreparedMotion, SKETCH_STRIDE, Scene, Stage};
 use crate::error::Result;
@@ -39,6 +39,8 @@ pub struct SceneBuilder {
     decoded: Option<(u64, Arc<image::DynamicImage>)>,
     /// Headers of the inputs, by input key.
     headers: Vec<(u64, crate::image_io::ImageHeader)>,
+    /// Proxy depths for the path's magnification, by photo and depth settings.
+    proxies: Vec<(u64, Arc<ProxyDepth>)>,
     /// Working sizes by the settings that decide them, least recently used first.
     working: Vec<(u64, WorkingSize)>,
     /// The largest working size chosen so far by input key (a growing builder never shrinks
@@ -290,8 +292,30 @@ impl SceneBuilder {
             header.decode_bytes(),
             budget_frame,
             || {
-                let photo = self.decoded_photo(key, &project.input)?;
-                proxy_magnification(project, &photo, p)
+                // The proxy's depth does not depend on the path: kept across camera edits.
+                let proxy_key = key_of(
+                    key,
+                    &(
+                        &project.depth.method,
+                        &project.depth.model,
+                        &project.depth.import,
+                        &project.depth.classical,
+                        project.camera.hfov_deg,
+                    ),
+                );
+                let proxy = match self.proxies.iter().find(|e| e.0 == proxy_key) {
+                    Some((_, proxy)) => proxy.clone(),
+                    None => {
+                        let photo = self.decoded_photo(key, &project.input)?;
+                        let proxy = Arc::new(ProxyDepth::new(project, &photo, p)?);
+                        self.proxies.push((proxy_key, proxy.clone()));
+                        if self.proxies.len() > CACHE_ENTRIES {
+                            self.proxies.remove(0);
+                        }
+                        proxy
+                    }
+                };
+                proxy.magnification(project)
             },
         )?;
         if self.grow_canvas

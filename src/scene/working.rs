@@ -407,31 +407,63 @@ pub fn path_magnification(
     Ok(m.min(MAX_MAGNIFICATION))
 }
 
-/// Measures the path's magnification on a proxy of `photo` ([`PROXY_LONG_SIDE`] px long, its
-/// depth estimated with `project`'s depth settings without strokes).
+/// The depth of a proxy of the photo ([`PROXY_LONG_SIDE`] px long), which the path's
+/// magnification is measured on: it depends on the photo and the depth settings, not on the
+/// path, so a builder keeps it across camera edits.
+#[derive(Clone, Debug)]
+pub struct ProxyDepth {
+    depth: crate::raster::GrayRaster,
+    sky: crate::raster::GrayRaster,
+    intrinsics: Intrinsics,
+    photo: (usize, usize),
+}
+
+impl ProxyDepth {
+    /// The proxy of `photo`, its depth estimated with `project`'s depth settings without
+    /// strokes.
+    pub fn new(
+        project: &Project,
+        photo: &image::DynamicImage,
+        progress: &Progress,
+    ) -> Result<Self> {
+        let (pw, ph) = (photo.width() as usize, photo.height() as usize);
+        let s = (PROXY_LONG_SIDE as f64 / pw.max(ph) as f64).min(1.0);
+        let proxy = crate::image_io::load_at_size(photo, scaled((pw, ph), s));
+        let size = proxy.rgb.size();
+        let intrinsics = Intrinsics::from_hfov(size.0, size.1, project.camera.hfov_deg);
+        let settings = crate::stages::depth::DepthSettings {
+            strokes: Vec::new(),
+            ..project.depth.clone()
+        };
+        let depth =
+            crate::stages::depth::run_depth_stage(&settings, &proxy.rgb, &intrinsics, progress)?;
+        Ok(Self {
+            depth: depth.estimate.depth,
+            sky: depth.estimate.sky,
+            intrinsics,
+            photo: (pw, ph),
+        })
+    }
+
+    /// The magnification of `project`'s path over this depth ([`path_magnification`]).
+    pub fn magnification(&self, project: &Project) -> Result<f64> {
+        path_magnification(
+            project,
+            &self.depth,
+            &self.sky,
+            &self.intrinsics,
+            self.photo,
+        )
+    }
+}
+
+/// Measures the path's magnification on a proxy of `photo` ([`ProxyDepth`]).
 pub fn proxy_magnification(
     project: &Project,
     photo: &image::DynamicImage,
     progress: &Progress,
 ) -> Result<f64> {
-    let (pw, ph) = (photo.width() as usize, photo.height() as usize);
-    let s = (PROXY_LONG_SIDE as f64 / pw.max(ph) as f64).min(1.0);
-    let proxy = crate::image_io::load_at_size(photo, scaled((pw, ph), s));
-    let size = proxy.rgb.size();
-    let intrinsics = Intrinsics::from_hfov(size.0, size.1, project.camera.hfov_deg);
-    let settings = crate::stages::depth::DepthSettings {
-        strokes: Vec::new(),
-        ..project.depth.clone()
-    };
-    let depth =
-        crate::stages::depth::run_depth_stage(&settings, &proxy.rgb, &intrinsics, progress)?;
-    path_magnification(
-        project,
-        &depth.estimate.depth,
-        &depth.estimate.sky,
-        &intrinsics,
-        (pw, ph),
-    )
+    ProxyDepth::new(project, photo, progress)?.magnification(project)
 }
 
 #[cfg(test)]
