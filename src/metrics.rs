@@ -441,16 +441,20 @@ pub fn consistency_error(first: &ViewImage<'_>, later: &ViewImage<'_>) -> Result
 /// The process's peak resident set size (`VmHWM` of `/proc/self/status`), MiB, a resource
 /// figure the benchmarks print next to the scores; `None` off Linux.
 pub fn peak_memory_mib() -> Option<f64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kib: f64 = line
-        .trim_start_matches("VmHWM:")
+    proc_kib("/proc/self/status", "VmHWM:").map(|kib| kib / 1024.0)
+}
+
+/// The `KEY  N kB` value of a `/proc` file (`/proc/self/status`, `/proc/meminfo`), KiB; `None`
+/// off Linux or when the key is missing.
+pub fn proc_kib(file: &str, key: &str) -> Option<f64> {
+    let text = std::fs::read_to_string(file).ok()?;
+    let line = text.lines().find(|l| l.starts_with(key))?;
+    line.trim_start_matches(key)
         .trim()
         .trim_end_matches("kB")
         .trim()
         .parse()
-        .ok()?;
-    Some(kib / 1024.0)
+        .ok()
 }
 
 #[cfg(test)]

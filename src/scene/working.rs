@@ -149,16 +149,7 @@ impl std::fmt::Display for WorkingSize {
 
 /// The machine's memory, MiB (`MemTotal` of `/proc/meminfo`); `None` where unknown.
 pub fn machine_memory_mib() -> Option<u64> {
-    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = info.lines().find(|l| l.starts_with("MemTotal:"))?;
-    let kib: u64 = line
-        .trim_start_matches("MemTotal:")
-        .trim()
-        .trim_end_matches("kB")
-        .trim()
-        .parse()
-        .ok()?;
-    Some(kib / 1024)
+    crate::metrics::proc_kib("/proc/meminfo", "MemTotal:").map(|kib| (kib / 1024.0) as u64)
 }
 
 /// The memory budget of `settings`, MiB: the project's, else [`DEFAULT_BUDGET_SHARE`] of the
@@ -584,6 +575,15 @@ mod tests {
             .to_string();
         assert!(e.contains("8064×6048") && e.contains("1024 MiB"), "{e}");
         assert!(!e.contains('\n'));
+    }
+
+    #[test]
+    #[cfg(target_os = "linux")]
+    fn the_default_budget_is_a_share_of_the_machine() {
+        let total = machine_memory_mib().expect("MemTotal in /proc/meminfo");
+        assert!(total > 100, "{total} MiB");
+        let budget = budget_mib(&WorkingSettings::default());
+        assert_eq!(budget, (total as f64 * DEFAULT_BUDGET_SHARE) as u64);
     }
 
     #[test]
