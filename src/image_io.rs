@@ -121,10 +121,46 @@ impl ImageHeader {
 }
 
 /// Reads an image file's header (size after the EXIF orientation, decoded bytes) with the same
-/// checks as [`decode_image`], without decoding the pixels.
+/// size checks as [`decode_image`], reading only as much of the file as the header takes.
 pub fn read_header(path: &Path) -> Result<ImageHeader> {
-    let bytes = read_image_file(path)?;
-    Ok(open_decoder(path, &bytes)?.1)
+    check_regular_file(path)?;
+    let mut reader = ImageReader::open(path)
+        .map_err(|e| Error::file(path, e))?
+        .with_guessed_format()
+        .map_err(|e| Error::file(path, e))?;
+    if reader.format().is_none() {
+        return Err(Error::file(path, "is not a recognised image format"));
+    }
+    reader.limits(decode_limits());
+    let mut decoder = reader
+        .into_decoder()
+        .map_err(|e| Error::file(path, decode_message(&e)))?;
+    header_of(path, &mut decoder)
+}
+
+/// The decoders' allocation limit (16-bit RGBA at [`MAX_PIXELS`]).
+fn decode_limits() -> Limits {
+    let mut limits = Limits::default();
+    limits.max_alloc = Some(MAX_DECODE_BYTES);
+    limits
+}
+
+/// The header of an open decoder, its size checked against the limits.
+fn header_of(path: &Path, decoder: &mut impl ImageDecoder) -> Result<ImageHeader> {
+    let (width, height) = decoder.dimensions();
+    check_size(path, width, height)?;
+    let orientation = decoder
+        .orientation()
+        .map_err(|e| Error::file(path, decode_message(&e)))?;
+    let mut header = ImageHeader {
+        size: (width as usize, height as usize),
+        pixel_bytes: decoder.total_bytes(),
+        orientation,
+    };
+    if header.decode_bytes() != header.pixel_bytes {
+        header.size = (height as usize, width as usize);
+    }
+    Ok(header)
 }
 
 fn read_image_file(path: &Path) -> Result<Vec<u8>> {
@@ -152,25 +188,11 @@ fn open_decoder<'a>(
     }
     // Width and height are checked by `check_size` right after the header is read (so the
     // message can name the size); the allocation limit guards the decoders themselves.
-    let mut limits = Limits::default();
-    limits.max_alloc = Some(MAX_DECODE_BYTES);
-    reader.limits(limits);
+    reader.limits(decode_limits());
     let mut decoder = reader
         .into_decoder()
         .map_err(|e| Error::file(path, decode_message(&e)))?;
-    let (width, height) = decoder.dimensions();
-    check_size(path, width, height)?;
-    let orientation = decoder
-        .orientation()
-        .map_err(|e| Error::file(path, decode_message(&e)))?;
-    let mut header = ImageHeader {
-        size: (width as usize, height as usize),
-        pixel_bytes: decoder.total_bytes(),
-        orientation,
-    };
-    if header.decode_bytes() != header.pixel_bytes {
-        header.size = (height as usize, width as usize);
-    }
+    let header = header_of(path, &mut decoder)?;
     Ok((Box::new(decoder), header))
 }
 
@@ -243,43 +265,30 @@ pub fn load_at_size(image: &DynamicImage, size: (usize, usize)) -> LoadedImage {
     }
     let bits_per_channel = bits_of(image);
     let has_alpha = image.color().has_alpha();
-    let area =
-        |raw: &(dyn Fn(usize, usize, &mut [f32; 4]) + Sync)| area_downsample(w, h, size, raw);
+    // Each pixel read straight from the decoded samples: `c` channels, `full` = white.
+    fn area<T: Copy + Into<f64> + Sync>(
+        raw: &[T],
+        c: usize,
+        full: f64,
+        (w, h): (usize, usize),
+        size: (usize, usize),
+    ) -> (RgbRaster, GrayRaster) {
+        area_downsample(w, h, size, &|x, y, px| {
+            px_of(&raw[c * (y * w + x)..][..c], px, full)
+        })
+    }
     let (rgb, alpha) = match image {
-        DynamicImage::ImageLuma8(b) => {
-            area(&|x, y, px| px_of(&b.as_raw()[y * w + x..][..1], px, 255.0))
-        }
-        DynamicImage::ImageLumaA8(b) => {
-            area(&|x, y, px| px_of(&b.as_raw()[2 * (y * w + x)..][..2], px, 255.0))
-        }
-        DynamicImage::ImageRgb8(b) => {
-            area(&|x, y, px| px_of(&b.as_raw()[3 * (y * w + x)..][..3], px, 255.0))
-        }
-        DynamicImage::ImageRgba8(b) => {
-            area(&|x, y, px| px_of(&b.as_raw()[4 * (y * w + x)..][..4], px, 255.0))
-        }
-        DynamicImage::ImageLuma16(b) => {
-            area(&|x, y, px| px_of(&b.as_raw()[y * w + x..][..1], px, 65535.0))
-        }
-        DynamicImage::ImageLumaA16(b) => {
-            area(&|x, y, px| px_of(&b.as_raw()[2 * (y * w + x)..][..2], px, 65535.0))
-        }
-        DynamicImage::ImageRgb16(b) => {
-            area(&|x, y, px| px_of(&b.as_raw()[3 * (y * w + x)..][..3], px, 65535.0))
-        }
-        DynamicImage::ImageRgba16(b) => {
-            area(&|x, y, px| px_of(&b.as_raw()[4 * (y * w + x)..][..4], px, 65535.0))
-        }
-        DynamicImage::ImageRgb32F(b) => {
-            area(&|x, y, px| px_of(&b.as_raw()[3 * (y * w + x)..][..3], px, 1.0))
-        }
-        DynamicImage::ImageRgba32F(b) => {
-            area(&|x, y, px| px_of(&b.as_raw()[4 * (y * w + x)..][..4], px, 1.0))
-        }
-        other => {
-            let rgba = other.to_rgba32f();
-            area(&|x, y, px| px_of(&rgba.as_raw()[4 * (y * w + x)..][..4], px, 1.0))
-        }
+        DynamicImage::ImageLuma8(b) => area(b.as_raw(), 1, 255.0, (w, h), size),
+        DynamicImage::ImageLumaA8(b) => area(b.as_raw(), 2, 255.0, (w, h), size),
+        DynamicImage::ImageRgb8(b) => area(b.as_raw(), 3, 255.0, (w, h), size),
+        DynamicImage::ImageRgba8(b) => area(b.as_raw(), 4, 255.0, (w, h), size),
+        DynamicImage::ImageLuma16(b) => area(b.as_raw(), 1, 65535.0, (w, h), size),
+        DynamicImage::ImageLumaA16(b) => area(b.as_raw(), 2, 65535.0, (w, h), size),
+        DynamicImage::ImageRgb16(b) => area(b.as_raw(), 3, 65535.0, (w, h), size),
+        DynamicImage::ImageRgba16(b) => area(b.as_raw(), 4, 65535.0, (w, h), size),
+        DynamicImage::ImageRgb32F(b) => area(b.as_raw(), 3, 1.0, (w, h), size),
+        DynamicImage::ImageRgba32F(b) => area(b.as_raw(), 4, 1.0, (w, h), size),
+        other => area(other.to_rgba32f().as_raw(), 4, 1.0, (w, h), size),
     };
     LoadedImage {
         rgb,

@@ -262,9 +262,6 @@ impl SceneBuilder {
     /// The working size of `project`'s scene ([`choose_working_size`]): remembered per the
     /// settings that decide it; a growing builder keeps the largest so far for the photo.
     fn working_size(&mut self, project: &Project, key: u64, p: &Progress) -> Result<WorkingSize> {
-        let header = remembered(&mut self.headers, key, CACHE_ENTRIES, || {
-            read_header(&project.input)
-        })?;
         let decides = key_of(
             key,
             &(
@@ -280,56 +277,44 @@ impl SceneBuilder {
                 self.budget_frame,
             ),
         );
-        if let Some(i) = self.working.iter().position(|e| e.0 == decides) {
-            let entry = self.working.remove(i);
-            self.working.push(entry.clone());
-            return Ok(entry.1);
-        }
+        // Taken out while it is filled: choosing needs the rest of the builder.
+        let mut memo = std::mem::take(&mut self.working);
+        let chosen = remembered(&mut memo, decides, 4 * CACHE_ENTRIES, || {
+            self.choose_working_size(project, key, p)
+        });
+        self.working = memo;
+        chosen
+    }
+
+    /// [`choose_working_size`] for `project` (photo key `key`), never smaller than an earlier
+    /// automatic choice for the same photo in a growing builder.
+    fn choose_working_size(
+        &mut self,
+        project: &Project,
+        key: u64,
+        p: &Progress,
+    ) -> Result<WorkingSize> {
+        let header = remembered(&mut self.headers, key, CACHE_ENTRIES, || {
+            read_header(&project.input)
+        })?;
         let budget_frame = self.budget_frame;
         let mut chosen = choose_working_size(
             project,
             header.size,
             header.decode_bytes(),
             budget_frame,
-            || {
-                // The proxy's depth does not depend on the path: kept across camera edits.
-                let proxy_key = key_of(
-                    key,
-                    &(
-                        &project.depth.method,
-                        &project.depth.model,
-                        &project.depth.import,
-                        &project.depth.classical,
-                        project.camera.hfov_deg,
-                    ),
-                );
-                let proxy = match self.proxies.iter().find(|e| e.0 == proxy_key) {
-                    Some((_, proxy)) => proxy.clone(),
-                    None => {
-                        let photo = self.decoded_photo(key, &project.input)?;
-                        let proxy = Arc::new(ProxyDepth::new(project, &photo, p)?);
-                        self.proxies.push((proxy_key, proxy.clone()));
-                        if self.proxies.len() > CACHE_ENTRIES {
-                            self.proxies.remove(0);
-                        }
-                        proxy
-                    }
-                };
-                proxy.magnification(project)
-            },
+            || self.proxy_depth(project, key, p)?.magnification(project),
         )?;
-        if self.grow_canvas
-            && matches!(
-                chosen.reason,
+        let automatic = |w: &WorkingSize| {
+            matches!(
+                w.reason,
                 WorkingReason::Output { .. } | WorkingReason::Floor { .. }
             )
-        {
+        };
+        if self.grow_canvas && automatic(&chosen) {
             if let Some((_, grown)) = self.working_grown.iter().find(|e| e.0 == key)
+                && automatic(grown)
                 && grown.size.0 * grown.size.1 > chosen.size.0 * chosen.size.1
-                && matches!(
-                    grown.reason,
-                    WorkingReason::Output { .. } | WorkingReason::Floor { .. }
-                )
             {
                 chosen = grown.clone();
             }
@@ -339,11 +324,34 @@ impl SceneBuilder {
                 self.working_grown.remove(0);
             }
         }
-        self.working.push((decides, chosen.clone()));
-        if self.working.len() > 4 * CACHE_ENTRIES {
-            self.working.remove(0);
-        }
         Ok(chosen)
+    }
+
+    /// The proxy depth the path's magnification is measured on: it depends on the photo and
+    /// the depth settings, not on the path, so camera edits re-use it.
+    fn proxy_depth(
+        &mut self,
+        project: &Project,
+        key: u64,
+        p: &Progress,
+    ) -> Result<Arc<ProxyDepth>> {
+        let proxy_key = key_of(
+            key,
+            &(
+                &project.depth.method,
+                &project.depth.model,
+                &project.depth.import,
+                &project.depth.classical,
+                project.camera.hfov_deg,
+            ),
+        );
+        let mut memo = std::mem::take(&mut self.proxies);
+        let proxy = remembered(&mut memo, proxy_key, CACHE_ENTRIES, || {
+            let photo = self.decoded_photo(key, &project.input)?;
+            Ok(Arc::new(ProxyDepth::new(project, &photo, p)?))
+        });
+        self.proxies = memo;
+        proxy
     }
 
     /// Stages 1 and 2: `(depth key, photo at the working size, input camera, depth, working
