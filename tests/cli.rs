@@ -667,7 +667,7 @@ fn stereo_frames_pack_both_eyes() {
 }
 
 /// `export-scene` writes the layered cloud as a whole binary PLY whose header counts its
-/// records; another format is refused by name and nothing is written.
+/// records; a format it does not write is refused by name and nothing is written.
 #[test]
 fn export_scene_writes_a_whole_ply() {
     let dir = tempfile::tempdir().unwrap();
@@ -691,15 +691,15 @@ fn export_scene_writes_a_whole_ply() {
     assert!(n > 10_000, "{n} points");
     assert_eq!(bytes.len(), end + n * 19);
     assert!(String::from_utf8_lossy(&o.stdout).contains(&format!("{n} points")));
-    // glTF is not built yet: refused, nothing written.
-    let glb = dir.path().join("scene.glb");
+    // A format it does not write: refused by name, nothing written.
+    let obj = dir.path().join("scene.obj");
     let o = exe()
         .args(["export-scene"])
         .arg(data("evening_glow_320.jpg"))
         .arg("--out")
-        .arg(&glb)
+        .arg(&obj)
         .output()
         .unwrap();
-    assert_clean_failure(&o, &["scene.glb", "PLY"]);
-    assert!(!glb.exists());
+    assert_clean_failure(&o, &["scene.obj", ".glb"]);
+    assert!(!obj.exists());
 }

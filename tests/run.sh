@@ -6,6 +6,9 @@
 #     ffmpeg (video export tests).
 #   - The ONNX Runtime 1.31 shared library from PyPI's onnxruntime wheel, into
 #     ${XDG_DATA_HOME:-~/.local/share}/makeit4d/ort (where makeit4d looks for it).
+#   - The Khronos glTF validator (npm gltf-validator, pinned) into
+#     ${XDG_CACHE_HOME:-~/.cache}/makeit4d/gltf-validator, for the .glb export's test (Debian's
+#     nodejs and npm first when npm is missing).
 #   - Rust crates through cargo (Cargo.lock pins them).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -32,5 +35,17 @@ if [ ! -e "$ort_lib" ]; then
     python3 -m pip install --quiet --disable-pip-version-check --no-deps --target "$ort_dir" onnxruntime==1.31.1
 fi
 export ORT_DYLIB_PATH="$ort_lib"
+
+if ! command -v npm >/dev/null; then
+    echo "tests/run.sh: installing nodejs npm"
+    as_root apt-get update -qq
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends nodejs npm >/dev/null
+fi
+validator_dir="${XDG_CACHE_HOME:-$HOME/.cache}/makeit4d/gltf-validator"
+if [ ! -e "$validator_dir/node_modules/gltf-validator/package.json" ]; then
+    echo "tests/run.sh: installing gltf-validator 2.0.0-dev.3.10 into $validator_dir"
+    npm install --silent --no-audit --no-fund --prefix "$validator_dir" gltf-validator@2.0.0-dev.3.10 >/dev/null
+fi
+export MAKEIT4D_GLTF_VALIDATOR="$validator_dir/node_modules"
 
 cargo test --locked --all-targets "$@"

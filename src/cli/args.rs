@@ -46,8 +46,9 @@ pub(crate) enum Command {
     /// The built-in catalogue of learned models: list, install, remove, print a manifest.
     #[command(subcommand)]
     Models(ModelsCommand),
-    /// Write the scene's layered point cloud (the frame-0 scene) as a PLY file for point-cloud
-    /// tools: position, colour, opacity, layer and a synthesised flag per point.
+    /// Write the layered scene (the frame-0 scene) for 3D software: glTF 2.0 (`.glb`: each
+    /// depth layer a textured mesh, the camera path an animated camera) or the point cloud as
+    /// PLY (`.ply`: position, colour, opacity, layer and a synthesised flag per point).
     ExportScene(ExportSceneArgs),
     /// Print a shell completion script (e.g. `makeit4d completions bash >
     /// ~/.local/share/bash-completion/completions/makeit4d`).
@@ -67,9 +68,25 @@ pub(crate) struct ExportSceneArgs {
     /// A project file: its scene, path and settings.
     #[arg(long, conflicts_with = "image")]
     pub(crate) project: Option<PathBuf>,
-    /// The file to write (.ply).
+    /// The file to write: `.glb` (glTF meshes and camera) or `.ply` (point cloud).
     #[arg(long)]
     pub(crate) out: PathBuf,
+    /// The format (default: from the file's extension).
+    #[arg(long, value_enum)]
+    pub(crate) format: Option<SceneFormatArg>,
+    /// glTF: the layer meshes' grid step in pixels (grows when the scene would exceed the
+    /// vertex budget, and says so).
+    #[arg(long, default_value_t = makeit4d::export::gltf::DEFAULT_MESH_STEP as u32, value_parser = clap::value_parser!(u32).range(1..=256))]
+    pub(crate) mesh_step: u32,
+}
+
+/// `export-scene --format`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum SceneFormatArg {
+    /// glTF 2.0 binary (.glb).
+    Glb,
+    /// Binary little-endian PLY point cloud.
+    Ply,
 }
 
 #[derive(Args, Debug)]
@@ -202,6 +219,35 @@ pub(crate) enum EvalCommand {
     /// Ordinal depth: the share of hand-annotated "a is nearer than b" pairs a depth map orders
     /// wrongly (WHDR), per photo and group, with the vertical-ramp and constant baselines.
     Ordinal(EvalOrdinalArgs),
+    /// The glTF export's round trip: write the scene's .glb, read it back, draw its meshes
+    /// through its own animated camera and compare with makeit4d's frames (first, middle and
+    /// last by default).
+    Gltf(EvalGltfArgs),
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct EvalGltfArgs {
+    /// The photo (or give --project).
+    #[arg(required_unless_present = "project")]
+    pub(crate) image: Option<PathBuf>,
+    /// A project file: its scene, path and settings.
+    #[arg(long, conflicts_with = "image")]
+    pub(crate) project: Option<PathBuf>,
+    /// The layer meshes' grid step in pixels.
+    #[arg(long, default_value_t = makeit4d::export::gltf::DEFAULT_MESH_STEP as u32, value_parser = clap::value_parser!(u32).range(1..=256))]
+    pub(crate) mesh_step: u32,
+    /// Path frames to compare, comma-separated (default: the first, the middle and the last).
+    #[arg(long, value_delimiter = ',')]
+    pub(crate) frames: Vec<usize>,
+    /// Width of the compared images (the output's aspect).
+    #[arg(long, default_value_t = 640)]
+    pub(crate) width: usize,
+    /// Write the .glb and each frame's pair (makeit4d | meshes) into this folder.
+    #[arg(long)]
+    pub(crate) save: Option<PathBuf>,
+    /// Print JSON instead of a markdown table.
+    #[arg(long)]
+    pub(crate) json: bool,
 }
 
 #[derive(Args, Debug)]

@@ -129,3 +129,48 @@ pub(crate) fn eval_zoom(args: EvalZoomArgs, cancel: Arc<AtomicBool>) -> anyhow::
     let table = table?;
     print_table(args.json, || table.to_json(), || table.to_markdown())
 }
+
+/// `makeit4d eval gltf`: the glTF export's round trip.
+pub(crate) fn eval_gltf(
+    args: super::args::EvalGltfArgs,
+    cancel: Arc<AtomicBool>,
+) -> anyhow::Result<()> {
+    use makeit4d::eval::gltf::{default_frames, markdown, round_trip};
+    let project = match (&args.project, &args.image) {
+        (Some(p), _) => makeit4d::project::Project::load(p)?,
+        (None, Some(image)) => makeit4d::project::Project::new(image),
+        (None, None) => bail!("give a photo or --project"),
+    };
+    if args.width == 0 {
+        bail!("--width must be positive");
+    }
+    let (bar, progress) = progress_bar(cancel);
+    let scene = makeit4d::scene::SceneBuilder::new().build(&project, &progress);
+    bar.finish_and_clear();
+    let scene = scene?;
+    let frames = if args.frames.is_empty() {
+        default_frames(project.output.frames)
+    } else {
+        args.frames.clone()
+    };
+    let options = makeit4d::export::gltf::GltfOptions {
+        mesh_step: args.mesh_step as usize,
+        ..Default::default()
+    };
+    let r = round_trip(
+        &project,
+        &scene,
+        &options,
+        &frames,
+        args.width,
+        args.save.as_deref(),
+    )?;
+    print_table(
+        args.json,
+        || {
+            serde_json::to_string_pretty(&r)
+                .map_err(|e| makeit4d::Error::invalid(format!("eval gltf: {e}")))
+        },
+        || markdown(&r),
+    )
+}

@@ -70,6 +70,7 @@ pub fn main() -> ExitCode {
         Command::Eval(EvalCommand::Nvs(args)) => eval::eval_nvs(args, cancel),
         Command::Eval(EvalCommand::Zoom(args)) => eval::eval_zoom(args, cancel),
         Command::Eval(EvalCommand::Ordinal(args)) => eval::eval_ordinal(args, cancel),
+        Command::Eval(EvalCommand::Gltf(args)) => eval::eval_gltf(args, cancel),
         Command::Models(command) => models::models(command),
         Command::Bench(BenchCommand::Depth(args)) => bench::bench_depth(args),
         Command::Bench(BenchCommand::Inpaint(args)) => bench::bench_inpaint(args, cancel),

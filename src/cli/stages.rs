@@ -137,21 +137,25 @@ fn write_cues(
     Ok(())
 }
 
-/// `makeit4d export-scene`: the scene's layered cloud as PLY.
+/// `makeit4d export-scene`: the layered scene as glTF meshes or a PLY cloud.
 pub(crate) fn export_scene(
     args: super::args::ExportSceneArgs,
     cancel: Arc<AtomicBool>,
 ) -> anyhow::Result<()> {
-    let is_ply = args
+    use super::args::SceneFormatArg;
+    let extension = args
         .out
         .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
-    if !is_ply {
-        anyhow::bail!(
-            "{}: export-scene writes PLY (.ply); glTF is not built yet",
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    let format = match (args.format, extension.as_deref()) {
+        (Some(f), _) => f,
+        (None, Some("glb")) => SceneFormatArg::Glb,
+        (None, Some("ply")) => SceneFormatArg::Ply,
+        (None, _) => anyhow::bail!(
+            "{}: say the format with a .glb or .ply extension, or --format glb|ply",
             args.out.display()
-        );
-    }
+        ),
+    };
     let project = match (&args.project, &args.image) {
         (Some(p), _) => makeit4d::project::Project::load(p)?,
         (None, Some(image)) => makeit4d::project::Project::new(image),
@@ -161,12 +165,56 @@ pub(crate) fn export_scene(
     let scene = makeit4d::scene::SceneBuilder::new().build(&project, &progress);
     bar.finish_and_clear();
     let scene = scene?;
-    makeit4d::export::ply::write_ply(&scene.cloud, &args.out)?;
-    println!(
-        "wrote {} ({} points in {} layers; axes: the photo's camera, OpenCV x right, y down, z forward)",
-        args.out.display(),
-        scene.cloud.len(),
-        scene.layers.layers.len().max(1)
-    );
+    for w in &scene.warnings {
+        eprintln!("warning: {w}");
+    }
+    match format {
+        SceneFormatArg::Ply => {
+            makeit4d::export::ply::write_ply(&scene.cloud, &args.out)?;
+            println!(
+                "wrote {} ({} points in {} layers; axes: the photo's camera, OpenCV x right, y down, z forward)",
+                args.out.display(),
+                scene.cloud.len(),
+                scene.layers.layers.len().max(1)
+            );
+        }
+        SceneFormatArg::Glb => {
+            let started = std::time::Instant::now();
+            let views = scene.output_views(&project)?;
+            let camera = scene.output_camera(&project);
+            let options = makeit4d::export::gltf::GltfOptions {
+                mesh_step: args.mesh_step as usize,
+                ..Default::default()
+            };
+            let summary = makeit4d::export::gltf::write_gltf(
+                &scene,
+                &views,
+                camera.size,
+                project.output.fps,
+                &options,
+                &args.out,
+            )?;
+            for w in &summary.warnings {
+                eprintln!("warning: {w}");
+            }
+            println!(
+                "wrote {} ({:.1} MB in {:.2} s: {} layer meshes{}, {} vertices, {} triangles at a {} px step; the path camera with {} keys at {} fps; glTF axes, +Y up, scene depth units)",
+                args.out.display(),
+                summary.bytes as f64 / 1e6,
+                started.elapsed().as_secs_f64(),
+                summary.layers,
+                if summary.empty_layers > 0 {
+                    format!(" ({} empty layers left out)", summary.empty_layers)
+                } else {
+                    String::new()
+                },
+                summary.vertices,
+                summary.triangles,
+                summary.mesh_step,
+                summary.frames,
+                project.output.fps
+            );
+        }
+    }
     Ok(())
 }

@@ -7,6 +7,7 @@
 
 pub mod bench;
 pub mod fuzz;
+pub mod gltf;
 pub mod nvs;
 pub mod plot;
 pub mod zoom;

@@ -29,6 +29,7 @@
 //! the summary), `sequence.rs` ([`render_sequence`], resuming, the sidecars), `video.rs` (the
 //! ffmpeg encoder); the passes' renders in [`passes`].
 
+pub mod gltf;
 mod options;
 pub mod passes;
 pub mod ply;
