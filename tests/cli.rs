@@ -654,11 +654,35 @@ fn stereo_frames_pack_both_eyes() {
     );
     assert!(o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("clamped"));
+    // Passes per eye, at the eye's size, in a mono export's layout under left/ and right/;
+    // the right eye's depth differs from the left's. A lost pass file is re-rendered by
+    // --resume, to the same bytes, and only that frame.
+    let eyes = d.join("eyes");
+    let args = [
+        "--frames", "2", "--stereo", "tb", "--pass", "depth", "--pass", "camera", "--pass",
+        "layers",
+    ];
+    let o = render(&photo, &eyes, &args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("left/depth, "));
+    for eye in ["left", "right"] {
+        let f = image::open(eyes.join(eye).join("depth/frame_0001.png")).unwrap();
+        assert_eq!((f.width(), f.height()), (320, 200));
+        assert!(eyes.join(eye).join("camera/camera.json").exists());
+        assert!(eyes.join(eye).join("layer0/frame_0001.png").exists());
+    }
+    let left = std::fs::read(eyes.join("left/depth/frame_0001.png")).unwrap();
+    let right_path = eyes.join("right/depth/frame_0001.png");
+    let right = std::fs::read(&right_path).unwrap();
+    assert_ne!(left, right);
+    std::fs::remove_file(&right_path).unwrap();
+    let mut resumed = args.to_vec();
+    resumed.push("--resume");
+    let o = render(&photo, &eyes, &resumed);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("1 already complete"));
+    assert_eq!(std::fs::read(&right_path).unwrap(), right);
     // Refused in one line, nothing written.
     let bad = d.join("bad");
-    let o = render(&photo, &bad, &["--stereo", "sbs", "--pass", "depth"]);
-    assert_clean_failure(&o, &["--stereo"]);
-    assert!(frames_in(&bad).is_empty());
     let o = render(&photo, &bad, &["--interaxial", "0.1"]);
     assert_clean_failure(&o, &["--stereo"]);
     let o = render(&photo, &bad, &["--stereo", "sbs", "--convergence=-1"]);

@@ -207,3 +207,32 @@ fn bad_outputs_and_steps_are_refused_cleanly() {
         .collect();
     assert_eq!(names, ["scene.bin"]);
 }
+
+/// A scene too large for the vertex budget gets a coarser step, and says so (as an 8000-px
+/// canvas does against the default budget of 4 million).
+#[test]
+fn the_mesh_step_grows_to_the_vertex_budget() {
+    use makeit4d::export::gltf::{GltfOptions, gltf_bytes};
+    let project = makeit4d::project::Project::new(data("evening_glow_320.jpg"));
+    let scene = makeit4d::scene::SceneBuilder::new()
+        .build(&project, &makeit4d::progress::Progress::none())
+        .unwrap();
+    let views = scene.output_views(&project).unwrap();
+    let size = scene.output_camera(&project).size;
+    let options = GltfOptions {
+        mesh_step: 2,
+        vertex_budget: 5_000,
+    };
+    let (bytes, summary) = gltf_bytes(&scene, &views, size, 25.0, &options).unwrap();
+    assert!(summary.mesh_step > 2, "{summary:?}");
+    assert!(summary.vertices <= 5_000, "{summary:?}");
+    assert!(
+        summary.warnings.iter().any(|w| w.contains("mesh step") && w.contains("5000")),
+        "{:?}",
+        summary.warnings
+    );
+    assert!(gltf::Gltf::from_slice(&bytes).is_ok());
+    // A frame rate of zero and an empty path are refused.
+    assert!(gltf_bytes(&scene, &views, size, 0.0, &options).is_err());
+    assert!(gltf_bytes(&scene, &[], size, 25.0, &options).is_err());
+}

@@ -437,6 +437,7 @@ impl EditorApp {
                 cpu_renderer,
                 gpu: None,
                 choice: options.preview_renderer,
+                anaglyph: false,
             },
             preview_id: 0,
             preview_key: None,

@@ -135,6 +135,15 @@ pub enum Request {
         /// Output settings to use (size, fps) — applied to the project as an edit first.
         project: Box<Project>,
     },
+    /// Write the layered scene as glTF (`.glb`: layer meshes and the path camera).
+    ExportScene {
+        /// The file to write.
+        path: PathBuf,
+        /// Mesh step and vertex budget.
+        options: crate::export::gltf::GltfOptions,
+        /// The project whose scene and path to write.
+        project: Box<Project>,
+    },
     /// Cancel the running job.
     CancelJob,
     /// Pick the export folder with a file dialog.
@@ -158,6 +167,8 @@ pub enum PanelMessage {
     ExportFailed(String),
     /// An export was cancelled.
     ExportCancelled,
+    /// The scene was written as glTF: the summary line.
+    SceneExported(String),
 }
 
 impl PanelMessage {
@@ -168,7 +179,8 @@ impl PanelMessage {
             PanelMessage::ExportFolder(_)
             | PanelMessage::ExportFinished(_)
             | PanelMessage::ExportFailed(_)
-            | PanelMessage::ExportCancelled => Tab::Export,
+            | PanelMessage::ExportCancelled
+            | PanelMessage::SceneExported(_) => Tab::Export,
         }
     }
 }
@@ -240,6 +252,9 @@ pub struct PreviewInfo {
     pub gpu: Option<GpuDraw>,
     /// The preview renderer the user chose (the panel may change it).
     pub choice: crate::render::RendererChoice,
+    /// Show the red-cyan anaglyph of the two eyes `render --stereo anaglyph` would make (the
+    /// CPU preview renders both eyes).
+    pub anaglyph: bool,
 }
 
 /// What the preview panel hands the GPU preview's paint callback (besides the view and size).

@@ -94,6 +94,10 @@ impl EditorApp {
                     self.last_export = Some(summary.to_string());
                     self.route(PanelMessage::ExportFinished(summary));
                 }
+                Event::SceneExported(line) => {
+                    self.notify(line.lines().next().unwrap_or_default().to_string());
+                    self.route(PanelMessage::SceneExported(line));
+                }
                 Event::ExportFailed(message) => {
                     self.last_export = Some(format!("failed: {message}"));
                     self.error(format!("export failed: {message}"));
@@ -142,6 +146,20 @@ impl EditorApp {
                 self.send(Command::Export {
                     project,
                     out_dir,
+                    options,
+                });
+            }
+            Request::ExportScene {
+                path,
+                options,
+                project,
+            } => {
+                if self.project() != Some(&project) {
+                    self.apply_edit("Export settings", (*project).clone());
+                }
+                self.send(Command::ExportScene {
+                    project,
+                    path,
                     options,
                 });
             }

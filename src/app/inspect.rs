@@ -51,9 +51,10 @@ impl EditorApp {
     /// True when the preview is drawn by the GPU splatter in the window (see
     /// [`EditorOptions::preview_renderer`]).
     pub fn preview_uses_gpu(&self) -> bool {
-        self.gpu
-            .as_ref()
-            .is_some_and(|g| self.gpu_error.is_none() && self.preview_choice.uses_gpu(g.context()))
+        !self.preview.anaglyph
+            && self.gpu.as_ref().is_some_and(|g| {
+                self.gpu_error.is_none() && self.preview_choice.uses_gpu(g.context())
+            })
     }
 
     /// GPU preview renders so far and the pixel size of the last one (zeros without one).
@@ -64,6 +65,9 @@ impl EditorApp {
     /// Which renderer draws the preview and why, one line (the status bar shows it).
     pub fn preview_renderer(&self) -> String {
         let cpu = self.preview.cpu_renderer.as_str();
+        if self.preview.anaglyph {
+            return format!("{cpu}: the red-cyan anaglyph renders both eyes on the CPU");
+        }
         if self.preview_uses_gpu() {
             return match &self.gpu {
                 Some(g) => format!("GPU preview on {}", g.context().adapter_info().name),

@@ -225,6 +225,7 @@ impl EditorApp {
                     width: 0,
                     height: 0,
                     work: PreviewWork::Positions,
+                    stereo: None,
                 });
             }
             return;
@@ -242,7 +243,13 @@ impl EditorApp {
         } else {
             self.preview.max_side.max(32)
         };
-        let key = (snapshot.generation, frame, format!("{:?}", view), side);
+        let anaglyph = self.preview.anaglyph;
+        let key = (
+            snapshot.generation,
+            frame,
+            format!("{view:?} {anaglyph}"),
+            side,
+        );
         if self.preview_key.as_ref() == Some(&key) {
             return;
         }
@@ -270,6 +277,23 @@ impl EditorApp {
             width: pw,
             height: ph,
             work: PreviewWork::Render,
+            stereo: if anaglyph {
+                let scale = &snapshot.scene.scale;
+                let options = crate::export::stereo::StereoOptions {
+                    layout: crate::export::stereo::StereoLayout::Anaglyph,
+                    interaxial: None,
+                    convergence: None,
+                };
+                crate::export::stereo::StereoRig::new(
+                    &options,
+                    scale.near_depth,
+                    scale.median_depth,
+                )
+                .ok()
+                .map(|(rig, _)| rig)
+            } else {
+                None
+            },
         });
     }
 }

@@ -154,12 +154,35 @@ pub fn round_trip(
             crate::image_io::save_rgb_png(&dir.join(format!("frame_{i:04}_glb.png")), &b, false)?;
         }
     }
+    if let Some(dir) = save {
+        let overview = overview_view(scene.scale.median_depth, w, h);
+        let d = draw(&loaded.meshes, &overview, w, h);
+        crate::image_io::save_rgb_png(&dir.join("overview.png"), &d.colour, false)?;
+    }
     Ok(RoundTrip {
         rows,
         summary,
         export_seconds,
         size: (w, h),
     })
+}
+
+/// A camera off the path that shows the layers as the 3D meshes they are: 0.3 of the subject's
+/// depth `m` to the right of the input camera, 0.25 above and 0.3 behind, looking at the
+/// subject (a point `m` straight ahead), with a 70° horizontal field of view.
+pub fn overview_view(m: f32, width: usize, height: usize) -> View {
+    use glam::{Mat3, Quat, Vec3};
+    let eye = Vec3::new(0.3 * m, -0.25 * m, -0.3 * m);
+    let z = (Vec3::new(0.0, 0.0, m) - eye).normalize();
+    let x = Vec3::Y.cross(z).normalize();
+    let y = z.cross(x);
+    View {
+        intrinsics: crate::geometry::Intrinsics::from_hfov(width, height, 70.0),
+        world_from_camera: crate::geometry::Pose {
+            rotation: Quat::from_mat3(&Mat3::from_cols(x, y, z)).normalize(),
+            translation: eye,
+        },
+    }
 }
 
 /// The round trip as a markdown table.

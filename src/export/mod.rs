@@ -21,6 +21,10 @@
 //! out/video.mp4                   when a video was asked for and ffmpeg is present
 //! ```
 //!
+//! A stereo export (`--stereo`) packs both eyes into each colour frame and writes each eye's
+//! passes in the layout above under `out/left/` and `out/right/`. The layered scene for 3D
+//! software is [`gltf`] (meshes and the path camera) and [`ply`] (the point cloud).
+//!
 //! The layers and motion passes are rendered by the CPU splatter whatever renderer made the
 //! colour ([`passes`]). The camera pass covers the whole path, also with a frame range, and is
 //! rewritten (same bytes) by every run.

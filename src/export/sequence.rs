@@ -65,9 +65,35 @@ fn depth_scale(scene: &Scene, views: &[View]) -> f32 {
     ((max_depth + travel) * 1.01 / 65535.0).max(f32::MIN_POSITIVE)
 }
 
+/// Where one eye's (or a mono export's) passes go: `out/` for a mono export, `out/left/` and
+/// `out/right/` for a stereo one.
+struct PassTargets {
+    depth: Option<PathBuf>,
+    coverage: Option<PathBuf>,
+    motion: Option<PathBuf>,
+    layers: Vec<PathBuf>,
+}
+
+impl PassTargets {
+    /// The pass files of frame `name`.
+    fn paths(&self, name: &str) -> Vec<PathBuf> {
+        let mut v: Vec<PathBuf> = [&self.depth, &self.coverage, &self.motion]
+            .into_iter()
+            .flatten()
+            .map(|d| d.join(name))
+            .collect();
+        v.extend(self.layers.iter().map(|d| d.join(name)));
+        v
+    }
+}
+
 /// Renders the project's frames into `out_dir` (see the module docs for the layout). Stops
 /// after the current frame when `progress` is cancelled and returns [`Error::Cancelled`];
 /// frames already written stay complete.
+///
+/// Stereo frames are packed into the colour files; their passes are per eye, each eye's in a
+/// folder laid out as a mono export's (`out/left/depth/…`, `out/right/camera/…`), at the eye's
+/// size.
 pub fn render_sequence(
     project: &Project,
     scene: &Scene,
@@ -84,11 +110,6 @@ pub fn render_sequence(
     // Stereo: two eyes a frame, packed; the frame files have the packed size.
     let stereo = match &options.stereo {
         Some(o) => {
-            if options.passes != Passes::default() {
-                return Err(Error::invalid(
-                    "--pass with --stereo is not supported yet: render the passes without --stereo",
-                ));
-            }
             let (rig, warning) =
                 super::stereo::StereoRig::new(o, scene.scale.near_depth, scene.scale.median_depth)?;
             warnings.extend(warning);
@@ -107,56 +128,93 @@ pub fn render_sequence(
             views.len()
         )));
     }
+    // Each eye's views (one "eye" for a mono export).
+    let eye_views: Vec<Vec<View>> = match &stereo {
+        Some((_, rig)) => (0..2)
+            .map(|e| views.iter().map(|v| rig.eyes(v)[e]).collect())
+            .collect(),
+        None => vec![views.clone()],
+    };
     prepare_output_dir(out_dir)?;
     remove_stale_temporaries(out_dir);
     let wanted = options.passes;
-    let mut pass_dirs = Vec::new();
-    let mut pass_dir = |name: &str| -> Result<PathBuf> {
-        let dir = out_dir.join(name);
-        prepare_output_dir(&dir)?;
-        remove_stale_temporaries(&dir);
-        pass_dirs.push(name.to_string());
-        Ok(dir)
+    let any_pass = wanted != Passes::default();
+    let eye_names: &[&str] = if stereo.is_some() {
+        &["left", "right"]
+    } else {
+        &[""]
     };
-    let depth_dir = out_dir.join("depth");
-    let coverage_dir = out_dir.join("coverage");
-    let motion_dir = out_dir.join("motion");
     let layer_count = if wanted.layers {
         passes::layer_count(scene)
     } else {
         0
     };
-    let layer_dirs: Vec<PathBuf> = (0..layer_count)
-        .map(|k| out_dir.join(format!("layer{k}")))
-        .collect();
-    let scale = depth_scale(scene, &views);
-    if wanted.depth {
-        let dir = pass_dir("depth")?;
-        let sidecar = DepthSidecar {
-            scale,
-            encoding: "16-bit grey PNG; depth along the optical axis = value × scale (scene units); 0 = no coverage".into(),
+    let scale = eye_views
+        .iter()
+        .map(|v| depth_scale(scene, v))
+        .fold(0.0f32, f32::max);
+    let mut pass_dirs = Vec::new();
+    let mut targets = Vec::new();
+    for (e, eye) in eye_names.iter().enumerate() {
+        let base = if eye.is_empty() {
+            out_dir.to_path_buf()
+        } else {
+            out_dir.join(eye)
         };
-        write_json(&dir.join("depth.json"), &sidecar)?;
-    }
-    if wanted.coverage {
-        pass_dir("coverage")?;
-    }
-    for k in 0..layer_count {
-        let dir = pass_dir(&format!("layer{k}"))?;
-        write_json(&dir.join("layer.json"), &passes::layer_sidecar(scene, k))?;
-    }
-    if wanted.motion {
-        let dir = pass_dir("motion")?;
-        write_json(&dir.join("motion.json"), &passes::MotionSidecar::default())?;
-    }
-    if wanted.camera {
-        // The whole path, whatever the range: every run writes the same bytes.
-        let dir = pass_dir("camera")?;
-        let fps = project.output.fps as f64;
-        let json = crate::path::export::CameraExport::new(&views, width, height, fps)?.to_json()?;
-        write_atomic(&dir.join("camera.json"), json.as_bytes())?;
-        let script = crate::path::export::blender_script(&views, width, height, fps)?;
-        write_atomic(&dir.join("camera.py"), script.as_bytes())?;
+        if any_pass && !eye.is_empty() {
+            prepare_output_dir(&base)?;
+        }
+        let mut pass_dir = |name: &str| -> Result<PathBuf> {
+            let dir = base.join(name);
+            prepare_output_dir(&dir)?;
+            remove_stale_temporaries(&dir);
+            pass_dirs.push(if eye.is_empty() {
+                name.to_string()
+            } else {
+                format!("{eye}/{name}")
+            });
+            Ok(dir)
+        };
+        let mut t = PassTargets {
+            depth: None,
+            coverage: None,
+            motion: None,
+            layers: Vec::new(),
+        };
+        if wanted.depth {
+            let dir = pass_dir("depth")?;
+            let sidecar = DepthSidecar {
+                scale,
+                encoding: "16-bit grey PNG; depth along the optical axis = value × scale (scene units); 0 = no coverage".into(),
+            };
+            write_json(&dir.join("depth.json"), &sidecar)?;
+            t.depth = Some(dir);
+        }
+        if wanted.coverage {
+            t.coverage = Some(pass_dir("coverage")?);
+        }
+        for k in 0..layer_count {
+            let dir = pass_dir(&format!("layer{k}"))?;
+            write_json(&dir.join("layer.json"), &passes::layer_sidecar(scene, k))?;
+            t.layers.push(dir);
+        }
+        if wanted.motion {
+            let dir = pass_dir("motion")?;
+            write_json(&dir.join("motion.json"), &passes::MotionSidecar::default())?;
+            t.motion = Some(dir);
+        }
+        if wanted.camera {
+            // The whole path, whatever the range: every run writes the same bytes.
+            let dir = pass_dir("camera")?;
+            let fps = project.output.fps as f64;
+            let v = &eye_views[e];
+            let json =
+                crate::path::export::CameraExport::new(v, eye_width, eye_height, fps)?.to_json()?;
+            write_atomic(&dir.join("camera.json"), json.as_bytes())?;
+            let script = crate::path::export::blender_script(v, eye_width, eye_height, fps)?;
+            write_atomic(&dir.join("camera.py"), script.as_bytes())?;
+        }
+        targets.push(t);
     }
 
     let mut video = match &options.video {
@@ -182,26 +240,13 @@ pub fn render_sequence(
             progress.check()?;
             let name = options.pattern.name(i);
             let colour_path = out_dir.join(&name);
-            let depth_path = depth_dir.join(&name);
-            let coverage_path = coverage_dir.join(&name);
-            let motion_path = motion_dir.join(&name);
-            let layer_paths: Vec<PathBuf> = layer_dirs.iter().map(|d| d.join(&name)).collect();
             let existing = if options.resume {
-                let mut pass_paths: Vec<&Path> = Vec::new();
-                if wanted.depth {
-                    pass_paths.push(&depth_path);
-                }
-                if wanted.coverage {
-                    pass_paths.push(&coverage_path);
-                }
-                if wanted.motion {
-                    pass_paths.push(&motion_path);
-                }
-                pass_paths.extend(layer_paths.iter().map(PathBuf::as_path));
                 complete_frame(&colour_path, width, height).filter(|_| {
-                    pass_paths
-                        .iter()
-                        .all(|p| complete_frame(p, width, height).is_some())
+                    targets.iter().all(|t| {
+                        t.paths(&name)
+                            .iter()
+                            .all(|p| complete_frame(p, eye_width, eye_height).is_some())
+                    })
                 })
             } else {
                 None
@@ -211,56 +256,43 @@ pub fn render_sequence(
                     enc.push(img.to_rgb8().as_raw())?;
                 }
                 resumed += 1;
-            } else if let Some((layout, rig)) = &stereo {
-                let [l, r] = rig.eyes(&views[i]);
-                let left = scene.render_frame(renderer, &l, i, eye_width, eye_height)?;
-                let right = scene.render_frame(renderer, &r, i, eye_width, eye_height)?;
-                let packed = super::stereo::pack(*layout, &left.colour, &right.colour)?;
-                save_rgb_png(&colour_path, &packed, options.sixteen_bit)?;
-                if let Some(enc) = video.as_mut() {
-                    enc.push(crate::image_io::to_rgb8(&packed).as_raw())?;
-                }
-                holes.push((i, 0.5 * (left.hole_fraction() + right.hole_fraction())));
-            } else {
-                let frame = scene.render_frame(renderer, &views[i], i, width, height)?;
-                write_frame(&frame, &colour_path, options.sixteen_bit)?;
-                if wanted.depth {
-                    let d = depth_for_pass(&frame, scale);
-                    save_gray16_png(&depth_path, &d)?;
-                }
-                if wanted.coverage {
-                    save_gray16_png(&coverage_path, &frame.coverage)?;
-                }
-                for (k, path) in layer_paths.iter().enumerate() {
-                    let layer = passes::render_layer(
-                        scene,
-                        &project.render,
-                        &views[i],
-                        i,
-                        width,
-                        height,
-                        k as u16,
-                    )?;
-                    save_rgba_png(path, &layer.colour, &layer.coverage, options.sixteen_bit)?;
-                }
-                if wanted.motion {
-                    let next = passes::next_view(&views, i).unwrap_or(views[i]);
-                    let flow = passes::render_flow(
-                        scene,
-                        &project.render,
-                        &views[i],
-                        &next,
-                        i,
-                        width,
-                        height,
-                    )?;
-                    save_rgb16_values_png(&motion_path, passes::encode_flow(&flow))?;
-                }
-                if let Some(enc) = video.as_mut() {
-                    enc.push(crate::image_io::to_rgb8(&frame.colour).as_raw())?;
-                }
-                holes.push((i, frame.hole_fraction()));
+                progress.report((n + 1) as f32 / total as f32, "render");
+                continue;
             }
+            let mut frames = Vec::with_capacity(eye_views.len());
+            for (e, v) in eye_views.iter().enumerate() {
+                let frame = scene.render_frame(renderer, &v[i], i, eye_width, eye_height)?;
+                let next = passes::next_view(v, i).unwrap_or(v[i]);
+                write_passes(
+                    &targets[e],
+                    &name,
+                    scene,
+                    project,
+                    &frame,
+                    &v[i],
+                    &next,
+                    i,
+                    scale,
+                    options,
+                )?;
+                frames.push(frame);
+            }
+            let (colour, hole) = match &stereo {
+                Some((layout, _)) => (
+                    super::stereo::pack(*layout, &frames[0].colour, &frames[1].colour)?,
+                    0.5 * (frames[0].hole_fraction() + frames[1].hole_fraction()),
+                ),
+                None => {
+                    let frame = frames.pop().expect("one eye");
+                    let h = frame.hole_fraction();
+                    (frame.colour, h)
+                }
+            };
+            save_rgb_png(&colour_path, &colour, options.sixteen_bit)?;
+            if let Some(enc) = video.as_mut() {
+                enc.push(crate::image_io::to_rgb8(&colour).as_raw())?;
+            }
+            holes.push((i, hole));
             progress.report((n + 1) as f32 / total as f32, "render");
         }
         Ok(())
@@ -315,16 +347,49 @@ pub fn render_sequence(
     })
 }
 
+/// Writes one eye's passes of frame `i` (rendered as `frame` from `view`; `next` is the next
+/// frame's view, for the motion pass).
+#[allow(clippy::too_many_arguments)]
+fn write_passes(
+    t: &PassTargets,
+    name: &str,
+    scene: &Scene,
+    project: &Project,
+    frame: &Frame,
+    view: &View,
+    next: &View,
+    i: usize,
+    scale: f32,
+    options: &ExportOptions,
+) -> Result<()> {
+    let (width, height) = frame.colour.size();
+    if let Some(dir) = &t.depth {
+        save_gray16_png(&dir.join(name), &depth_for_pass(frame, scale))?;
+    }
+    if let Some(dir) = &t.coverage {
+        save_gray16_png(&dir.join(name), &frame.coverage)?;
+    }
+    for (k, dir) in t.layers.iter().enumerate() {
+        let layer = passes::render_layer(scene, &project.render, view, i, width, height, k as u16)?;
+        save_rgba_png(
+            &dir.join(name),
+            &layer.colour,
+            &layer.coverage,
+            options.sixteen_bit,
+        )?;
+    }
+    if let Some(dir) = &t.motion {
+        let flow = passes::render_flow(scene, &project.render, view, next, i, width, height)?;
+        save_rgb16_values_png(&dir.join(name), passes::encode_flow(&flow))?;
+    }
+    Ok(())
+}
+
 /// Writes `value` as pretty JSON, atomically.
 fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
     let text = serde_json::to_string_pretty(value)
         .map_err(|e| Error::invalid(format!("{}: {e}", path.display())))?;
     write_atomic(path, text.as_bytes())
-}
-
-/// Writes a colour frame, 8- or 16-bit.
-fn write_frame(frame: &Frame, path: &Path, sixteen_bit: bool) -> Result<()> {
-    save_rgb_png(path, &frame.colour, sixteen_bit)
 }
 
 /// Depth scaled into `[0, 1]` of the 16-bit range for the depth pass.

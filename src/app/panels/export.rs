@@ -1,8 +1,10 @@
-//! Export: folder, PNG bit depth, size, fps, frame range, passes, video; progress and cancel.
-//! Runs the command line's `render_sequence` on the scene thread.
+//! Export: folder, PNG bit depth, size, fps, frame range, stereo, passes, video; progress and
+//! cancel. Runs the command line's `render_sequence` on the scene thread. "Export scene"
+//! writes the layered scene as glTF (`scene.glb` in the folder) as `export-scene` does.
 
 use super::{PanelContext, PanelMessage, Request, StagePanel, Tab, placeholder_ui};
 use crate::app::worker::JobKind;
+use crate::export::stereo::{StereoLayout, StereoOptions};
 use crate::export::{ExportOptions, Passes, VideoFormat, VideoOptions};
 use eframe::egui::{self, Ui};
 use std::path::PathBuf;
@@ -20,6 +22,14 @@ pub struct ExportPanel {
     range: (usize, usize),
     passes: Passes,
     video: Option<VideoFormat>,
+    /// Stereo packing (`None`: one eye).
+    stereo: Option<StereoLayout>,
+    /// Interaxial, scene units (`None`: the 1/30 rule).
+    interaxial: Option<f32>,
+    /// Convergence depth, scene units (`None`: the subject).
+    convergence: Option<f32>,
+    /// The glTF meshes' grid step, pixels.
+    mesh_step: usize,
     last_result: Option<String>,
 }
 
@@ -34,6 +44,10 @@ impl Default for ExportPanel {
             range: (0, 10),
             passes: Passes::default(),
             video: None,
+            stereo: None,
+            interaxial: None,
+            convergence: None,
+            mesh_step: crate::export::gltf::DEFAULT_MESH_STEP,
             last_result: None,
         }
     }
@@ -43,7 +57,11 @@ impl ExportPanel {
     /// The export options the panel describes for a path of `frames` frames.
     pub fn options(&self, frames: usize) -> ExportOptions {
         ExportOptions {
-            stereo: None,
+            stereo: self.stereo.map(|layout| StereoOptions {
+                layout,
+                interaxial: self.interaxial,
+                convergence: self.convergence,
+            }),
             sixteen_bit: self.sixteen_bit,
             passes: self.passes,
             range: self.range_on.then(|| {
@@ -84,6 +102,7 @@ impl StagePanel for ExportPanel {
                 self.last_result =
                     Some("export cancelled: the frames written so far are complete".into());
             }
+            PanelMessage::SceneExported(line) => self.last_result = Some(line.clone()),
             PanelMessage::Suggestion(_) => {}
         }
     }
@@ -179,6 +198,50 @@ impl StagePanel for ExportPanel {
             self.range.1 = self.range.1.clamp(self.range.0 + 1, out.frames.max(1));
         }
         ui.separator();
+        ui.heading("Stereo");
+        ui.horizontal(|ui| {
+            ui.radio_value(&mut self.stereo, None, "off");
+            for layout in [
+                StereoLayout::SideBySide,
+                StereoLayout::SideBySideHalf,
+                StereoLayout::TopBottom,
+                StereoLayout::Anaglyph,
+            ] {
+                ui.radio_value(&mut self.stereo, Some(layout), layout.name());
+            }
+        });
+        if self.stereo.is_some() {
+            for (value, label, hint) in [
+                (
+                    &mut self.interaxial,
+                    "interaxial",
+                    "Distance between the eyes, scene units (auto: 1/30 of the near depth)",
+                ),
+                (
+                    &mut self.convergence,
+                    "convergence",
+                    "Depth at the screen plane, scene units (auto: the subject, the median depth)",
+                ),
+            ] {
+                ui.horizontal(|ui| {
+                    let mut auto = value.is_none();
+                    if ui
+                        .checkbox(&mut auto, format!("{label}: auto"))
+                        .on_hover_text(hint)
+                        .changed()
+                    {
+                        *value = if auto { None } else { Some(1.0) };
+                    }
+                    if let Some(v) = value {
+                        let l = ui.label(label);
+                        ui.add(egui::DragValue::new(v).speed(0.01).range(0.0..=1.0e6))
+                            .labelled_by(l.id);
+                    }
+                });
+            }
+            ui.label(egui::RichText::new("Passes go per eye into left/ and right/.").weak());
+        }
+        ui.separator();
         ui.heading("Passes");
         ui.checkbox(&mut self.passes.depth, "Depth (16-bit + depth.json)");
         ui.checkbox(&mut self.passes.coverage, "Coverage (16-bit alpha)");
@@ -237,6 +300,45 @@ impl StagePanel for ExportPanel {
         });
         if busy {
             ui.add(egui::ProgressBar::new(cx.job.fraction).show_percentage());
+        }
+        ui.separator();
+        ui.heading("Scene for 3D software");
+        ui.horizontal(|ui| {
+            let l = ui.label("mesh step (px)");
+            ui.add(egui::DragValue::new(&mut self.mesh_step).range(1..=256))
+                .labelled_by(l.id)
+                .on_hover_text("Grid step of the layer meshes; grows when a scene is too large");
+        });
+        if ui
+            .add_enabled(
+                !busy && !dir.is_empty(),
+                egui::Button::new("Export scene (.glb)"),
+            )
+            .on_hover_text(
+                "scene.glb in the folder: each depth layer a textured mesh, the camera path an \
+                 animated camera (Blender: File → Import → glTF 2.0)",
+            )
+            .clicked()
+        {
+            let folder = PathBuf::from(&dir);
+            let mut project = cx.current().clone();
+            if let Some((w, h)) = self.size {
+                project.output.width = Some(w);
+                project.output.height = Some(h);
+            }
+            if let Err(e) = crate::image_io::prepare_output_dir(&folder) {
+                self.last_result = Some(format!("export failed: {e}"));
+            } else {
+                cx.requests.push(Request::ExportScene {
+                    path: folder.join("scene.glb"),
+                    options: crate::export::gltf::GltfOptions {
+                        mesh_step: self.mesh_step.max(1),
+                        ..Default::default()
+                    },
+                    project: Box::new(project),
+                });
+                self.last_result = None;
+            }
         }
         if let Some(r) = &self.last_result {
             ui.label(r);

@@ -175,6 +175,11 @@ impl StagePanel for PreviewPanel {
             }
         });
         ui.label(egui::RichText::new(&cx.preview.renderer).weak());
+        ui.checkbox(&mut cx.preview.anaglyph, "Red-cyan anaglyph (3D glasses)")
+            .on_hover_text(
+                "Both eyes of `render --stereo anaglyph` with its defaults (interaxial 1/30 of \
+                 the near depth, convergence at the subject), rendered on the CPU",
+            );
         if cx.preview.gpu.is_some() {
             ui.label(egui::RichText::new("The GPU renders at the viewport's pixel size.").weak());
         } else {

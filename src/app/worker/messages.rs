@@ -25,6 +25,15 @@ pub enum Command {
     /// Size the current scene's orbit, swing, pan or fly-out to what the scene supports
     /// ([`crate::scene::size_preset`], as `render --preset` without `--amplitude`).
     SizePreset,
+    /// Write the project's scene as glTF (building the scene first if needed).
+    ExportScene {
+        /// The project.
+        project: Box<Project>,
+        /// The `.glb` to write.
+        path: PathBuf,
+        /// Mesh step and vertex budget.
+        options: crate::export::gltf::GltfOptions,
+    },
     /// Render the project's frames into a folder (building the scene first if needed).
     Export {
         /// The project to render.
@@ -135,6 +144,8 @@ pub enum Event {
     ExportDone(RenderSummary),
     /// An export failed or was cancelled.
     ExportFailed(String),
+    /// The scene was written as glTF: the summary line.
+    SceneExported(String),
     /// A job was cancelled.
     Cancelled(JobKind),
     /// Something failed outside a job.

@@ -53,6 +53,8 @@ pub struct PreviewRequest {
     pub height: usize,
     /// Render, or only compute positions.
     pub work: PreviewWork,
+    /// Render both eyes of this rig and show their red-cyan anaglyph.
+    pub stereo: Option<crate::export::stereo::StereoRig>,
 }
 
 /// A rendered preview.
@@ -167,19 +169,36 @@ fn preview_thread(
         let start = Instant::now();
         let snapshot = &request.snapshot;
         let result = on_pool(pool.as_ref(), || match request.work {
-            PreviewWork::Render => renderer
-                .render(
-                    &snapshot.scene,
-                    &snapshot.project.render,
-                    &request.view,
-                    request.frame_index,
-                    request.width,
-                    request.height,
-                )
-                .map(|frame| PreviewOutput::Image {
-                    image: rgb_image(&frame.colour, usize::MAX),
-                    hole_fraction: frame.hole_fraction(),
-                }),
+            PreviewWork::Render => {
+                let mut render = |view: &View| {
+                    renderer.render(
+                        &snapshot.scene,
+                        &snapshot.project.render,
+                        view,
+                        request.frame_index,
+                        request.width,
+                        request.height,
+                    )
+                };
+                match &request.stereo {
+                    None => render(&request.view).map(|frame| PreviewOutput::Image {
+                        image: rgb_image(&frame.colour, usize::MAX),
+                        hole_fraction: frame.hole_fraction(),
+                    }),
+                    Some(rig) => {
+                        let [l, r] = rig.eyes(&request.view);
+                        render(&l).and_then(|left| {
+                            let right = render(&r)?;
+                            let colour =
+                                crate::export::stereo::anaglyph(&left.colour, &right.colour)?;
+                            Ok(PreviewOutput::Image {
+                                image: rgb_image(&colour, usize::MAX),
+                                hole_fraction: 0.5 * (left.hole_fraction() + right.hole_fraction()),
+                            })
+                        })
+                    }
+                }
+            }
             PreviewWork::Positions => {
                 snapshot
                     .scene

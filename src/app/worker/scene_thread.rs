@@ -357,6 +357,46 @@ fn scene_thread(
                     }
                 }
             }
+            Command::ExportScene {
+                project,
+                path,
+                options,
+            } => {
+                let result = job(&shared, &ctx, JobKind::Export, pool, |progress| {
+                    let scene = builder.build_exact(&project, &progress.sub(0.0, 0.8))?;
+                    progress.check()?;
+                    let views = scene.output_views(&project)?;
+                    let size = scene.output_camera(&project).size;
+                    progress.report(0.9, "writing the glTF");
+                    let s = crate::export::gltf::write_gltf(
+                        &scene,
+                        &views,
+                        size,
+                        project.output.fps,
+                        &options,
+                        &path,
+                    )?;
+                    let mut line = format!(
+                        "wrote {} ({:.1} MB: {} layer meshes, {} vertices, {} triangles at a {} px step; the path camera with {} keys)",
+                        path.display(),
+                        s.bytes as f64 / 1e6,
+                        s.layers,
+                        s.vertices,
+                        s.triangles,
+                        s.mesh_step,
+                        s.frames
+                    );
+                    for w in &s.warnings {
+                        line.push_str(&format!("\nwarning: {w}"));
+                    }
+                    Ok(line)
+                });
+                match result {
+                    Ok(line) => send(Event::SceneExported(line)),
+                    Err(crate::Error::Cancelled) => send(Event::Cancelled(JobKind::Export)),
+                    Err(e) => send(Event::ExportFailed(one_line(&e))),
+                }
+            }
             Command::Export {
                 project,
                 out_dir,
