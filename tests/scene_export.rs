@@ -227,7 +227,10 @@ fn the_mesh_step_grows_to_the_vertex_budget() {
     assert!(summary.mesh_step > 2, "{summary:?}");
     assert!(summary.vertices <= 5_000, "{summary:?}");
     assert!(
-        summary.warnings.iter().any(|w| w.contains("mesh step") && w.contains("5000")),
+        summary
+            .warnings
+            .iter()
+            .any(|w| w.contains("mesh step") && w.contains("5000")),
         "{:?}",
         summary.warnings
     );
