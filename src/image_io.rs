@@ -476,10 +476,63 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         let _ = std::fs::remove_file(&tmp);
         return Err(Error::file(
             path,
-            format!("cannot write: {}", describe_io_error(&e)),
+            format!(
+                "cannot write: {}",
+                describe_write_error(&e, &dir, Some(bytes.len() as u64))
+            ),
         ));
     }
     Ok(())
+}
+
+/// Bytes a new file in `dir` can take (`None` where the platform cannot say).
+pub fn free_bytes(dir: &Path) -> Option<u64> {
+    #[cfg(unix)]
+    {
+        rustix::fs::statvfs(dir)
+            .ok()
+            .map(|s| s.f_bavail.saturating_mul(s.f_frsize))
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = dir;
+        None
+    }
+}
+
+/// A byte count for people: `812 B`, `3.4 kB`, `12.0 MB`, `2.10 GB`.
+pub fn human_bytes(n: u64) -> String {
+    let n = n as f64;
+    if n < 1e3 {
+        format!("{n:.0} B")
+    } else if n < 1e6 {
+        format!("{:.1} kB", n / 1e3)
+    } else if n < 1e9 {
+        format!("{:.1} MB", n / 1e6)
+    } else {
+        format!("{:.2} GB", n / 1e9)
+    }
+}
+
+/// One line for a failed write of `needed` bytes into `dir`: [`describe_io_error`], and for a
+/// full disk or quota what was needed and what is free there.
+pub fn describe_write_error(e: &std::io::Error, dir: &Path, needed: Option<u64>) -> String {
+    let base = describe_io_error(e);
+    if !matches!(e.raw_os_error(), Some(28) | Some(122)) {
+        return base;
+    }
+    let needed = needed.map_or_else(
+        || "more space".to_string(),
+        |n| format!("{} needed", human_bytes(n)),
+    );
+    match free_bytes(dir) {
+        Some(free) => format!(
+            "{base} ({needed}, {} free in {})",
+            human_bytes(free),
+            dir.display()
+        ),
+        None => format!("{base} ({needed} in {})", dir.display()),
+    }
 }
 
 /// One line for an I/O error, naming the common causes plainly.

@@ -577,6 +577,39 @@ mod tests {
         }
     }
 
+    /// Found by `bench storm`: a keyframe rotation from the editor (an f32 view turned f64)
+    /// reopened one ulp off, because serde_json's default float parser is not exact; with
+    /// `float_roundtrip` every f64 reads back as written.
+    #[test]
+    fn every_f64_reopens_exactly() {
+        use crate::path::{Interpolation, Keyframe, KeyframePath};
+        let dir = tempfile::tempdir().unwrap();
+        let mut p = Project::new(dir.path().join("a.jpg"));
+        let q = glam::DQuat::from_xyzw(0.48547953367233276, -0.1, 0.2, 0.0).normalize();
+        let key = |frame: f64| Keyframe {
+            frame,
+            position: glam::DVec3::new(0.1 + 1e-17, 2.0 / 3.0, 1.0 / 7.0),
+            rotation: q,
+            hfov_deg: Some(53.130_102_354_155_98),
+            interpolation: Interpolation::default(),
+            ease: Default::default(),
+        };
+        p.camera.path = CameraPath::Keyframes(KeyframePath {
+            keys: vec![key(0.0), key(9.0)],
+            ..Default::default()
+        });
+        let file = dir.path().join("p.json");
+        p.save(&file).unwrap();
+        let back = Project::load(&file).unwrap();
+        assert_eq!(back, p);
+        // Many values at once, each exact.
+        for i in 1..2000u64 {
+            let v = (i as f64).sqrt() / 3.0 + 1e-9 * i as f64;
+            let text = serde_json::to_string(&v).unwrap();
+            assert_eq!(serde_json::from_str::<f64>(&text).unwrap(), v, "{text}");
+        }
+    }
+
     #[test]
     fn save_load_round_trip_with_relative_input() {
         let dir = tempfile::tempdir().unwrap();

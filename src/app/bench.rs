@@ -71,7 +71,8 @@ impl Driver {
             time: Some(self.started.elapsed().as_secs_f64()),
             ..Default::default()
         };
-        let _ = self.app.run_frame(&self.ctx, input);
+        let mut output = self.app.run_frame(&self.ctx, input);
+        output.textures_delta.clear();
         std::thread::sleep(Duration::from_millis(16));
     }
 

@@ -48,6 +48,11 @@ impl History {
         self.redo.last().map(|(l, _)| l.as_str())
     }
 
+    /// How many edits can be undone and redone.
+    pub fn depths(&self) -> (usize, usize) {
+        (self.undo.len(), self.redo.len())
+    }
+
     /// Forgets everything (a new document).
     pub fn clear(&mut self) {
         self.undo.clear();

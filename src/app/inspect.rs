@@ -242,6 +242,17 @@ impl EditorApp {
         self.last_export.as_deref()
     }
 
+    /// The autosaved project the editor offers to recover (a session that did not end cleanly
+    /// left it), while the offer stands.
+    pub fn recovery_offer(&self) -> Option<&Project> {
+        self.recover_offer.as_ref().map(|(p, _, _)| p)
+    }
+
+    /// How many edits the history can undo and redo now.
+    pub fn history_depths(&self) -> (usize, usize) {
+        self.history.depths()
+    }
+
     /// True when there is an edit to undo.
     pub fn can_undo(&self) -> bool {
         self.history.undo_label().is_some()

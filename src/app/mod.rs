@@ -37,6 +37,7 @@ mod path_edits;
 mod preview;
 mod recovery;
 mod status_bar;
+pub mod storm;
 pub mod timeline;
 pub mod viewport;
 mod welcome;

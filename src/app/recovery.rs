@@ -69,8 +69,9 @@ impl EditorApp {
                     .as_ref()
                     .map(|f| f.display().to_string())
                     .unwrap_or_default();
-                std::fs::write(dir.join(RECOVERY_ORIGIN), origin)
-                    .map_err(|e| format!("{}: {e}", dir.display()))
+                // Atomic too: a killed editor never leaves a truncated path here.
+                crate::image_io::write_atomic(&dir.join(RECOVERY_ORIGIN), origin.as_bytes())
+                    .map_err(|e| format!("{e:#}"))
             });
         match written {
             // Said once, not every minute, until an autosave works again.

@@ -450,6 +450,31 @@ pub(crate) enum BenchCommand {
     /// Mutated inputs of every format makeit4d reads (JPEG, PNG, projects and recovery files,
     /// model manifests, ordinal annotations, ONNX files): cases read, refused, panics, slow.
     Fuzz(BenchFuzzArgs),
+    /// An edit storm: the real editor, headless, through thousands of random edits, undo/redo
+    /// bursts, cancels, saves, reopens, resizes and random input, with its history, saves and
+    /// scene checked after every step; peak memory and threads.
+    Storm(BenchStormArgs),
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct BenchStormArgs {
+    /// The photo or project to open (default: tests/data/evening_glow_320.jpg).
+    pub(crate) photo: Option<PathBuf>,
+    /// Edits to make.
+    #[arg(long, default_value_t = 10_000)]
+    pub(crate) edits: usize,
+    /// Seed of the edits (same seed, same edits).
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
+    /// Edits between checkpoints (undo to the start, redo to the end, wait for the scene).
+    #[arg(long, default_value_t = 250)]
+    pub(crate) checkpoint_every: usize,
+    /// Folder for the saves and the autosave (default: a new temporary folder, removed after).
+    #[arg(long)]
+    pub(crate) dir: Option<PathBuf>,
+    /// Print JSON instead of markdown.
+    #[arg(long)]
+    pub(crate) json: bool,
 }
 
 #[derive(Args, Debug)]

@@ -315,3 +315,44 @@ pub(crate) fn bench_fuzz(args: super::args::BenchFuzzArgs) -> anyhow::Result<()>
     }
     Ok(())
 }
+
+/// `makeit4d bench storm`.
+pub(crate) fn bench_storm(args: super::args::BenchStormArgs) -> anyhow::Result<()> {
+    use makeit4d::app::storm;
+    let open = args.photo.clone().unwrap_or_else(|| {
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/evening_glow_320.jpg")
+    });
+    if !open.is_file() {
+        anyhow::bail!("{}: no such file", open.display());
+    }
+    let (dir, temporary) = match &args.dir {
+        Some(d) => (d.clone(), false),
+        None => (storm::default_dir(args.seed), true),
+    };
+    let options = storm::StormOptions {
+        open,
+        edits: args.edits,
+        seed: args.seed,
+        dir: dir.clone(),
+        checkpoint_every: args.checkpoint_every,
+        settle_limit: std::time::Duration::from_secs(300),
+    };
+    let report = storm::run(&options, |line| eprintln!("{line}"));
+    if temporary {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    let report = report?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", report.to_markdown());
+    }
+    if !report.passed() {
+        anyhow::bail!(
+            "{} broken invariant(s), {} panic(s)",
+            report.violation_count,
+            report.panics
+        );
+    }
+    Ok(())
+}

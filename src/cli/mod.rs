@@ -82,6 +82,7 @@ pub fn main() -> ExitCode {
         Command::Bench(BenchCommand::SceneCase(args)) => bench::bench_scene_case(args),
         Command::Bench(BenchCommand::Download(args)) => bench::bench_download(args),
         Command::Bench(BenchCommand::Fuzz(args)) => bench::bench_fuzz(args),
+        Command::Bench(BenchCommand::Storm(args)) => bench::bench_storm(args),
         Command::Doctor(args) => doctor::doctor(args),
         Command::ExportScene(args) => stages::export_scene(args, cancel),
         Command::Completions(args) => install::print_bytes(&install::completions(args.shell)),

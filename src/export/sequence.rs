@@ -28,7 +28,9 @@ fn remove_stale_temporaries(dir: &Path) {
         let ours = [".png.", ".json.", ".py."]
             .iter()
             .any(|ext| name.contains(ext));
-        if name.starts_with('.') && name.ends_with(".tmp") && ours {
+        // A killed video encode leaves `.video.mp4.PID.tmp.mp4` (the encoder's own name).
+        let video = name.starts_with(".video.") && name.contains(".tmp.");
+        if name.starts_with('.') && ((name.ends_with(".tmp") && ours) || video) {
             let _ = std::fs::remove_file(entry.path());
         }
     }

@@ -118,9 +118,26 @@ pub fn install_from_file(
         return Err(Error::file(source, "no such file"));
     }
     let folder = entry_dir(dir, entry);
-    std::fs::create_dir_all(&folder).map_err(|e| Error::file(&folder, e))?;
+    std::fs::create_dir_all(&folder).map_err(|e| {
+        Error::file(
+            &folder,
+            format!(
+                "cannot create the model folder: {}",
+                crate::image_io::describe_io_error(&e)
+            ),
+        )
+    })?;
     let part = folder.join(format!("{}.part", entry.file));
-    let copied = std::fs::copy(source, &part).map_err(|e| Error::file(&part, e));
+    let copied = std::fs::copy(source, &part).map_err(|e| {
+        let size = std::fs::metadata(source).map(|m| m.len()).ok();
+        Error::file(
+            &part,
+            format!(
+                "cannot write: {}",
+                crate::image_io::describe_write_error(&e, &folder, size)
+            ),
+        )
+    });
     let result = copied.and_then(|_| {
         verify(
             entry,
@@ -179,7 +196,15 @@ fn download_and_install(
 ) -> Result<InstalledModel> {
     let url = url.unwrap_or(entry.url);
     let folder = entry_dir(dir, entry);
-    std::fs::create_dir_all(&folder).map_err(|e| Error::file(&folder, e))?;
+    std::fs::create_dir_all(&folder).map_err(|e| {
+        Error::file(
+            &folder,
+            format!(
+                "cannot create the model folder: {}",
+                crate::image_io::describe_io_error(&e)
+            ),
+        )
+    })?;
     let part = folder.join(format!("{}.part", entry.file));
     let by_hand = format!(
         "download {} by hand and run `makeit4d models install {} --file PATH`",
@@ -264,7 +289,14 @@ fn download_and_install(
         }
         file.write_all(&buf[..n]).map_err(|e| {
             let _ = std::fs::remove_file(&part);
-            Error::file(&part, e)
+            let left = total.map(|t| t.saturating_sub(start));
+            Error::file(
+                &part,
+                format!(
+                    "cannot write: {}",
+                    crate::image_io::describe_write_error(&e, &folder, left)
+                ),
+            )
         })?;
         done += n as u64;
         progress(done, total);
