@@ -97,6 +97,8 @@ pub struct StormReport {
     pub max_threads_first: usize,
     /// Most threads over the last 1000 edits.
     pub max_threads_last: usize,
+    /// Resident memory after each checkpoint's scene settled, MiB (the trend over the run).
+    pub rss_at_checkpoints_mib: Vec<f64>,
     /// Wall time, seconds.
     pub seconds: f64,
 }
@@ -153,6 +155,17 @@ impl StormReport {
             ),
         ] {
             out.push_str(&format!("| {name} | {value} |\n"));
+        }
+        if !self.rss_at_checkpoints_mib.is_empty() {
+            let series: Vec<String> = self
+                .rss_at_checkpoints_mib
+                .iter()
+                .map(|m| format!("{m:.0}"))
+                .collect();
+            out.push_str(&format!(
+                "\nRSS after each checkpoint settled (MiB): {}\n",
+                series.join(" ")
+            ));
         }
         for v in &self.violations {
             out.push_str(&format!("\n- {v}"));
@@ -479,6 +492,8 @@ impl Storm {
                 self.report.build_errors += 1;
             }
             self.report.checkpoints += 1;
+            let rss = crate::metrics::proc_kib("/proc/self/status", "VmRSS:").unwrap_or(0.0);
+            self.report.rss_at_checkpoints_mib.push(rss / 1024.0);
         } else {
             self.report.violation(format!(
                 "checkpoint: the scene did not settle to the project within {settle_limit:?}"

@@ -223,6 +223,68 @@ pub(crate) enum EvalCommand {
     /// through its own animated camera and compare with makeit4d's frames (first, middle and
     /// last by default).
     Gltf(EvalGltfArgs),
+    /// A simulated artist correcting the estimated depth of a stereo pair with depth targets:
+    /// after each count of strokes, δ<1.25, AbsRel, the full pipeline's novel-view PSNR and the
+    /// solve's seconds, between the estimate and the oracle depth.
+    Scribbles(EvalScribblesArgs),
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct EvalScribblesArgs {
+    /// The left image (the input).
+    #[arg(long)]
+    pub(crate) left: PathBuf,
+    /// The right image (the answer).
+    #[arg(long)]
+    pub(crate) right: PathBuf,
+    /// Ground-truth disparity of the left image (8/16-bit PNG or .npy), 0 = unknown.
+    #[arg(long)]
+    pub(crate) gt_disparity: PathBuf,
+    /// The disparity file holds disparity × this factor (e.g. 256 for aloe_disparity_q.png).
+    #[arg(long, default_value_t = 1.0)]
+    pub(crate) disparity_factor: f32,
+    /// Focal length, pixels (of the files as given).
+    #[arg(long)]
+    pub(crate) focal: f32,
+    /// Baseline: the right camera's translation along +x.
+    #[arg(long)]
+    pub(crate) baseline: f32,
+    /// Stroke counts to report, ascending, comma-separated.
+    #[arg(long, value_delimiter = ',', default_values_t = [0usize, 1, 2, 5, 10, 20, 30])]
+    pub(crate) strokes: Vec<usize>,
+    /// Resample the pair by this factor first, in (0, 1].
+    #[arg(long, default_value_t = 1.0)]
+    pub(crate) scale: f32,
+    /// Depth only: leave out the novel views (fast).
+    #[arg(long)]
+    pub(crate) no_nvs: bool,
+    /// The solver's colour scale σ_c (sRGB 0..1; default: the editor's).
+    #[arg(long)]
+    pub(crate) sigma_colour: Option<f32>,
+    /// The solver's log-depth scale σ_z (default: the editor's).
+    #[arg(long)]
+    pub(crate) sigma_depth: Option<f32>,
+    /// The solver's smoothness weight λ (default: the editor's).
+    #[arg(long)]
+    pub(crate) lambda: Option<f32>,
+    /// The solve grid's longest side, pixels (default: the editor's).
+    #[arg(long)]
+    pub(crate) solve_side: Option<usize>,
+    /// The feature-space interpolation instead of the affinity Laplacian.
+    #[arg(long)]
+    pub(crate) bilateral: bool,
+    /// Feature-space solver: spatial scale, a fraction of the diagonal.
+    #[arg(long)]
+    pub(crate) sigma_space: Option<f32>,
+    /// Feature-space solver: the weight of "no correction".
+    #[arg(long)]
+    pub(crate) kappa: Option<f32>,
+    /// Inpainting preset of the novel views: draft, preview or final.
+    #[arg(long, default_value = "preview")]
+    pub(crate) inpaint_preset: String,
+    /// Print JSON instead of a markdown table.
+    #[arg(long)]
+    pub(crate) json: bool,
 }
 
 #[derive(Args, Debug)]

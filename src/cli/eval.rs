@@ -174,3 +174,61 @@ pub(crate) fn eval_gltf(
         || markdown(&r),
     )
 }
+
+/// `makeit4d eval scribbles`: the simulated artist.
+pub(crate) fn eval_scribbles(
+    args: super::args::EvalScribblesArgs,
+    cancel: Arc<AtomicBool>,
+) -> anyhow::Result<()> {
+    use makeit4d::eval::nvs::StereoPair;
+    use makeit4d::eval::scribbles::{ScribbleOptions, eval_scribbles};
+    let pair = StereoPair::load(
+        &args.left,
+        &args.right,
+        &args.gt_disparity,
+        args.disparity_factor,
+        args.focal,
+        args.baseline,
+    )?
+    .scaled(args.scale)?;
+    let mut options = ScribbleOptions {
+        strokes: args.strokes.clone(),
+        nvs: !args.no_nvs,
+        ..ScribbleOptions::default()
+    };
+    options.nvs_options.preset = args.inpaint_preset.parse()?;
+    if let Some(v) = args.sigma_colour {
+        options.params.sigma_colour = v;
+    }
+    if let Some(v) = args.sigma_depth {
+        options.params.sigma_log_depth = v;
+    }
+    if let Some(v) = args.lambda {
+        options.params.lambda = v;
+    }
+    if let Some(v) = args.solve_side {
+        options.params.solve_long_side = v;
+    }
+    if args.bilateral {
+        options.params.mode = makeit4d::stages::depth::propagate::PropagateMode::Bilateral;
+    }
+    if let Some(v) = args.sigma_space {
+        options.params.sigma_space = v;
+    }
+    if let Some(v) = args.kappa {
+        options.params.kappa = v;
+    }
+    options.nvs_options.border_px = (40.0 * args.scale).round() as usize;
+    let (bar, progress) = progress_bar(cancel);
+    let table = eval_scribbles(&pair, &options, &progress);
+    bar.finish_and_clear();
+    let table = table?;
+    print_table(
+        args.json,
+        || {
+            serde_json::to_string_pretty(&table)
+                .map_err(|e| makeit4d::Error::invalid(format!("eval scribbles: {e}")))
+        },
+        || table.to_markdown(),
+    )
+}

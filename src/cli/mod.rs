@@ -71,6 +71,7 @@ pub fn main() -> ExitCode {
         Command::Eval(EvalCommand::Zoom(args)) => eval::eval_zoom(args, cancel),
         Command::Eval(EvalCommand::Ordinal(args)) => eval::eval_ordinal(args, cancel),
         Command::Eval(EvalCommand::Gltf(args)) => eval::eval_gltf(args, cancel),
+        Command::Eval(EvalCommand::Scribbles(args)) => eval::eval_scribbles(args, cancel),
         Command::Models(command) => models::models(command),
         Command::Bench(BenchCommand::Depth(args)) => bench::bench_depth(args),
         Command::Bench(BenchCommand::Inpaint(args)) => bench::bench_inpaint(args, cancel),

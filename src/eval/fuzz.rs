@@ -203,6 +203,17 @@ pub fn formats(root: &Path) -> Vec<Format> {
             |x, y| image::Rgba([gradient(x, y), 0, 0, 128]),
         ))),
     ];
+    // Indexed colour (with and without a transparent entry), made by
+    // tests/fixtures/make_images.py.
+    let mut pngs = pngs;
+    pngs.extend(
+        [
+            "tests/fixtures/fuzz/palette.png",
+            "tests/fixtures/fuzz/palette_trns.png",
+        ]
+        .iter()
+        .filter_map(|p| read(p)),
+    );
     let jpegs: Vec<Vec<u8>> = [
         "tests/data/evening_glow_320.jpg",
         "tests/data/cmyk.jpg",
@@ -358,6 +369,28 @@ mod tests {
         assert!(r.panics > 0 && r.refused > 0, "{r:?}");
         assert!(r.first_failure.is_some());
         assert_eq!(r.ok + r.refused + r.panics, r.cases);
+    }
+
+    /// The seeds are valid files of their format (palette PNGs included), so the mutations
+    /// start from what makeit4d reads.
+    #[test]
+    fn every_seed_reads() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        for f in formats(root) {
+            assert!(f.seeds.len() >= 2, "{}: {} seeds", f.name, f.seeds.len());
+            for (i, seed) in f.seeds.iter().enumerate() {
+                if let Err(e) = (f.read)(seed) {
+                    panic!("{} seed {i} does not read: {e}", f.name);
+                }
+            }
+        }
+        assert_eq!(
+            formats(root)
+                .iter()
+                .find(|f| f.name == "png")
+                .map(|f| f.seeds.len()),
+            Some(6)
+        );
     }
 
     /// The seeded mutation run CI makes: every format, no panic, every refusal one line.

@@ -10,6 +10,7 @@ pub mod fuzz;
 pub mod gltf;
 pub mod nvs;
 pub mod plot;
+pub mod scribbles;
 pub mod zoom;
 
 use crate::error::{Error, Result};

@@ -113,6 +113,10 @@ fn scene_depth(
     progress: &Progress,
 ) -> Result<(GrayRaster, Option<DepthMetrics>, f64)> {
     let fb = pair.focal_px * pair.baseline;
+    if let Some(given) = &options.given_depth {
+        let (depth, m) = aligned_depth(pair, given)?;
+        return Ok((depth, Some(m), 0.0));
+    }
     match options.depth {
         NvsDepth::Oracle => {
             let filled = fill_unknown_disparity(&pair.disparity)?;

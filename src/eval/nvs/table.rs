@@ -102,6 +102,9 @@ pub struct NvsOptions {
     pub layer_params: crate::stages::layers::LayerParams,
     /// Splat settings of the scene methods (the project default unless changed).
     pub render: SplatSettings,
+    /// A depth map (scene units, the left image's size) to use instead of `depth`'s, aligned
+    /// to the ground truth like the ramp (`eval scribbles`: a corrected estimate).
+    pub given_depth: Option<crate::raster::GrayRaster>,
 }
 
 impl Default for NvsOptions {
@@ -118,6 +121,7 @@ impl Default for NvsOptions {
             save_dir: None,
             layer_params: crate::stages::layers::LayerParams::default(),
             render: SplatSettings::default(),
+            given_depth: None,
         }
     }
 }

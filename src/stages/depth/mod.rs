@@ -10,6 +10,7 @@ pub mod onnx;
 pub mod ordinal;
 pub mod paint;
 pub mod preview;
+pub mod propagate;
 
 use crate::error::Result;
 use crate::geometry::Intrinsics;

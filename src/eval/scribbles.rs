@@ -1,0 +1,365 @@
+//! `makeit4d eval scribbles`: a simulated artist correcting the estimated depth of a stereo
+//! pair's left image with depth targets ([`crate::stages::depth::propagate`]), so the tool is
+//! measured, not assumed.
+//!
+//! From the estimate, at each step the simulated user draws one stroke where the current depth
+//! is most wrong (the click protocol of interactive segmentation benchmarks, Xu et al., CVPR
+//! 2016): the ground-truth pixels whose aligned depth is off by more than the tolerance (a depth
+//! ratio over 1.25, the δ<1.25 criterion) form regions; inside the largest 4-connected region,
+//! at its innermost point (farthest from the region's boundary), a dab of radius
+//! `min(radius, that distance)` carrying the ground truth's median disparity there, turned into
+//! the estimate's scene units through the estimate's own alignment to the ground truth. After
+//! each count in the list the table gives δ<1.25 and AbsRel (aligned as `eval depth` aligns),
+//! the full pipeline's novel-view PSNR (`eval nvs`'s "full" row, on the view and on the known
+//! pixels) and the solve's seconds; the estimate (0 strokes) and the oracle depth frame it.
+
+use crate::error::{Error, Result};
+use crate::eval::nvs::{NvsDepth, NvsMethod, NvsOptions, StereoPair, eval_nvs};
+use crate::progress::Progress;
+use crate::raster::{GrayRaster, MaskRaster, Raster};
+use crate::stages::depth::eval::depth_metrics;
+use crate::stages::depth::propagate::{DepthTarget, PropagateParams, propagate};
+use crate::stages::depth::{DepthSettings, run_depth_stage};
+use serde::Serialize;
+use std::collections::VecDeque;
+use std::time::Instant;
+
+/// The simulated user's settings.
+#[derive(Clone, Debug)]
+pub struct ScribbleOptions {
+    /// Stroke counts to report (ascending; 0 is the estimate).
+    pub strokes: Vec<usize>,
+    /// Depth ratio beyond which a pixel is wrong.
+    pub tolerance: f64,
+    /// Largest dab radius, pixels.
+    pub radius_px: f32,
+    /// The solver.
+    pub params: PropagateParams,
+    /// Run the novel-view pipeline for each row (slow: a scene build per row).
+    pub nvs: bool,
+    /// The novel-view evaluation's settings (its methods are replaced by the full pipeline).
+    pub nvs_options: NvsOptions,
+}
+
+impl Default for ScribbleOptions {
+    fn default() -> Self {
+        Self {
+            strokes: vec![0, 1, 2, 5, 10, 20, 30],
+            tolerance: 1.25,
+            radius_px: 12.0,
+            params: PropagateParams::default(),
+            nvs: true,
+            nvs_options: NvsOptions::default(),
+        }
+    }
+}
+
+/// One row.
+#[derive(Clone, Debug, Serialize)]
+pub struct ScribbleRow {
+    /// Strokes drawn.
+    pub strokes: usize,
+    /// δ<1.25.
+    pub delta1: f64,
+    /// AbsRel.
+    pub absrel: f64,
+    /// The full pipeline's PSNR on the view, dB (`None` without `nvs`).
+    pub psnr: Option<f64>,
+    /// The same on the known pixels.
+    pub psnr_known: Option<f64>,
+    /// Seconds of the last stroke's solve (0 for the estimate).
+    pub solve_s: f64,
+}
+
+/// The oracle's row.
+#[derive(Clone, Debug, Serialize)]
+pub struct OracleRow {
+    /// PSNR on the view, dB.
+    pub psnr: f64,
+    /// PSNR on the known pixels, dB.
+    pub psnr_known: f64,
+}
+
+/// The table.
+#[derive(Clone, Debug, Serialize)]
+pub struct ScribbleTable {
+    /// Rows in stroke order.
+    pub rows: Vec<ScribbleRow>,
+    /// The oracle depth's row (`None` without `nvs`).
+    pub oracle: Option<OracleRow>,
+    /// The strokes drawn, in order.
+    #[serde(skip)]
+    pub targets: Vec<DepthTarget>,
+}
+
+impl ScribbleTable {
+    /// Markdown.
+    pub fn to_markdown(&self) -> String {
+        let f = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.2}"));
+        let mut out = String::from(
+            "| strokes | δ<1.25 | AbsRel | PSNR view (dB) | PSNR known (dB) | solve (s) |\n|---:|---:|---:|---:|---:|---:|\n",
+        );
+        for r in &self.rows {
+            out.push_str(&format!(
+                "| {} | {:.3} | {:.3} | {} | {} | {:.3} |\n",
+                r.strokes,
+                r.delta1,
+                r.absrel,
+                f(r.psnr),
+                f(r.psnr_known),
+                r.solve_s
+            ));
+        }
+        if let Some(o) = &self.oracle {
+            out.push_str(&format!(
+                "| oracle depth | 1 | 0 | {:.2} | {:.2} | |\n",
+                o.psnr, o.psnr_known
+            ));
+            if let (Some(first), Some(o)) = (self.rows.first().and_then(|r| r.psnr), &self.oracle) {
+                let gap = o.psnr - first;
+                out.push('\n');
+                for r in &self.rows {
+                    if let Some(p) = r.psnr
+                        && gap.abs() > 1e-9
+                    {
+                        out.push_str(&format!(
+                            "{} strokes close {:.0} % of the PSNR gap. ",
+                            r.strokes,
+                            100.0 * (p - first) / gap
+                        ));
+                    }
+                }
+                out.push('\n');
+            }
+        }
+        out
+    }
+}
+
+/// Where the simulated user clicks on `wrong` (true = wrong pixel): the innermost pixel of the
+/// largest 4-connected wrong region and its distance to the region's boundary (pixels, at
+/// least 1). `None` when nothing is wrong.
+pub fn simulated_click(wrong: &MaskRaster) -> Option<(usize, usize, f32)> {
+    let regions = crate::raster::connected_components(wrong);
+    let largest = regions.iter().max_by_key(|r| r.len())?;
+    let (w, h) = wrong.size();
+    let mut inside = Raster::new(w, h, false);
+    for &i in largest {
+        inside.data_mut()[i] = true;
+    }
+    // Distance to the boundary: breadth-first from the region's border pixels (4-neighbours
+    // outside the region or the image), in city-block steps.
+    let mut dist = Raster::new(w, h, u32::MAX);
+    let mut queue = VecDeque::new();
+    for &i in largest {
+        let (x, y) = (i % w, i / w);
+        let border = x == 0
+            || y == 0
+            || x + 1 == w
+            || y + 1 == h
+            || !inside.at(x - 1, y)
+            || !inside.at(x + 1, y)
+            || !inside.at(x, y - 1)
+            || !inside.at(x, y + 1);
+        if border {
+            dist.set(x, y, 1);
+            queue.push_back(i);
+        }
+    }
+    while let Some(i) = queue.pop_front() {
+        let d = dist.data()[i];
+        crate::raster::for_each_neighbour4(i, w, h, |j| {
+            if inside.data()[j] && dist.data()[j] == u32::MAX {
+                dist.data_mut()[j] = d + 1;
+                queue.push_back(j);
+            }
+        });
+    }
+    // The innermost pixels; of those, the one nearest their centroid (ties to the first in
+    // reading order: deterministic).
+    let top = largest.iter().map(|&i| dist.data()[i]).max()?;
+    let deepest: Vec<usize> = largest
+        .iter()
+        .copied()
+        .filter(|&i| dist.data()[i] == top)
+        .collect();
+    let n = deepest.len() as f64;
+    let (mx, my) = deepest.iter().fold((0.0, 0.0), |(sx, sy), &i| {
+        (sx + (i % w) as f64 / n, sy + (i / w) as f64 / n)
+    });
+    let best = deepest.iter().copied().min_by(|&a, &b| {
+        let d = |i: usize| ((i % w) as f64 - mx).powi(2) + ((i / w) as f64 - my).powi(2);
+        d(a).total_cmp(&d(b)).then(a.cmp(&b))
+    })?;
+    Some((best % w, best / w, top as f32))
+}
+
+/// Runs the simulated user on `pair` (see the module docs).
+pub fn eval_scribbles(
+    pair: &StereoPair,
+    options: &ScribbleOptions,
+    progress: &Progress,
+) -> Result<ScribbleTable> {
+    pair.validate()?;
+    if options.strokes.windows(2).any(|w| w[0] >= w[1]) {
+        return Err(Error::invalid(
+            "eval scribbles: the stroke counts must be ascending",
+        ));
+    }
+    let max = options.strokes.last().copied().unwrap_or(0);
+    let stage = run_depth_stage(
+        &DepthSettings::default(),
+        &pair.left,
+        &pair.intrinsics(),
+        &progress.sub(0.0, 0.05),
+    )?;
+    let estimate = stage.estimate.depth;
+    let known = pair
+        .disparity
+        .map(|d| if d.is_finite() && d > 0.0 { d } else { 0.0 });
+    let m0 = depth_metrics(&estimate, &known, 0.0)?;
+    let run_nvs = |depth: Option<&GrayRaster>, progress: &Progress| -> Result<(f64, f64)> {
+        let mut o = options.nvs_options.clone();
+        o.methods = vec![NvsMethod::Full];
+        match depth {
+            Some(d) => o.given_depth = Some(d.clone()),
+            None => {
+                o.given_depth = None;
+                o.depth = NvsDepth::Oracle;
+            }
+        }
+        let table = eval_nvs(pair, &o, progress)?;
+        let row = table
+            .rows
+            .first()
+            .ok_or_else(|| Error::invalid("eval scribbles: the novel view made no row"))?;
+        Ok((row.psnr_db, row.psnr_known_db))
+    };
+    let mut rows = Vec::new();
+    let mut targets: Vec<DepthTarget> = Vec::new();
+    let mut current = estimate.clone();
+    let mut warm: Option<GrayRaster> = None;
+    let mut solve_s = 0.0;
+    let (w, h) = pair.left.size();
+    let steps = options.strokes.len() as f32 + 1.0;
+    let mut reported = 0usize;
+    for k in 0..=max {
+        if k > 0 {
+            progress.check()?;
+            // Where the current depth is most wrong, seen through the estimate's alignment
+            // (the scene units every stroke is drawn in; a re-fit after each stroke would
+            // move the goal posts under the strokes already drawn).
+            let m = &m0;
+            let wrong = Raster::from_fn(w, h, |x, y| {
+                let g = known.at(x, y) as f64;
+                if g <= 0.0 {
+                    return false;
+                }
+                let a = (m.scale / current.at(x, y) as f64 + m.shift).max(1e-9);
+                (a / g).max(g / a) > options.tolerance
+            });
+            let Some((cx, cy, dist)) = simulated_click(&wrong) else {
+                break; // Nothing left to correct.
+            };
+            let r = options.radius_px.min(dist).max(1.0);
+            // The ground truth's median disparity in the dab, in the estimate's units.
+            let mut d: Vec<f32> = Vec::new();
+            let ri = r.ceil() as i64;
+            for dy in -ri..=ri {
+                for dx in -ri..=ri {
+                    let (x, y) = (cx as i64 + dx, cy as i64 + dy);
+                    if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
+                        continue;
+                    }
+                    if ((dx * dx + dy * dy) as f32) <= r * r {
+                        let g = known.at(x as usize, y as usize);
+                        if g > 0.0 {
+                            d.push(g);
+                        }
+                    }
+                }
+            }
+            if d.is_empty() {
+                break;
+            }
+            let mid = d.len() / 2;
+            let g = *d.select_nth_unstable_by(mid, f32::total_cmp).1 as f64;
+            // a = s·(1/Z) + t  ⇒  Z = s/(g − t).
+            let inv = (g - m0.shift) / m0.scale;
+            if !(inv.is_finite() && inv > 0.0) {
+                break;
+            }
+            targets.push(DepthTarget {
+                x: cx as f32,
+                y: cy as f32,
+                radius_px: r,
+                depth: (1.0 / inv) as f32,
+            });
+            let started = Instant::now();
+            let p = propagate(
+                &pair.left,
+                &estimate,
+                &targets,
+                &options.params,
+                warm.as_ref(),
+            )?;
+            solve_s = started.elapsed().as_secs_f64();
+            current = p.depth;
+            warm = Some(p.correction);
+        }
+        if options.strokes.contains(&k) {
+            let m = depth_metrics(&current, &known, 0.0)?;
+            let sub = progress.sub(
+                0.05 + 0.95 * reported as f32 / steps,
+                0.05 + 0.95 * (reported + 1) as f32 / steps,
+            );
+            let (psnr, psnr_known) = if options.nvs {
+                let (a, b) = run_nvs(Some(&current), &sub)?;
+                (Some(a), Some(b))
+            } else {
+                (None, None)
+            };
+            rows.push(ScribbleRow {
+                strokes: k,
+                delta1: m.delta_1,
+                absrel: m.abs_rel,
+                psnr,
+                psnr_known,
+                solve_s: if k == 0 { 0.0 } else { solve_s },
+            });
+            reported += 1;
+        }
+    }
+    let oracle = if options.nvs {
+        let (psnr, psnr_known) = run_nvs(None, &progress.sub(0.95, 1.0))?;
+        Some(OracleRow { psnr, psnr_known })
+    } else {
+        None
+    };
+    Ok(ScribbleTable {
+        rows,
+        oracle,
+        targets,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_simulated_user_clicks_the_middle_of_the_largest_wrong_region() {
+        // Two wrong regions: a 3 × 3 one and a 9 × 5 one (columns 10..19, rows 4..9).
+        let mask = Raster::from_fn(30, 16, |x, y| {
+            (x < 3 && y < 3) || ((10..19).contains(&x) && (4..9).contains(&y))
+        });
+        let (x, y, d) = simulated_click(&mask).unwrap();
+        assert_eq!((x, y), (14, 6));
+        assert_eq!(d, 3.0);
+        assert!(simulated_click(&Raster::new(5, 5, false)).is_none());
+        // A region touching the image's edge counts the edge as its boundary.
+        let edge = Raster::from_fn(10, 10, |x, _| x < 5);
+        let (x, _, d) = simulated_click(&edge).unwrap();
+        assert_eq!((x, d), (2, 3.0));
+    }
+}

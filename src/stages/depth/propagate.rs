@@ -1,0 +1,771 @@
+//! Depth targets that propagate: sparse strokes carrying a depth, spread by an edge-aware
+//! solver into a dense *correction* of an estimate (Levin, Lischinski and Weiss, "Colorization
+//! using optimization", SIGGRAPH 2004, with log depth for colour; the depth estimate's own
+//! edges count as edges too).
+//!
+//! In log depth `u = ln Z`, with the estimate `e` and a correction `c` (the result is
+//! `Z = exp(e + c)`), the solver minimises
+//!
+//! ```text
+//! E(c) = Σ_i w_i (e_i + c_i − ln T_i)²  +  λ Σ_(i,j) a_ij (c_i − c_j)²  +  ε Σ_i c_i²
+//! ```
+//!
+//! over the 4-neighbour pairs `(i, j)` of a grid at most [`PropagateParams::solve_long_side`]
+//! pixels long, where `w_i = 1` on the target strokes' pixels (their target `T`, contradictory
+//! targets averaging in least squares), `a_ij = exp(−‖I_i − I_j‖²/2σ_c²)·exp(−(e_i − e_j)²/2σ_z²)`
+//! is small across colour and depth edges, and the small `ε` lets the correction fade to zero
+//! far from every stroke instead of spreading a region's correction to the whole picture. A
+//! region bounded by edges takes its strokes' depth; where no stroke speaks the estimate keeps
+//! its relief (the correction is smooth there); strokes of different depths on both sides of an
+//! edge make a discontinuity there. The linear system `(W + λL + εI)c = W·t` is solved by
+//! Jacobi-preconditioned conjugate gradients, warm-started from a previous solution (a new
+//! stroke starts from the last answer); the correction is brought to full size by joint
+//! bilateral upsampling guided by the photo (Kopf et al., SIGGRAPH 2007), so it keeps its edges.
+
+use crate::error::{Error, Result};
+use crate::raster::{GrayRaster, Raster, RgbRaster};
+use serde::{Deserialize, Serialize};
+
+/// A depth target: a dab of radius `radius_px` at `(x, y)` (photo pixels, centres at integers)
+/// saying "the depth here is `depth`" (scene units).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DepthTarget {
+    /// Centre, pixels.
+    pub x: f32,
+    /// Centre, pixels.
+    pub y: f32,
+    /// Radius, pixels.
+    pub radius_px: f32,
+    /// Target depth, scene units (finite, > 0).
+    pub depth: f32,
+}
+
+/// Most targets a solve takes; beyond it the oldest are merged away (said by
+/// [`propagate`]'s caller).
+pub const MAX_TARGETS: usize = 4096;
+
+/// The solver's settings.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PropagateParams {
+    /// Longest side of the solve grid, pixels.
+    pub solve_long_side: usize,
+    /// Colour scale `σ_c` of the affinity (sRGB units, 0..1).
+    pub sigma_colour: f32,
+    /// Log-depth scale `σ_z` of the affinity.
+    pub sigma_log_depth: f32,
+    /// Smoothness weight `λ`.
+    pub lambda: f32,
+    /// Fade `ε` of the correction far from strokes.
+    pub epsilon: f32,
+    /// Most conjugate-gradient iterations.
+    pub iterations: usize,
+    /// The solver: the affinity Laplacian over image neighbours, or the feature-space
+    /// interpolation ([`bilateral_correction`]).
+    #[serde(default)]
+    pub mode: PropagateMode,
+    /// Feature-space mode: spatial scale as a fraction of the photo's diagonal.
+    #[serde(default = "default_sigma_space")]
+    pub sigma_space: f32,
+    /// Feature-space mode: the weight of "no correction" (how fast a correction fades where no
+    /// stroke is similar).
+    #[serde(default = "default_kappa")]
+    pub kappa: f32,
+}
+
+fn default_sigma_space() -> f32 {
+    0.25
+}
+
+fn default_kappa() -> f32 {
+    0.01
+}
+
+/// Which solver spreads the targets.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PropagateMode {
+    /// The affinity Laplacian over 4-neighbours (Levin et al.), coarse to fine. The default:
+    /// on Aloe's simulated artist it reached δ<1.25 0.835 / 0.866 after 10 / 30 strokes
+    /// against the feature-space interpolation's 0.811 / 0.805 (half-size pair).
+    #[default]
+    Laplacian,
+    /// Each pixel takes the strokes' corrections weighted by its similarity to each stroke in
+    /// position, colour and estimated log depth (a Gaussian in that feature space, as the
+    /// bilateral solver's bilateral space), fading to no correction where none is similar.
+    Bilateral,
+}
+
+impl Default for PropagateParams {
+    fn default() -> Self {
+        Self {
+            solve_long_side: 320,
+            sigma_colour: 0.06,
+            sigma_log_depth: 0.15,
+            lambda: 4.0,
+            epsilon: 1e-6,
+            iterations: 400,
+            mode: PropagateMode::default(),
+            sigma_space: default_sigma_space(),
+            kappa: default_kappa(),
+        }
+    }
+}
+
+/// A solve's answer.
+#[derive(Clone, Debug)]
+pub struct Propagated {
+    /// The corrected depth, the estimate's size.
+    pub depth: GrayRaster,
+    /// The correction on the solve grid (warm start of the next solve).
+    pub correction: GrayRaster,
+    /// Conjugate-gradient iterations run.
+    pub iterations: usize,
+}
+
+/// Checks a target; the message says what is wrong.
+pub fn validate_target(t: &DepthTarget) -> Result<()> {
+    if !(t.x.is_finite() && t.y.is_finite()) {
+        return Err(Error::invalid("depth target: the position is not finite"));
+    }
+    if !(t.radius_px.is_finite() && t.radius_px >= 0.0) {
+        return Err(Error::invalid(format!(
+            "depth target: the radius must be ≥ 0, not {}",
+            t.radius_px
+        )));
+    }
+    if !(t.depth.is_finite() && t.depth > 0.0) {
+        return Err(Error::invalid(format!(
+            "depth target: the depth must be finite and > 0, not {}",
+            t.depth
+        )));
+    }
+    Ok(())
+}
+
+/// Area-downsamples `r` to `w × h` (a box filter over each cell's source pixels).
+fn area<T: Copy + Default + std::ops::AddAssign + std::ops::Mul<f32, Output = T>>(
+    r: &Raster<T>,
+    w: usize,
+    h: usize,
+) -> Raster<T> {
+    let (sw, sh) = r.size();
+    Raster::from_fn(w, h, |x, y| {
+        let (x0, x1) = (x * sw / w, ((x + 1) * sw / w).max(x * sw / w + 1).min(sw));
+        let (y0, y1) = (y * sh / h, ((y + 1) * sh / h).max(y * sh / h + 1).min(sh));
+        let mut acc = T::default();
+        for yy in y0..y1 {
+            for xx in x0..x1 {
+                acc += r.at(xx, yy);
+            }
+        }
+        acc * (1.0 / ((x1 - x0) * (y1 - y0)) as f32)
+    })
+}
+
+/// A colour that adds and scales (for [`area`]).
+#[derive(Clone, Copy, Default)]
+struct Rgb3([f32; 3]);
+impl std::ops::AddAssign for Rgb3 {
+    fn add_assign(&mut self, o: Self) {
+        for i in 0..3 {
+            self.0[i] += o.0[i];
+        }
+    }
+}
+impl std::ops::Mul<f32> for Rgb3 {
+    type Output = Self;
+    fn mul(self, s: f32) -> Self {
+        Self(self.0.map(|v| v * s))
+    }
+}
+
+/// Spreads `targets` over `estimate` (depth, scene units) guided by `image` (the same size):
+/// see the module docs. `warm` is a previous [`Propagated::correction`] of the same grid.
+/// Without targets the estimate comes back unchanged.
+pub fn propagate(
+    image: &RgbRaster,
+    estimate: &GrayRaster,
+    targets: &[DepthTarget],
+    params: &PropagateParams,
+    warm: Option<&GrayRaster>,
+) -> Result<Propagated> {
+    if !image.same_size(estimate) || image.is_empty() {
+        return Err(Error::invalid(format!(
+            "depth propagation: the photo is {}×{} but the depth {}×{}",
+            image.width(),
+            image.height(),
+            estimate.width(),
+            estimate.height()
+        )));
+    }
+    for t in targets {
+        validate_target(t)?;
+    }
+    let (w, h) = image.size();
+    let long = w.max(h);
+    let s = (params.solve_long_side.max(8) as f32 / long as f32).min(1.0);
+    let (gw, gh) = (
+        ((w as f32 * s).round() as usize).max(1),
+        ((h as f32 * s).round() as usize).max(1),
+    );
+    let usable = |z: f32| z.is_finite() && z > 0.0;
+    // A usable value for every pixel: unusable ones take the median's log.
+    let mut logs: Vec<f32> = estimate
+        .data()
+        .iter()
+        .filter(|z| usable(**z))
+        .map(|z| z.ln())
+        .collect();
+    let fallback = if logs.is_empty() {
+        0.0
+    } else {
+        let mid = logs.len() / 2;
+        *logs.select_nth_unstable_by(mid, f32::total_cmp).1
+    };
+    let log_e = estimate.map(|z| if usable(z) { z.ln() } else { fallback });
+    if targets.is_empty() {
+        return Ok(Propagated {
+            depth: estimate.clone(),
+            correction: Raster::new(gw, gh, 0.0),
+            iterations: 0,
+        });
+    }
+    if params.mode == PropagateMode::Bilateral {
+        let c = bilateral_correction(image, &log_e, targets, params);
+        let depth = Raster::from_fn(w, h, |x, y| {
+            let z = estimate.at(x, y);
+            if usable(z) {
+                (log_e.at(x, y) + c.at(x, y))
+                    .exp()
+                    .clamp(f32::MIN_POSITIVE, f32::MAX)
+            } else {
+                z
+            }
+        });
+        return Ok(Propagated {
+            depth,
+            correction: Raster::new(gw, gh, 0.0),
+            iterations: 0,
+        });
+    }
+    let colour_full = image.map(Rgb3);
+    // Coarse to fine: each level starts from the one below it (conjugate gradients move
+    // information about one cell per iteration, so the coarse levels carry it far cheaply).
+    let mut sizes = vec![(gw, gh)];
+    while sizes.last().is_some_and(|&(a, b)| a.max(b) > 48) {
+        let (a, b) = *sizes.last().unwrap_or(&(gw, gh));
+        sizes.push(((a / 2).max(1), (b / 2).max(1)));
+    }
+    sizes.reverse();
+    // A warm start of the finest grid needs no coarse levels.
+    if warm.is_some_and(|wc| wc.size() == (gw, gh)) {
+        sizes = vec![(gw, gh)];
+    }
+    let mut c: Option<(Vec<f64>, usize, usize)> = None;
+    let mut iterations = 0;
+    let mut finest = None;
+    for (level, &(lw, lh)) in sizes.iter().enumerate() {
+        let colour_grid = area(&colour_full, lw, lh).map(|c| c.0);
+        let log_grid = area(&log_e, lw, lh);
+        let (weight, rhs) = data_term(targets, (w, h), (lw, lh), &log_grid);
+        let init = match (&c, level + 1 == sizes.len(), warm) {
+            (_, true, Some(wc))
+                if wc.size() == (lw, lh) && wc.data().iter().all(|v| v.is_finite()) =>
+            {
+                wc.data().iter().map(|&v| v as f64).collect()
+            }
+            (Some((prev, pw, ph)), _, _) => upsample_nearest(prev, *pw, *ph, lw, lh),
+            _ => vec![0.0; lw * lh],
+        };
+        let (solved, its) = solve_level(&colour_grid, &log_grid, &weight, &rhs, init, params);
+        iterations += its;
+        c = Some((solved, lw, lh));
+        finest = Some((colour_grid, log_grid));
+    }
+    let (c, _, _) = c.unwrap_or((vec![0.0; gw * gh], gw, gh));
+    let (colour_grid, log_grid) = finest.unwrap_or_else(|| {
+        (
+            area(&colour_full, gw, gh).map(|c| c.0),
+            area(&log_e, gw, gh),
+        )
+    });
+    let (sx, sy) = (gw as f32 / w as f32, gh as f32 / h as f32);
+    let two_sc = 2.0 * params.sigma_colour.max(1e-4).powi(2);
+    let two_sz = 2.0 * params.sigma_log_depth.max(1e-4).powi(2);
+    let correction = Raster::from_vec(gw, gh, c.iter().map(|&v| v as f32).collect())
+        .unwrap_or_else(|| Raster::new(gw, gh, 0.0));
+    // Joint bilateral upsampling of the correction, guided by the photo's colour.
+    let up = Raster::from_fn(w, h, |x, y| {
+        let (gx, gy) = ((x as f32 + 0.5) * sx - 0.5, (y as f32 + 0.5) * sy - 0.5);
+        let (fx, fy) = (gx.floor(), gy.floor());
+        let colour = image.at(x, y);
+        let (mut acc, mut total) = (0.0f32, 0.0f32);
+        for dy in -1i32..=2 {
+            for dx in -1i32..=2 {
+                let (cx, cy) = (fx as i32 + dx, fy as i32 + dy);
+                if cx < 0 || cy < 0 || cx >= gw as i32 || cy >= gh as i32 {
+                    continue;
+                }
+                let (cxu, cyu) = (cx as usize, cy as usize);
+                let spatial = (1.0 - (gx - cx as f32).abs() / 2.0).max(0.0)
+                    * (1.0 - (gy - cy as f32).abs() / 2.0).max(0.0);
+                let cc = colour_grid.at(cxu, cyu);
+                let dc = (colour[0] - cc[0]).powi(2)
+                    + (colour[1] - cc[1]).powi(2)
+                    + (colour[2] - cc[2]).powi(2);
+                let dz = (log_e.at(x, y) - log_grid.at(cxu, cyu)).powi(2);
+                let wgt = spatial * (-dc / two_sc).exp() * (-dz / two_sz).exp() + 1e-12 * spatial;
+                acc += wgt * correction.at(cxu, cyu);
+                total += wgt;
+            }
+        }
+        if total > 0.0 { acc / total } else { 0.0 }
+    });
+    let depth = Raster::from_fn(w, h, |x, y| {
+        let z = estimate.at(x, y);
+        if usable(z) {
+            (log_e.at(x, y) + up.at(x, y))
+                .exp()
+                .clamp(f32::MIN_POSITIVE, f32::MAX)
+        } else {
+            z
+        }
+    });
+    Ok(Propagated {
+        depth,
+        correction,
+        iterations,
+    })
+}
+
+/// Nearest-cell upsampling of a `pw × ph` grid to `w × h`.
+fn upsample_nearest(v: &[f64], pw: usize, ph: usize, w: usize, h: usize) -> Vec<f64> {
+    let mut out = vec![0.0; w * h];
+    for y in 0..h {
+        let py = (y * ph / h).min(ph - 1);
+        for x in 0..w {
+            let px = (x * pw / w).min(pw - 1);
+            out[y * w + x] = v[py * pw + px];
+        }
+    }
+    out
+}
+
+/// The data term on a `gw × gh` grid of a `w × h` photo: per cell, the targets' weight and
+/// their summed log-depth corrections `ln T − e`.
+fn data_term(
+    targets: &[DepthTarget],
+    (w, h): (usize, usize),
+    (gw, gh): (usize, usize),
+    log_grid: &GrayRaster,
+) -> (GrayRaster, GrayRaster) {
+    let mut weight = Raster::new(gw, gh, 0.0f32);
+    let mut rhs = Raster::new(gw, gh, 0.0f32);
+    let (sx, sy) = (gw as f32 / w as f32, gh as f32 / h as f32);
+    for t in targets {
+        let (cx, cy) = ((t.x + 0.5) * sx - 0.5, (t.y + 0.5) * sy - 0.5);
+        let r = (t.radius_px * sx.max(sy)).max(0.5);
+        let (x0, x1) = (
+            (cx - r).floor().max(0.0),
+            (cx + r).ceil().min(gw as f32 - 1.0),
+        );
+        let (y0, y1) = (
+            (cy - r).floor().max(0.0),
+            (cy + r).ceil().min(gh as f32 - 1.0),
+        );
+        if x0 > x1 || y0 > y1 {
+            continue; // Entirely outside the photo.
+        }
+        let lt = t.depth.ln();
+        let mut any = false;
+        for y in y0 as usize..=y1 as usize {
+            for x in x0 as usize..=x1 as usize {
+                let d2 = (x as f32 - cx).powi(2) + (y as f32 - cy).powi(2);
+                if d2 <= r * r {
+                    weight.set(x, y, weight.at(x, y) + 1.0);
+                    rhs.set(x, y, rhs.at(x, y) + (lt - log_grid.at(x, y)));
+                    any = true;
+                }
+            }
+        }
+        if !any {
+            let (x, y) = (
+                cx.round().clamp(0.0, gw as f32 - 1.0) as usize,
+                cy.round().clamp(0.0, gh as f32 - 1.0) as usize,
+            );
+            weight.set(x, y, weight.at(x, y) + 1.0);
+            rhs.set(x, y, rhs.at(x, y) + (lt - log_grid.at(x, y)));
+        }
+    }
+    (weight, rhs)
+}
+
+/// Solves `(W + λL + εI)c = rhs` on one grid by Jacobi-preconditioned conjugate gradients from
+/// `c`; returns the solution and the iterations run.
+fn solve_level(
+    colour_grid: &Raster<[f32; 3]>,
+    log_grid: &GrayRaster,
+    weight: &GrayRaster,
+    rhs: &GrayRaster,
+    mut c: Vec<f64>,
+    params: &PropagateParams,
+) -> (Vec<f64>, usize) {
+    let (gw, gh) = weight.size();
+    let two_sc = 2.0 * params.sigma_colour.max(1e-4).powi(2);
+    let two_sz = 2.0 * params.sigma_log_depth.max(1e-4).powi(2);
+    let affinity = |a: usize, b: usize| -> f32 {
+        let (ca, cb) = (colour_grid.data()[a], colour_grid.data()[b]);
+        let dc = (ca[0] - cb[0]).powi(2) + (ca[1] - cb[1]).powi(2) + (ca[2] - cb[2]).powi(2);
+        let dz = (log_grid.data()[a] - log_grid.data()[b]).powi(2);
+        params.lambda * (-dc / two_sc).exp() * (-dz / two_sz).exp()
+    };
+    let n = gw * gh;
+    let mut right = vec![0.0f32; n];
+    let mut down = vec![0.0f32; n];
+    for y in 0..gh {
+        for x in 0..gw {
+            let i = y * gw + x;
+            if x + 1 < gw {
+                right[i] = affinity(i, i + 1);
+            }
+            if y + 1 < gh {
+                down[i] = affinity(i, i + gw);
+            }
+        }
+    }
+    let eps = params.epsilon.max(0.0);
+    let apply = |v: &[f64], out: &mut [f64]| {
+        for y in 0..gh {
+            for x in 0..gw {
+                let i = y * gw + x;
+                let mut acc = (weight.data()[i] + eps) as f64 * v[i];
+                if x + 1 < gw {
+                    acc += right[i] as f64 * (v[i] - v[i + 1]);
+                }
+                if x > 0 {
+                    acc += right[i - 1] as f64 * (v[i] - v[i - 1]);
+                }
+                if y + 1 < gh {
+                    acc += down[i] as f64 * (v[i] - v[i + gw]);
+                }
+                if y > 0 {
+                    acc += down[i - gw] as f64 * (v[i] - v[i - gw]);
+                }
+                out[i] = acc;
+            }
+        }
+    };
+    let diag: Vec<f64> = (0..n)
+        .map(|i| {
+            let (x, y) = (i % gw, i / gw);
+            let mut d = (weight.data()[i] + eps) as f64;
+            if x + 1 < gw {
+                d += right[i] as f64;
+            }
+            if x > 0 {
+                d += right[i - 1] as f64;
+            }
+            if y + 1 < gh {
+                d += down[i] as f64;
+            }
+            if y > 0 {
+                d += down[i - gw] as f64;
+            }
+            d.max(1e-12)
+        })
+        .collect();
+    let b: Vec<f64> = rhs.data().iter().map(|&v| v as f64).collect();
+    if c.len() != n {
+        c = vec![0.0; n];
+    }
+    let mut ac = vec![0.0f64; n];
+    apply(&c, &mut ac);
+    let mut r: Vec<f64> = b.iter().zip(&ac).map(|(b, a)| b - a).collect();
+    let mut z: Vec<f64> = r.iter().zip(&diag).map(|(r, d)| r / d).collect();
+    let mut p = z.clone();
+    let mut rz: f64 = r.iter().zip(&z).map(|(a, b)| a * b).sum();
+    let b_norm = b.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-30);
+    let mut ap = vec![0.0f64; n];
+    let mut iterations = 0;
+    for _ in 0..params.iterations {
+        let r_norm = r.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if r_norm <= 1e-5 * b_norm {
+            break;
+        }
+        apply(&p, &mut ap);
+        let pap: f64 = p.iter().zip(&ap).map(|(a, b)| a * b).sum();
+        if !(pap.is_finite() && pap > 0.0) {
+            break;
+        }
+        let alpha = rz / pap;
+        for i in 0..n {
+            c[i] += alpha * p[i];
+            r[i] -= alpha * ap[i];
+            z[i] = r[i] / diag[i];
+        }
+        let rz_new: f64 = r.iter().zip(&z).map(|(a, b)| a * b).sum();
+        let beta = rz_new / rz.max(1e-300);
+        rz = rz_new;
+        for i in 0..n {
+            p[i] = z[i] + beta * p[i];
+        }
+        iterations += 1;
+    }
+    (c, iterations)
+}
+
+/// The feature-space correction: stroke `k` (its dab's mean colour `I_k`, mean log estimate
+/// `e_k`, centre `p_k`, correction `c_k = ln T_k − e_k`) weighs on pixel `x` by
+/// `K_k(x) = exp(−‖x − p_k‖²/2σ_s² − ‖I(x) − I_k‖²/2σ_c² − (e(x) − e_k)²/2σ_z²)`, and
+/// `c(x) = Σ K_k c_k / (Σ K_k + κ)`. Strokes at one feature place average (least squares).
+pub fn bilateral_correction(
+    image: &RgbRaster,
+    log_e: &GrayRaster,
+    targets: &[DepthTarget],
+    params: &PropagateParams,
+) -> GrayRaster {
+    let (w, h) = image.size();
+    let diag = ((w * w + h * h) as f32).sqrt();
+    let two_ss = 2.0 * (params.sigma_space.max(1e-4) * diag).powi(2);
+    let two_sc = 2.0 * params.sigma_colour.max(1e-4).powi(2);
+    let two_sz = 2.0 * params.sigma_log_depth.max(1e-4).powi(2);
+    // Each stroke's features over its dab.
+    struct Feature {
+        x: f32,
+        y: f32,
+        colour: [f32; 3],
+        log_e: f32,
+        correction: f32,
+    }
+    let features: Vec<Feature> = targets
+        .iter()
+        .filter_map(|t| {
+            let r = t.radius_px.max(0.5);
+            let (x0, x1) = (
+                (t.x - r).floor().max(0.0),
+                (t.x + r).ceil().min(w as f32 - 1.0),
+            );
+            let (y0, y1) = (
+                (t.y - r).floor().max(0.0),
+                (t.y + r).ceil().min(h as f32 - 1.0),
+            );
+            if x0 > x1 || y0 > y1 {
+                return None;
+            }
+            let (mut n, mut c, mut e) = (0.0f32, [0.0f32; 3], 0.0f32);
+            for y in y0 as usize..=y1 as usize {
+                for x in x0 as usize..=x1 as usize {
+                    if (x as f32 - t.x).powi(2) + (y as f32 - t.y).powi(2) <= r * r {
+                        let p = image.at(x, y);
+                        for i in 0..3 {
+                            c[i] += p[i];
+                        }
+                        e += log_e.at(x, y);
+                        n += 1.0;
+                    }
+                }
+            }
+            if n == 0.0 {
+                let (x, y) = (t.x.round() as usize, t.y.round() as usize);
+                let (x, y) = (x.min(w - 1), y.min(h - 1));
+                c = image.at(x, y);
+                e = log_e.at(x, y);
+                n = 1.0;
+            }
+            let e = e / n;
+            Some(Feature {
+                x: t.x,
+                y: t.y,
+                colour: c.map(|v| v / n),
+                log_e: e,
+                correction: t.depth.ln() - e,
+            })
+        })
+        .collect();
+    let kappa = params.kappa.max(0.0);
+    let mut out = Raster::new(w, h, 0.0f32);
+    use rayon::prelude::*;
+    out.data_mut()
+        .par_chunks_mut(w)
+        .enumerate()
+        .for_each(|(y, row)| {
+            for (x, v) in row.iter_mut().enumerate() {
+                let p = image.at(x, y);
+                let e = log_e.at(x, y);
+                let (mut num, mut den) = (0.0f32, 0.0f32);
+                for f in &features {
+                    let ds = (x as f32 - f.x).powi(2) + (y as f32 - f.y).powi(2);
+                    let dc = (p[0] - f.colour[0]).powi(2)
+                        + (p[1] - f.colour[1]).powi(2)
+                        + (p[2] - f.colour[2]).powi(2);
+                    let dz = (e - f.log_e).powi(2);
+                    let k = (-(ds / two_ss) - dc / two_sc - dz / two_sz).exp();
+                    num += k * f.correction;
+                    den += k;
+                }
+                *v = if den + kappa > 0.0 {
+                    num / (den + kappa)
+                } else {
+                    0.0
+                };
+            }
+        });
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two regions (left dark, right light) with a gentle relief on top of a flat estimate.
+    fn two_regions(w: usize, h: usize) -> (RgbRaster, GrayRaster) {
+        let image = Raster::from_fn(w, h, |x, _| {
+            if x < w / 2 {
+                [0.1, 0.2, 0.1]
+            } else {
+                [0.8, 0.7, 0.6]
+            }
+        });
+        let estimate = Raster::from_fn(w, h, |_, y| 5.0 * (1.0 + 0.02 * (y as f32 / h as f32)));
+        (image, estimate)
+    }
+
+    #[test]
+    fn each_region_takes_its_strokes_depth_and_keeps_its_relief() {
+        let (w, h) = (160, 100);
+        let (image, estimate) = two_regions(w, h);
+        let targets = [
+            DepthTarget {
+                x: 30.0,
+                y: 50.0,
+                radius_px: 4.0,
+                depth: 2.0,
+            },
+            DepthTarget {
+                x: 130.0,
+                y: 50.0,
+                radius_px: 4.0,
+                depth: 20.0,
+            },
+        ];
+        let p = propagate(
+            &image,
+            &estimate,
+            &targets,
+            &PropagateParams::default(),
+            None,
+        )
+        .unwrap();
+        // Each region takes its stroke's depth within 1 % at the stroke's row, everywhere in
+        // the region (away from the edge's two pixels).
+        for x in (0..w).step_by(7) {
+            if (x as i32 - (w / 2) as i32).abs() <= 2 {
+                continue;
+            }
+            let want = if x < w / 2 { 2.0 } else { 20.0 };
+            let got = p.depth.at(x, 50);
+            assert!((got / want - 1.0).abs() < 0.01, "x {x}: {got} vs {want}");
+        }
+        // The relief (2 % from top to bottom) is kept: the ratio of two rows is the estimate's.
+        for x in [20usize, 140] {
+            let ratio = p.depth.at(x, 95) / p.depth.at(x, 5);
+            let want = estimate.at(x, 95) / estimate.at(x, 5);
+            assert!(
+                (ratio / want - 1.0).abs() < 0.003,
+                "x {x}: {ratio} vs {want}"
+            );
+        }
+        // A warm start from the answer converges at once to the same depth.
+        let again = propagate(
+            &image,
+            &estimate,
+            &targets,
+            &PropagateParams::default(),
+            Some(&p.correction),
+        )
+        .unwrap();
+        assert!(
+            again.iterations < p.iterations / 4 + 2,
+            "{} vs {}",
+            again.iterations,
+            p.iterations
+        );
+        assert!((again.depth.at(10, 10) / p.depth.at(10, 10) - 1.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn the_feature_space_mode_keeps_the_regions_apart() {
+        let (w, h) = (160, 100);
+        let (image, estimate) = two_regions(w, h);
+        let params = PropagateParams {
+            mode: PropagateMode::Bilateral,
+            ..PropagateParams::default()
+        };
+        let targets = [
+            DepthTarget {
+                x: 30.0,
+                y: 50.0,
+                radius_px: 4.0,
+                depth: 2.0,
+            },
+            DepthTarget {
+                x: 130.0,
+                y: 50.0,
+                radius_px: 4.0,
+                depth: 20.0,
+            },
+        ];
+        let p = propagate(&image, &estimate, &targets, &params, None).unwrap();
+        // At the strokes: their depth within 2 %; across the colour edge the other region's
+        // stroke has no say.
+        for (x, want) in [(30usize, 2.0f32), (130, 20.0)] {
+            let got = p.depth.at(x, 50);
+            assert!((got / want - 1.0).abs() < 0.02, "x {x}: {got} vs {want}");
+        }
+        assert!(p.depth.at(75, 50) < 3.0 && p.depth.at(85, 50) > 13.0);
+    }
+
+    #[test]
+    fn no_target_changes_nothing_and_bad_targets_are_refused() {
+        let (image, estimate) = two_regions(40, 20);
+        let p = propagate(&image, &estimate, &[], &PropagateParams::default(), None).unwrap();
+        assert_eq!(p.depth, estimate);
+        for depth in [0.0, -1.0, f32::NAN, f32::INFINITY] {
+            let t = DepthTarget {
+                x: 1.0,
+                y: 1.0,
+                radius_px: 2.0,
+                depth,
+            };
+            let e = propagate(&image, &estimate, &[t], &PropagateParams::default(), None);
+            assert!(e.is_err(), "{depth}");
+        }
+        // Outside the photo: ignored, not a panic. Contradictory strokes on one region: a
+        // least-squares answer between them.
+        let far = DepthTarget {
+            x: -500.0,
+            y: 9.0,
+            radius_px: 2.0,
+            depth: 3.0,
+        };
+        let p = propagate(&image, &estimate, &[far], &PropagateParams::default(), None).unwrap();
+        assert!(p.depth.data().iter().all(|z| z.is_finite() && *z > 0.0));
+        let a = DepthTarget {
+            x: 5.0,
+            y: 10.0,
+            radius_px: 2.0,
+            depth: 2.0,
+        };
+        let b = DepthTarget { depth: 8.0, ..a };
+        let p = propagate(
+            &image,
+            &estimate,
+            &[a, b],
+            &PropagateParams::default(),
+            None,
+        )
+        .unwrap();
+        let z = p.depth.at(5, 10);
+        assert!(z > 2.5 && z < 6.5, "{z}");
+    }
+}
