@@ -224,6 +224,7 @@ fn a_full_disk_says_what_is_needed_and_keeps_what_was_there() {
     app.apply_edit("Frames", p);
     assert!(!app.save_to(&target));
     let said = app.notices().join("\n");
+    eprintln!("{said}");
     assert!(
         said.contains("no space left") && said.contains("needed") && said.contains("free in"),
         "{said}"

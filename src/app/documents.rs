@@ -118,7 +118,8 @@ impl EditorApp {
                 true
             }
             Err(e) => {
-                self.error(format!("cannot save {}: {e:#}", path.display()));
+                // The error names the file already.
+                self.error(format!("cannot save: {e:#}"));
                 false
             }
         }
