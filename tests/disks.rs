@@ -7,24 +7,10 @@
 //! permission bits), else a folder without write permission; a full disk is a small tmpfs
 //! filled to the last byte (root only; CI runs as root and must be able to mount one).
 
+mod common;
+use common::{assert_one_line_failure, data, exe, fixture};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn exe() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_makeit4d"))
-}
-
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-}
-
-fn fixture(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures")
-        .join(name)
-}
+use std::process::Command;
 
 fn is_root() -> bool {
     Command::new("id")
@@ -100,20 +86,6 @@ fn fill(dir: &Path) {
     let _ = f.sync_all();
 }
 
-fn one_line_failure(o: &Output, needles: &[&str]) {
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{stderr}");
-    assert_eq!(
-        stderr.trim_end().lines().count(),
-        1,
-        "not one line: {stderr}"
-    );
-    assert!(!stderr.contains("panicked"), "{stderr}");
-    for n in needles {
-        assert!(stderr.contains(n), "missing '{n}' in: {stderr}");
-    }
-}
-
 fn visible_files(dir: &Path) -> Vec<String> {
     let mut v: Vec<String> = std::fs::read_dir(dir)
         .map(|rd| {
@@ -155,7 +127,7 @@ fn a_read_only_folder_is_refused_by_name_and_left_as_it_was() {
         .arg(ro.join("frames"))
         .output()
         .unwrap();
-    one_line_failure(&o, &[&ro.display().to_string()]);
+    assert_one_line_failure(&o, &[&ro.display().to_string()]);
     let o = exe()
         .arg("export-scene")
         .arg(data("evening_glow_320.jpg"))
@@ -163,7 +135,7 @@ fn a_read_only_folder_is_refused_by_name_and_left_as_it_was() {
         .arg(ro.join("scene.glb"))
         .output()
         .unwrap();
-    one_line_failure(&o, &["scene.glb"]);
+    assert_one_line_failure(&o, &["scene.glb"]);
     let o = exe()
         .args([
             "models",
@@ -177,7 +149,7 @@ fn a_read_only_folder_is_refused_by_name_and_left_as_it_was() {
         .arg(ro.join("models"))
         .output()
         .unwrap();
-    one_line_failure(&o, &[&ro.display().to_string()]);
+    assert_one_line_failure(&o, &[&ro.display().to_string()]);
     assert_eq!(visible_files(&ro), before);
     // The editor: save and autosave fail with a message; it keeps running and saves
     // elsewhere.

@@ -4,16 +4,14 @@
 //! visible under its final name; `--resume` completes to the same bytes as an uninterrupted
 //! run; every project and the autosave load, and the next editor start offers the autosave.
 
+mod common;
+use common::exe;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// Kill points per kind.
 const KILL_POINTS: usize = 50;
-
-fn exe() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_makeit4d"))
-}
 
 fn photo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/evening_glow_320.jpg")

@@ -2,18 +2,10 @@
 //! validator (when tests/run.sh installed it: always in CI), carries the path camera with a key
 //! per frame, and its meshes drawn through that camera match makeit4d's own frames.
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::{assert_one_line_failure, data, exe};
+use std::path::Path;
 use std::process::{Command, Output};
-
-fn exe() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_makeit4d"))
-}
-
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-}
 
 fn ok(o: &Output) -> String {
     assert!(
@@ -23,20 +15,6 @@ fn ok(o: &Output) -> String {
         String::from_utf8_lossy(&o.stderr)
     );
     String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn clean_failure(o: &Output, needles: &[&str]) {
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{stderr}");
-    assert_eq!(
-        stderr.trim_end().lines().count(),
-        1,
-        "not one line: {stderr}"
-    );
-    assert!(!stderr.contains("panicked"), "{stderr}");
-    for n in needles {
-        assert!(stderr.contains(n), "missing '{n}' in: {stderr}");
-    }
 }
 
 /// Runs the Khronos validator on `glb`: `Some((errors, warnings, report))`, or `None` when it is
@@ -84,7 +62,7 @@ fn the_glb_validates_and_carries_the_layers_and_the_path_camera() {
         .output()
         .unwrap();
     // `--inpaint-preset` is not an export-scene flag: refused in one line, nothing written.
-    clean_failure(&o, &["--inpaint-preset"]);
+    assert_one_line_failure(&o, &["--inpaint-preset"]);
     assert!(!glb.exists());
     let o = exe()
         .arg("export-scene")
@@ -179,7 +157,7 @@ fn bad_outputs_and_steps_are_refused_cleanly() {
         .arg(&missing)
         .output()
         .unwrap();
-    clean_failure(&o, &["scene.glb"]);
+    assert_one_line_failure(&o, &["scene.glb"]);
     assert!(!missing.exists());
     let o = exe()
         .arg("export-scene")
@@ -188,7 +166,7 @@ fn bad_outputs_and_steps_are_refused_cleanly() {
         .arg(dir.path().join("s.glb"))
         .output()
         .unwrap();
-    clean_failure(&o, &["--mesh-step"]);
+    assert_one_line_failure(&o, &["--mesh-step"]);
     // --format overrides the extension.
     let odd = dir.path().join("scene.bin");
     let o = exe()

@@ -229,8 +229,9 @@ pub(crate) enum EvalCommand {
     Scribbles(EvalScribblesArgs),
 }
 
+/// A rectified stereo pair with ground-truth disparity (`eval nvs`, `eval scribbles`).
 #[derive(Args, Debug)]
-pub(crate) struct EvalScribblesArgs {
+pub(crate) struct StereoPairArgs {
     /// The left image (the input).
     #[arg(long)]
     pub(crate) left: PathBuf,
@@ -246,9 +247,16 @@ pub(crate) struct EvalScribblesArgs {
     /// Focal length, pixels (of the files as given).
     #[arg(long)]
     pub(crate) focal: f32,
-    /// Baseline: the right camera's translation along +x.
+    /// Baseline: the right camera's translation along +x (depth comes out in its unit).
     #[arg(long)]
     pub(crate) baseline: f32,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct EvalScribblesArgs {
+    /// The stereo pair.
+    #[command(flatten)]
+    pub(crate) pair: StereoPairArgs,
     /// Stroke counts to report, ascending, comma-separated.
     #[arg(long, value_delimiter = ',', default_values_t = [0usize, 1, 2, 5, 10, 20, 30])]
     pub(crate) strokes: Vec<usize>,
@@ -408,24 +416,9 @@ impl From<KernelArg> for makeit4d::render::SplatKernel {
 
 #[derive(Args, Debug)]
 pub(crate) struct EvalNvsArgs {
-    /// The left image (the input).
-    #[arg(long)]
-    pub(crate) left: PathBuf,
-    /// The right image (the answer).
-    #[arg(long)]
-    pub(crate) right: PathBuf,
-    /// Ground-truth disparity of the left image (8/16-bit PNG or .npy), 0 = unknown.
-    #[arg(long)]
-    pub(crate) gt_disparity: PathBuf,
-    /// The disparity file holds disparity × this factor (e.g. 256 for aloe_disparity_q.png).
-    #[arg(long, default_value_t = 1.0)]
-    pub(crate) disparity_factor: f32,
-    /// Focal length, pixels (of the files as given).
-    #[arg(long)]
-    pub(crate) focal: f32,
-    /// Baseline: the right camera's translation along +x (depth comes out in its unit).
-    #[arg(long)]
-    pub(crate) baseline: f32,
+    /// The stereo pair.
+    #[command(flatten)]
+    pub(crate) pair: StereoPairArgs,
     /// Depth of the scene: the ground truth, or the depth stage's estimate aligned to it.
     #[arg(long, value_enum, default_value = "oracle")]
     pub(crate) depth: NvsDepthArg,

@@ -69,16 +69,8 @@ pub(crate) fn eval_ordinal(args: EvalOrdinalArgs, cancel: Arc<AtomicBool>) -> an
 }
 
 pub(crate) fn eval_nvs(args: EvalNvsArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
-    use makeit4d::eval::nvs::{NvsDepth, NvsOptions, StereoPair, eval_nvs};
-    let pair = StereoPair::load(
-        &args.left,
-        &args.right,
-        &args.gt_disparity,
-        args.disparity_factor,
-        args.focal,
-        args.baseline,
-    )?
-    .scaled(args.scale)?;
+    use makeit4d::eval::nvs::{NvsDepth, NvsOptions, eval_nvs};
+    let pair = load_pair(&args.pair)?.scaled(args.scale)?;
     let mut options = NvsOptions {
         depth: match args.depth {
             NvsDepthArg::Oracle => NvsDepth::Oracle,
@@ -180,17 +172,8 @@ pub(crate) fn eval_scribbles(
     args: super::args::EvalScribblesArgs,
     cancel: Arc<AtomicBool>,
 ) -> anyhow::Result<()> {
-    use makeit4d::eval::nvs::StereoPair;
     use makeit4d::eval::scribbles::{ScribbleOptions, eval_scribbles};
-    let pair = StereoPair::load(
-        &args.left,
-        &args.right,
-        &args.gt_disparity,
-        args.disparity_factor,
-        args.focal,
-        args.baseline,
-    )?
-    .scaled(args.scale)?;
+    let pair = load_pair(&args.pair)?.scaled(args.scale)?;
     let mut options = ScribbleOptions {
         strokes: args.strokes.clone(),
         nvs: !args.no_nvs,
@@ -231,4 +214,16 @@ pub(crate) fn eval_scribbles(
         },
         || table.to_markdown(),
     )
+}
+
+/// Loads the stereo pair the arguments name.
+fn load_pair(a: &super::args::StereoPairArgs) -> anyhow::Result<makeit4d::eval::nvs::StereoPair> {
+    Ok(makeit4d::eval::nvs::StereoPair::load(
+        &a.left,
+        &a.right,
+        &a.gt_disparity,
+        a.disparity_factor,
+        a.focal,
+        a.baseline,
+    )?)
 }

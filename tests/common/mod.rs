@@ -1,4 +1,43 @@
 //! Helpers shared by the integration tests (`mod common;` in each test file that needs them).
+// Each test binary uses some of them.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// The makeit4d binary under test.
+pub fn exe() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_makeit4d"))
+}
+
+/// A file of `tests/data/`.
+pub fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+/// A file of `tests/fixtures/`.
+pub fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(name)
+}
+
+/// A clean refusal: exit code 2, one line on stderr, no panic, each of `needles` in it.
+pub fn assert_one_line_failure(out: &Output, needles: &[&str]) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "stderr: {stderr}");
+    assert_eq!(
+        stderr.trim_end().lines().count(),
+        1,
+        "not one line: {stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    for n in needles {
+        assert!(stderr.contains(n), "missing '{n}' in: {stderr}");
+    }
+}
 
 /// A PNG that is all header: `width × height`, 8-bit RGB, no pixel data.
 pub fn png_header(width: u32, height: u32) -> Vec<u8> {

@@ -40,10 +40,6 @@ pub struct DepthTarget {
     pub depth: f32,
 }
 
-/// Most targets a solve takes; beyond it the oldest are merged away (said by
-/// [`propagate`]'s caller).
-pub const MAX_TARGETS: usize = 4096;
-
 /// The solver's settings.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PropagateParams {
@@ -643,24 +639,22 @@ mod tests {
         (image, estimate)
     }
 
+    /// A stroke in each region of [`two_regions`]: 2 on the left, 20 on the right.
+    fn one_per_region() -> [DepthTarget; 2] {
+        let at = |x: f32, depth: f32| DepthTarget {
+            x,
+            y: 50.0,
+            radius_px: 4.0,
+            depth,
+        };
+        [at(30.0, 2.0), at(130.0, 20.0)]
+    }
+
     #[test]
     fn each_region_takes_its_strokes_depth_and_keeps_its_relief() {
         let (w, h) = (160, 100);
         let (image, estimate) = two_regions(w, h);
-        let targets = [
-            DepthTarget {
-                x: 30.0,
-                y: 50.0,
-                radius_px: 4.0,
-                depth: 2.0,
-            },
-            DepthTarget {
-                x: 130.0,
-                y: 50.0,
-                radius_px: 4.0,
-                depth: 20.0,
-            },
-        ];
+        let targets = one_per_region();
         let p = propagate(
             &image,
             &estimate,
@@ -714,20 +708,7 @@ mod tests {
             mode: PropagateMode::Bilateral,
             ..PropagateParams::default()
         };
-        let targets = [
-            DepthTarget {
-                x: 30.0,
-                y: 50.0,
-                radius_px: 4.0,
-                depth: 2.0,
-            },
-            DepthTarget {
-                x: 130.0,
-                y: 50.0,
-                radius_px: 4.0,
-                depth: 20.0,
-            },
-        ];
+        let targets = one_per_region();
         let p = propagate(&image, &estimate, &targets, &params, None).unwrap();
         // At the strokes: their depth within 2 %; across the colour edge the other region's
         // stroke has no say.
