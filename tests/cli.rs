@@ -2,19 +2,10 @@
 //! exit code 2 and nothing written.
 
 mod common;
+use common::{assert_one_line_failure as assert_clean_failure, data, exe};
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn exe() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_makeit4d"))
-}
-
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-}
+use std::process::Output;
 
 /// Runs `makeit4d render ARGS…`.
 fn run(args: &[&std::ffi::OsStr]) -> Output {
@@ -27,22 +18,6 @@ fn run(args: &[&std::ffi::OsStr]) -> Output {
 
 fn os<S: AsRef<std::ffi::OsStr> + ?Sized>(s: &S) -> &std::ffi::OsStr {
     s.as_ref()
-}
-
-/// Asserts a clean failure: exit code 2, one line on stderr that contains every needle, no
-/// panic.
-fn assert_clean_failure(out: &Output, needles: &[&str]) {
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "stderr: {stderr}");
-    assert_eq!(
-        stderr.trim_end().lines().count(),
-        1,
-        "not one line: {stderr}"
-    );
-    assert!(!stderr.contains("panicked"), "{stderr}");
-    for n in needles {
-        assert!(stderr.contains(n), "missing '{n}' in: {stderr}");
-    }
 }
 
 fn frames_in(dir: &Path) -> Vec<PathBuf> {

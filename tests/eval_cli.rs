@@ -13,15 +13,15 @@ fn data(name: &str) -> PathBuf {
         .join(name)
 }
 
-fn nvs(extra: &[&str]) -> Output {
-    exe()
-        .args(["eval", "nvs", "--left"])
+/// `makeit4d eval SUB` on the quarter-size Aloe pair (f = 3740/4 px, disparities stored ×256).
+fn on_aloe_q(sub: &str) -> Command {
+    let mut c = exe();
+    c.args(["eval", sub, "--left"])
         .arg(data("aloe_left_q.jpg"))
         .arg("--right")
         .arg(data("aloe_right_q.jpg"))
         .arg("--gt-disparity")
         .arg(data("aloe_disparity_q.png"))
-        // Quarter size: f = 3740/4 px, disparities stored ×256.
         .args([
             "--disparity-factor",
             "256",
@@ -29,7 +29,12 @@ fn nvs(extra: &[&str]) -> Output {
             "935",
             "--baseline",
             "160",
-        ])
+        ]);
+    c
+}
+
+fn nvs(extra: &[&str]) -> Output {
+    on_aloe_q("nvs")
         .args([
             "--border",
             "10",
@@ -325,26 +330,7 @@ fn eval_ordinal_scores_the_estimator_against_the_ramp() {
 /// novel views the oracle row frames the table.
 #[test]
 fn eval_scribbles_strokes_improve_the_depth() {
-    let run = |extra: &[&str]| {
-        exe()
-            .args(["eval", "scribbles", "--left"])
-            .arg(data("aloe_left_q.jpg"))
-            .arg("--right")
-            .arg(data("aloe_right_q.jpg"))
-            .arg("--gt-disparity")
-            .arg(data("aloe_disparity_q.png"))
-            .args([
-                "--disparity-factor",
-                "256",
-                "--focal",
-                "935",
-                "--baseline",
-                "160",
-            ])
-            .args(extra)
-            .output()
-            .unwrap()
-    };
+    let run = |extra: &[&str]| on_aloe_q("scribbles").args(extra).output().unwrap();
     let o = run(&["--strokes", "0,5,15", "--no-nvs", "--json"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();

@@ -22,6 +22,7 @@ use super::app::*;
 use super::context::Request;
 use super::history::MAX_UNDO;
 use super::panels::Tab;
+use crate::eval::XorShift as Rng;
 use crate::path::{CameraPath, Keyframe, Preset, PresetKind};
 use crate::project::Project;
 use crate::render::RendererChoice;
@@ -174,29 +175,6 @@ impl StormReport {
             out.push('\n');
         }
         out
-    }
-}
-
-/// xorshift64*: the storm's own deterministic generator.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        let mut x = self.0;
-        x ^= x >> 12;
-        x ^= x << 25;
-        x ^= x >> 27;
-        self.0 = x;
-        x.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-    fn unit(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-    fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.unit()
     }
 }
 
@@ -720,17 +698,8 @@ pub fn run(options: &StormOptions, mut log: impl FnMut(&str)) -> anyhow::Result<
                 }
             }),
             "preset" => s.edit("Preset", |p, r, _| {
-                let kinds = [
-                    PresetKind::Still,
-                    PresetKind::FlyIn,
-                    PresetKind::FlyOut,
-                    PresetKind::Orbit,
-                    PresetKind::Swing,
-                    PresetKind::Pan,
-                    PresetKind::DollyZoom,
-                ];
                 p.camera.path = CameraPath::Preset(Preset {
-                    kind: kinds[r.below(kinds.len())],
+                    kind: PresetKind::ALL[r.below(PresetKind::ALL.len())],
                     amplitude: f64::from(r.range(0.1, 1.5)),
                 });
             }),

@@ -8,6 +8,7 @@
 //!
 //! Deterministic for a seed (xorshift64*; the case order and every mutation follow from it).
 
+use super::XorShift as Rng;
 use crate::error::{Error, Result};
 use crate::image_io::decode_image_bytes;
 use serde::Serialize;
@@ -46,23 +47,6 @@ pub struct FormatReport {
     /// The first failing case's bytes (panic, slow or multi-line), for a regression file.
     #[serde(skip)]
     pub first_failure: Option<Vec<u8>>,
-}
-
-/// The seeded random source (xorshift64*).
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-
-    /// Uniform in `0..n` (`n ≥ 1`).
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
 }
 
 /// One mutation of `seed` (another seed `other` for splices).

@@ -16,6 +16,35 @@ pub mod zoom;
 use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};
 
+/// The seeded random source of the robustness harnesses (`bench fuzz`, `bench storm`):
+/// xorshift64*, so a seed gives the same cases on every machine.
+pub(crate) struct XorShift(pub(crate) u64);
+
+impl XorShift {
+    /// The next 64 bits.
+    pub(crate) fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+
+    /// Uniform in `0..n` (`n ≥ 1`).
+    pub(crate) fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+
+    /// Uniform in `[0, 1)`.
+    pub(crate) fn unit(&mut self) -> f32 {
+        (self.next() >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// Uniform in `[lo, hi)`.
+    pub(crate) fn range(&mut self, lo: f32, hi: f32) -> f32 {
+        lo + (hi - lo) * self.unit()
+    }
+}
+
 /// A private temporary folder, removed (with its contents) when dropped.
 pub(crate) struct TempDir {
     path: PathBuf,

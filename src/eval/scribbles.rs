@@ -21,7 +21,6 @@ use crate::stages::depth::eval::depth_metrics;
 use crate::stages::depth::propagate::{DepthTarget, PropagateParams, propagate};
 use crate::stages::depth::{DepthSettings, run_depth_stage};
 use serde::Serialize;
-use std::collections::VecDeque;
 use std::time::Instant;
 
 /// The simulated user's settings.
@@ -137,8 +136,8 @@ impl ScribbleTable {
 }
 
 /// Where the simulated user clicks on `wrong` (true = wrong pixel): the innermost pixel of the
-/// largest 4-connected wrong region and its distance to the region's boundary (pixels, at
-/// least 1). `None` when nothing is wrong.
+/// largest 4-connected wrong region and its distance to the region's boundary (chamfer pixels,
+/// at least 1). `None` when nothing is wrong.
 pub fn simulated_click(wrong: &MaskRaster) -> Option<(usize, usize, f32)> {
     let regions = crate::raster::connected_components(wrong);
     let largest = regions.iter().max_by_key(|r| r.len())?;
@@ -147,41 +146,21 @@ pub fn simulated_click(wrong: &MaskRaster) -> Option<(usize, usize, f32)> {
     for &i in largest {
         inside.data_mut()[i] = true;
     }
-    // Distance to the boundary: breadth-first from the region's border pixels (4-neighbours
-    // outside the region or the image), in city-block steps.
-    let mut dist = Raster::new(w, h, u32::MAX);
-    let mut queue = VecDeque::new();
-    for &i in largest {
+    // Distance to the region's boundary: to the nearest pixel outside it, or past the image's
+    // edge (the edge bounds the region too).
+    let outside = crate::raster::morph::chamfer_distance(&inside.map(|v| !v));
+    let dist = |i: usize| -> f32 {
         let (x, y) = (i % w, i / w);
-        let border = x == 0
-            || y == 0
-            || x + 1 == w
-            || y + 1 == h
-            || !inside.at(x - 1, y)
-            || !inside.at(x + 1, y)
-            || !inside.at(x, y - 1)
-            || !inside.at(x, y + 1);
-        if border {
-            dist.set(x, y, 1);
-            queue.push_back(i);
-        }
-    }
-    while let Some(i) = queue.pop_front() {
-        let d = dist.data()[i];
-        crate::raster::for_each_neighbour4(i, w, h, |j| {
-            if inside.data()[j] && dist.data()[j] == u32::MAX {
-                dist.data_mut()[j] = d + 1;
-                queue.push_back(j);
-            }
-        });
-    }
+        let edge = (x + 1).min(y + 1).min(w - x).min(h - y) as f32;
+        outside.data()[i].min(edge)
+    };
     // The innermost pixels; of those, the one nearest their centroid (ties to the first in
     // reading order: deterministic).
-    let top = largest.iter().map(|&i| dist.data()[i]).max()?;
+    let top = largest.iter().map(|&i| dist(i)).fold(0.0f32, f32::max);
     let deepest: Vec<usize> = largest
         .iter()
         .copied()
-        .filter(|&i| dist.data()[i] == top)
+        .filter(|&i| dist(i) == top)
         .collect();
     let n = deepest.len() as f64;
     let (mx, my) = deepest.iter().fold((0.0, 0.0), |(sx, sy), &i| {
@@ -191,7 +170,7 @@ pub fn simulated_click(wrong: &MaskRaster) -> Option<(usize, usize, f32)> {
         let d = |i: usize| ((i % w) as f64 - mx).powi(2) + ((i / w) as f64 - my).powi(2);
         d(a).total_cmp(&d(b)).then(a.cmp(&b))
     })?;
-    Some((best % w, best / w, top as f32))
+    Some((best % w, best / w, top))
 }
 
 /// Runs the simulated user on `pair` (see the module docs).
@@ -279,11 +258,10 @@ pub fn eval_scribbles(
                     }
                 }
             }
-            if d.is_empty() {
+            let Some(g) = crate::raster::quantile(&d, 0.5) else {
                 break;
-            }
-            let mid = d.len() / 2;
-            let g = *d.select_nth_unstable_by(mid, f32::total_cmp).1 as f64;
+            };
+            let g = g as f64;
             // a = s·(1/Z) + t  ⇒  Z = s/(g − t).
             let inv = (g - m0.shift) / m0.scale;
             if !(inv.is_finite() && inv > 0.0) {

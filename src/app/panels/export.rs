@@ -6,6 +6,7 @@ use super::{PanelContext, PanelMessage, Request, StagePanel, Tab, placeholder_ui
 use crate::app::worker::JobKind;
 use crate::export::stereo::{StereoLayout, StereoOptions};
 use crate::export::{ExportOptions, Passes, VideoFormat, VideoOptions};
+use crate::project::Project;
 use eframe::egui::{self, Ui};
 use std::path::PathBuf;
 
@@ -73,6 +74,26 @@ impl ExportPanel {
             video: self.video.map(VideoOptions::new),
             ..Default::default()
         }
+    }
+}
+
+impl ExportPanel {
+    /// The folder `dir` (remembered with the project) and the project to export into it (with
+    /// this export's size, if one is set).
+    fn export_target(&mut self, dir: &str, cx: &mut PanelContext<'_>) -> (PathBuf, Project) {
+        let folder = PathBuf::from(dir);
+        if cx.project.export.folder.as_ref() != Some(&folder) {
+            // Remember the folder with the project.
+            self.from_project = Some(folder.clone());
+            let f = folder.clone();
+            cx.edit("Export folder", move |p| p.export.folder = Some(f));
+        }
+        let mut project = cx.current().clone();
+        if let Some((w, h)) = self.size {
+            project.output.width = Some(w);
+            project.output.height = Some(h);
+        }
+        (folder, project)
     }
 }
 
@@ -278,18 +299,7 @@ impl StagePanel for ExportPanel {
                 .add_enabled(!busy && !dir.is_empty(), egui::Button::new("Export"))
                 .clicked()
             {
-                let folder = PathBuf::from(&dir);
-                if cx.project.export.folder.as_ref() != Some(&folder) {
-                    // Remember the folder with the project.
-                    self.from_project = Some(folder.clone());
-                    let f = folder.clone();
-                    cx.edit("Export folder", move |p| p.export.folder = Some(f));
-                }
-                let mut project = cx.current().clone();
-                if let Some((w, h)) = self.size {
-                    project.output.width = Some(w);
-                    project.output.height = Some(h);
-                }
+                let (folder, project) = self.export_target(&dir, cx);
                 cx.requests.push(Request::Export {
                     out_dir: folder,
                     options: self.options(out.frames),
@@ -320,25 +330,16 @@ impl StagePanel for ExportPanel {
             )
             .clicked()
         {
-            let folder = PathBuf::from(&dir);
-            let mut project = cx.current().clone();
-            if let Some((w, h)) = self.size {
-                project.output.width = Some(w);
-                project.output.height = Some(h);
-            }
-            if let Err(e) = crate::image_io::prepare_output_dir(&folder) {
-                self.last_result = Some(format!("export failed: {e}"));
-            } else {
-                cx.requests.push(Request::ExportScene {
-                    path: folder.join("scene.glb"),
-                    options: crate::export::gltf::GltfOptions {
-                        mesh_step: self.mesh_step.max(1),
-                        ..Default::default()
-                    },
-                    project: Box::new(project),
-                });
-                self.last_result = None;
-            }
+            let (folder, project) = self.export_target(&dir, cx);
+            cx.requests.push(Request::ExportScene {
+                path: folder.join("scene.glb"),
+                options: crate::export::gltf::GltfOptions {
+                    mesh_step: self.mesh_step.max(1),
+                    ..Default::default()
+                },
+                project: Box::new(project),
+            });
+            self.last_result = None;
         }
         if let Some(r) = &self.last_result {
             ui.label(r);

@@ -363,6 +363,10 @@ fn scene_thread(
                 options,
             } => {
                 let result = job(&shared, &ctx, JobKind::Export, pool, |progress| {
+                    // The folder first: a bad one fails before the build.
+                    if let Some(dir) = path.parent() {
+                        crate::image_io::prepare_output_dir(dir)?;
+                    }
                     let scene = builder.build_exact(&project, &progress.sub(0.0, 0.8))?;
                     progress.check()?;
                     let views = scene.output_views(&project)?;

@@ -36,7 +36,7 @@ use crate::error::{Error, Result};
 use crate::geometry::{Intrinsics, View};
 use crate::image_io::{encode_png, write_atomic};
 use crate::scene::Scene;
-use glam::{DQuat, DVec3, Vec3};
+use glam::{DQuat, Vec3};
 use gltf::json;
 use json::validation::Checked::Valid;
 use json::validation::USize64;
@@ -96,7 +96,8 @@ pub struct GltfSummary {
     pub warnings: Vec<String>,
 }
 
-/// OpenCV axes (the input camera's) to glTF's: `(x, y, z) ↦ (x, −y, −z)`.
+/// OpenCV axes (the input camera's) to glTF's: `(x, y, z) ↦ (x, −y, −z)`; its own inverse, so
+/// it also reads glTF positions back.
 pub fn gltf_from_opencv(p: Vec3) -> Vec3 {
     Vec3::new(p.x, -p.y, -p.z)
 }
@@ -262,7 +263,12 @@ pub fn gltf_bytes(
         .filter(|(i, _)| bounds[*i].is_some())
         .map(|(i, l)| -> Result<(usize, LayerMesh, Vec<u8>)> {
             let m = mesh_layer(l, &k, step, near, alpha);
-            let png = encode_png(&image::DynamicImage::ImageRgba8(m.texture.clone()))?;
+            // A layer whose every cell was cut has no mesh: no texture to encode either.
+            let png = if m.indices.is_empty() {
+                Vec::new()
+            } else {
+                encode_png(&image::DynamicImage::ImageRgba8(m.texture.clone()))?
+            };
             Ok((i, m, png))
         })
         .collect::<Result<_>>()?;
@@ -652,14 +658,10 @@ pub fn write_gltf(
     Ok(summary)
 }
 
-/// The camera centre of glTF node `translation` in the input camera's OpenCV axes.
-pub fn opencv_from_gltf(p: DVec3) -> DVec3 {
-    DVec3::new(p.x, -p.y, -p.z)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::DVec3;
 
     #[test]
     fn axes_turn_half_a_turn_about_x() {

@@ -7,7 +7,7 @@
 //! near plane, texture coordinates interpolated perspective-correct, the texture sampled
 //! bilinearly (straight alpha), the nearest surface wins.
 
-use super::{INPUT_CAMERA_NODE, PATH_CAMERA_NODE, opencv_from_gltf};
+use super::{INPUT_CAMERA_NODE, PATH_CAMERA_NODE, gltf_from_opencv};
 use crate::error::{Error, Result};
 use crate::geometry::{Intrinsics, Pose, View};
 use crate::raster::{MaskRaster, Raster, RgbRaster};
@@ -209,13 +209,13 @@ impl LoadedGltf {
             .ok_or_else(|| Error::invalid(format!("the file has no camera key {frame}")))?;
         let yfov = self.yfov[frame.min(self.yfov.len() - 1)];
         let k = intrinsics_of(yfov, self.aspect, width, height);
-        // Back to OpenCV: R = F·R'·F, t = F·t'.
+        // Back to OpenCV: R = F·R'·F, t = F·t' (F is its own inverse).
         let rotation = super::gltf_rotation_from_opencv(q);
         Ok(View {
             intrinsics: k,
             world_from_camera: Pose {
                 rotation: rotation.as_quat(),
-                translation: opencv_from_gltf(t).as_vec3(),
+                translation: gltf_from_opencv(t.as_vec3()),
             },
         })
     }
@@ -262,7 +262,7 @@ pub fn draw(meshes: &[ViewMesh], view: &View, width: usize, height: usize) -> Dr
         let camera: Vec<Vec3> = mesh
             .positions
             .iter()
-            .map(|p| world_to_camera.apply(super::gltf_from_opencv(*p)))
+            .map(|p| world_to_camera.apply(gltf_from_opencv(*p)))
             .collect();
         for t in mesh.indices.chunks_exact(3) {
             let tri = [0, 1, 2].map(|c| ClipVertex {
