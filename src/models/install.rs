@@ -118,15 +118,7 @@ pub fn install_from_file(
         return Err(Error::file(source, "no such file"));
     }
     let folder = entry_dir(dir, entry);
-    std::fs::create_dir_all(&folder).map_err(|e| {
-        Error::file(
-            &folder,
-            format!(
-                "cannot create the model folder: {}",
-                crate::image_io::describe_io_error(&e)
-            ),
-        )
-    })?;
+    create_folder(&folder)?;
     let part = folder.join(format!("{}.part", entry.file));
     let copied = std::fs::copy(source, &part).map_err(|e| {
         let size = std::fs::metadata(source).map(|m| m.len()).ok();
@@ -196,15 +188,7 @@ fn download_and_install(
 ) -> Result<InstalledModel> {
     let url = url.unwrap_or(entry.url);
     let folder = entry_dir(dir, entry);
-    std::fs::create_dir_all(&folder).map_err(|e| {
-        Error::file(
-            &folder,
-            format!(
-                "cannot create the model folder: {}",
-                crate::image_io::describe_io_error(&e)
-            ),
-        )
-    })?;
+    create_folder(&folder)?;
     let part = folder.join(format!("{}.part", entry.file));
     let by_hand = format!(
         "download {} by hand and run `makeit4d models install {} --file PATH`",
@@ -312,6 +296,19 @@ fn download_and_install(
         )));
     }
     verify_and_finish()
+}
+
+/// Creates the model's folder; the error names it and the cause plainly (read-only, full).
+fn create_folder(folder: &Path) -> Result<()> {
+    std::fs::create_dir_all(folder).map_err(|e| {
+        Error::file(
+            folder,
+            format!(
+                "cannot create the model folder: {}",
+                crate::image_io::describe_io_error(&e)
+            ),
+        )
+    })
 }
 
 /// Removes `folder` when it is empty (a failed first install leaves nothing behind).
