@@ -25,9 +25,30 @@ use std::sync::atomic::AtomicBool;
 const EXIT_ERROR: u8 = 2;
 /// Exit code after Ctrl+C.
 const EXIT_CANCELLED: u8 = 130;
+/// Exit code when the reader of the output went away (128 + SIGPIPE, as a shell reports it).
+const EXIT_BROKEN_PIPE: i32 = 141;
+
+/// Stops quietly when standard output or error is a pipe whose reader went away
+/// (`makeit4d … | head`): the standard library's print macros panic on that write error.
+fn stop_quietly_on_broken_pipe() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let payload = info.payload();
+        let message = payload
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| payload.downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if message.starts_with("failed printing to std") && message.contains("Broken pipe") {
+            std::process::exit(EXIT_BROKEN_PIPE);
+        }
+        default(info);
+    }));
+}
 
 /// Parses the command line, runs the subcommand and maps its result to an exit code.
 pub fn main() -> ExitCode {
+    stop_quietly_on_broken_pipe();
     quiet_vulkan_device_select_layer();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,

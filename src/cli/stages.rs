@@ -114,13 +114,15 @@ fn write_cues(
         ("cue_position", &a.position_work),
         ("cue_object", &a.object_work),
         ("cue_haze", &a.haze_work),
+        ("cue_defocus", &a.defocus_work),
+        ("evidence", &a.evidence_work),
         ("cue_sky", &a.sky_work),
         ("confidence", &e.confidence),
     ] {
         save_rgb_png(&dir.join(format!("{stem}_{name}.png")), &grey(cue), false)?;
     }
     println!(
-        "{stem}: horizon {:.3} ({}), haziness {:.2}, border coherence {:.3}, object structure {:.3}, object weight {:.2}, depth {:.2}–{:.2}",
+        "{stem}: horizon {:.3} ({}), haziness {:.2}, border coherence {:.3}, object structure {:.3}, object weight {:.2}, defocus weight {:.2} (edge blur {:.2}–{:.2} px), depth {:.2}–{:.2}",
         a.horizon,
         if a.horizon_detected {
             "from sky"
@@ -131,6 +133,9 @@ fn write_cues(
         a.border_coherence,
         a.object_structure,
         a.object_weight,
+        a.defocus_weight,
+        a.defocus_range.0,
+        a.defocus_range.1,
         e.depth.data().iter().copied().fold(f32::INFINITY, f32::min),
         e.depth.data().iter().copied().fold(0.0f32, f32::max),
     );

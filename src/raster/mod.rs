@@ -82,6 +82,11 @@ impl<T: Copy> Raster<T> {
         self.data.len()
     }
 
+    /// Bytes its pixels take on the heap.
+    pub fn heap_bytes(&self) -> usize {
+        self.data.len() * std::mem::size_of::<T>()
+    }
+
     /// True when the raster has no pixels.
     pub fn is_empty(&self) -> bool {
         self.data.is_empty()

@@ -2,7 +2,8 @@
 //! unchanged (the exact canvas, the growing canvas of the editor, sketches and dry runs).
 
 use super::cache::{
-    CACHE_ENTRIES, GrownCanvas, StageCache, Stats, built, cached, key_of, remembered,
+    CACHE_ENTRIES, GrownCanvas, StageCache, Stats, built, cached, key_of, remembered, spare_budget,
+    trim,
 };
 use super::camera::{OutputCamera, scene_scale};
 use super::canvas::{build_canvas, canvas_layout, grow_canvas, layout_covers, layout_union};
@@ -115,13 +116,45 @@ impl SceneBuilder {
     /// Builds (or re-uses) every stage for `project`.
     pub fn build(&mut self, project: &Project, progress: &Progress) -> Result<Scene> {
         let grow = self.grow_canvas;
-        built(self.build_inner(project, progress, grow, false, false)?)
+        let scene = built(self.build_inner(project, progress, grow, false, false)?);
+        self.trim();
+        scene
+    }
+
+    /// Drops the least recently used outputs nothing else holds (across stages) until they
+    /// take at most [`spare_budget`] of what the held ones take (the shown scene's outputs
+    /// are held by it); returns `(held, spare)` bytes after. Every build calls it.
+    pub fn trim(&mut self) -> (usize, usize) {
+        let held = self.load.in_use_bytes()
+            + self.depth.in_use_bytes()
+            + self.canvas.in_use_bytes()
+            + self.layers.in_use_bytes()
+            + self.inpaint.in_use_bytes()
+            + self.layer_depth.in_use_bytes()
+            + self.cloud.in_use_bytes()
+            + self.motion.in_use_bytes();
+        let spare = trim(
+            &mut [
+                &mut self.load,
+                &mut self.depth,
+                &mut self.canvas,
+                &mut self.layers,
+                &mut self.inpaint,
+                &mut self.layer_depth,
+                &mut self.cloud,
+                &mut self.motion,
+            ],
+            spare_budget(held),
+        );
+        (held, spare)
     }
 
     /// Builds with exactly the canvas `project`'s path needs, whatever the builder's rule (what
     /// the command line renders for the same project).
     pub fn build_exact(&mut self, project: &Project, progress: &Progress) -> Result<Scene> {
-        built(self.build_inner(project, progress, false, false, false)?)
+        let scene = built(self.build_inner(project, progress, false, false, false)?);
+        self.trim();
+        scene
     }
 
     /// The first stage a [`SceneBuilder::build`] of `project` would run, without running any
@@ -144,7 +177,9 @@ impl SceneBuilder {
     /// the others.
     pub fn build_sketch(&mut self, project: &Project, progress: &Progress) -> Result<Scene> {
         let grow = self.grow_canvas;
-        built(self.build_inner(project, progress, grow, false, true)?)
+        let scene = built(self.build_inner(project, progress, grow, false, true)?);
+        self.trim();
+        scene
     }
 
     /// The inpainter `settings` ask for, made once per settings; a model that falls back to
@@ -176,6 +211,7 @@ impl SceneBuilder {
     ) -> Result<(Arc<LoadedImage>, WorkingSize)> {
         project.validate()?;
         let (_, input, working) = built(self.load_working(project, progress, false)?)?;
+        self.trim();
         Ok((input, working))
     }
 
@@ -239,6 +275,7 @@ impl SceneBuilder {
             &progress.sub(0.2, 1.0),
             false,
         )?)?;
+        self.trim();
         Ok(depth)
     }
 

@@ -36,7 +36,7 @@ mod tools;
 mod working;
 
 pub use builder::{SceneBuilder, build_scene};
-pub use cache::CACHE_ENTRIES;
+pub use cache::{CACHE_ENTRIES, CacheBytes, MIN_SPARE_BYTES, spare_budget};
 pub use camera::{OutputCamera, autocruise, scene_scale};
 pub use canvas::canvas_layout;
 pub use sizing::{MIN_SIZED_AMPLITUDE, PresetSizing, SIZING_MARGIN, size_preset};

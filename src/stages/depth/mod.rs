@@ -117,6 +117,17 @@ impl DepthCues {
     }
 }
 
+/// Share of the photo whose flattened relief is worth a line.
+pub const FLATTENED_NOTE_SHARE: f32 = 0.01;
+
+/// The line that says how much relief the classical estimator flattened.
+pub fn flattened_note(share: f32) -> String {
+    format!(
+        "depth: relief flattened on {:.0} % of the photo, where no cue vouched for it (texture is not relief; paint depth to add it back)",
+        100.0 * share
+    )
+}
+
 /// Runs the depth stage: import or estimate, then apply the painted strokes.
 pub fn run_depth_stage(
     settings: &DepthSettings,
@@ -127,9 +138,11 @@ pub fn run_depth_stage(
     let (w, h) = image.size();
     let mut warnings = Vec::new();
     let mut cues = None;
+    let mut flattened = None;
     let mut classical = || -> Result<DepthEstimate> {
         let analysis = classical::ClassicalDepth::new(settings.classical.clone())
             .analyse(image, intrinsics, progress)?;
+        flattened = Some(analysis.flattened);
         cues = Some(DepthCues::of(
             &analysis,
             settings.classical.horizon.is_some(),
@@ -192,6 +205,9 @@ pub fn run_depth_stage(
             }
         }
     };
+    if let Some(share) = flattened.filter(|s| *s >= FLATTENED_NOTE_SHARE) {
+        warnings.push(flattened_note(share));
+    }
     if !settings.strokes.is_empty() {
         estimate.depth = paint::apply_strokes(&estimate.depth, &settings.strokes)?;
     }

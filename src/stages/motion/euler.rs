@@ -113,6 +113,13 @@ pub struct EulerSequence {
 }
 
 impl EulerSequence {
+    /// Bytes it takes on the heap.
+    pub fn heap_bytes(&self) -> usize {
+        self.flow.heap_bytes()
+            + self.active.len() * 4
+            + self.checkpoints.iter().map(|c| c.len() * 8).sum::<usize>()
+    }
+
     /// The default checkpoint interval `C = ⌈√(N + 1)⌉` for `N` frames.
     pub fn default_interval(frames: usize) -> usize {
         ((frames + 1) as f64).sqrt().ceil().max(1.0) as usize

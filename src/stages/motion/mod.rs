@@ -71,6 +71,16 @@ pub struct MotionLoop {
 }
 
 impl MotionLoop {
+    /// Bytes its sequences take on the heap (flows, active pixels, checkpoints).
+    pub fn heap_bytes(&self) -> usize {
+        self.forward
+            .iter()
+            .chain(&self.backward)
+            .flatten()
+            .map(EulerSequence::heap_bytes)
+            .sum()
+    }
+
     /// A loop in which nothing moves.
     pub fn still(loop_frames: usize) -> Self {
         Self {

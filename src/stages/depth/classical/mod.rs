@@ -29,6 +29,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
+mod defocus;
 mod ground;
 mod haze;
 mod object;
@@ -36,6 +37,7 @@ mod params;
 mod popup;
 mod sky;
 
+pub use defocus::*;
 pub use ground::*;
 pub use haze::*;
 pub use object::*;
@@ -78,6 +80,13 @@ pub struct ClassicalAnalysis {
     pub haze_work: GrayRaster,
     /// Detail cue, a nearness offset in `[−½, ½]` (zero in landscapes).
     pub detail_work: GrayRaster,
+    /// Defocus cue, nearness `[0, 1]` (in focus = 1; 0.5 everywhere when it did not run).
+    pub defocus_work: GrayRaster,
+    /// Weight of the defocus cue in the fusion (its weight × its confidence; 0 in a
+    /// landscape).
+    pub defocus_weight: f32,
+    /// The 10th and 90th percentiles of the edges' blur σ, pixels of the measured copy.
+    pub defocus_range: (f32, f32),
     /// Weight of the detail cue in the fusion, after its gate (0 in a landscape or against
     /// one background).
     pub detail_weight: f32,
@@ -87,6 +96,11 @@ pub struct ClassicalAnalysis {
     pub landscape: bool,
     /// Which cue decided each working pixel.
     pub cues: Raster<DepthCue>,
+    /// Where confident cues draw depth edges (grown), `[0, 1]`: the relief kept as fused.
+    pub evidence_work: GrayRaster,
+    /// Share of the working pixels whose relief was flattened (moved by more than 0.05 in
+    /// nearness) because no confident cue vouched for it.
+    pub flattened: f32,
 }
 
 /// The cue that decided a region's depth, for the editor's Depth tab.
@@ -193,8 +207,27 @@ impl ClassicalDepth {
         let sky_horizon = horizon_from_sky(&sky_work);
         let row_fraction = |row: f32| row / (wh as f32 - 1.0).max(1.0);
         // Water lies below the sky (a symmetric cloud is not a lake).
-        let mirror = find_mirror_line(&gaussian_blur(&work_luma, 1.0))
-            .filter(|m| sky_horizon.is_none_or(|s| row_fraction(m.axis) >= s - 0.02));
+        // … and a sky that covers a quarter of what lies below the axis (a smooth sky or wall
+        // mirrors itself anywhere) has no shore there.
+        let sky_below = |m: &MirrorLine| {
+            let from = ((m.axis.ceil() as usize) + 1).min(wh);
+            let below = &sky_work.data()[from * ww..];
+            4 * below.iter().filter(|s| **s > 0.5).count() >= below.len().max(1)
+        };
+        let mirror = find_mirror_line(&gaussian_blur(&work_luma, 1.0)).filter(|m| {
+            sky_horizon.is_none_or(|s| row_fraction(m.axis) >= s - 0.02) && !sky_below(m)
+        });
+        let mut sky_horizon = sky_horizon;
+        if mirror.is_none()
+            && p.horizon.is_none()
+            && reaches_bottom(&sky_work)
+            && !blue_sky(&work, &sky_work)
+        {
+            // A pale "sky" that runs down to the bottom of the picture with no reflection is a
+            // surface (a wall, a plank, fog, sand); looking up into a sky, it is blue.
+            sky_work.data_mut().fill(0.0);
+            sky_horizon = None;
+        }
         let water_rows = mirror.map(|m| {
             let from = (m.axis.floor() as usize + 1).min(wh);
             from..(from + m.extent).min(wh)
@@ -220,8 +253,14 @@ impl ClassicalDepth {
                 sky_work.row_mut(y).fill(0.0);
             }
         }
-        let sky_share =
+        let mut sky_share =
             sky_work.data().iter().filter(|s| **s > 0.5).count() as f32 / sky_work.len() as f32;
+        if !horizon_detected && sky_share >= 0.9 && !blue_sky(&work, &sky_work) {
+            // A picture that is nearly all "sky" with no horizon is a sky seen looking up only
+            // when it is blue: a pale wall, a plank, fog or sand is as smooth and light.
+            sky_work.data_mut().fill(0.0);
+            sky_share = 0.0;
+        }
         if !horizon_detected && sky_share < 0.9 {
             // No one sky over a horizon: what is left is sky seen through gaps (a canopy),
             // the brightest thing in the picture, or bright patches that are not sky (the
@@ -267,8 +306,11 @@ impl ClassicalDepth {
         progress.report(0.6, "depth: cues");
         progress.check()?;
 
-        // Haze and detail cues.
+        // Haze and detail cues. Haze thickens with distance, and distance grows up the picture
+        // on any ground: a haze map that is not nearer below than above is a pale surface's
+        // texture, not haze.
         let (haze_work, haziness) = haze_cue(&work, p);
+        let haziness = haziness * vertical_agreement(&haze_work);
         // Detail is the fallback's figure/ground where the border is many things. Where the
         // border is one background, figure/ground against it is the object cue's to find;
         // when that finds only texture (a forest floor, a canopy), there is no figure there.
@@ -277,6 +319,12 @@ impl ClassicalDepth {
         } else {
             p.detail_weight * (1.0 - coherent_border)
         };
+        // Defocus: in focus is nearer, where no landscape cue applies.
+        let defocus = (!landscape && p.defocus_weight > 0.0)
+            .then(|| defocus_cue(&image, ww, wh, &DefocusParams::default()));
+        let wf = defocus
+            .as_ref()
+            .map_or(0.0, |d| p.defocus_weight * d.confidence);
         let detail_work = if wd > 0.0 {
             detail_cue(&texture, &work_luma, p.detail_scale)
         } else {
@@ -298,7 +346,7 @@ impl ClassicalDepth {
         // too would flatten the ground-plane gradient of everything in front of the fog.
         let wo = p.object_weight * object_share * (1.0 - haziness);
         let wz = p.haze_weight * haziness;
-        let total = (wg + wo + wz).max(1e-6);
+        let total = (wg + wo + wz + wf).max(1e-6);
 
         // Position prior and pop-up.
         let prior = position_prior(ww, wh, v_horizon_work, p.background_ramp);
@@ -306,11 +354,18 @@ impl ClassicalDepth {
         progress.report(0.65, "depth: cues");
         progress.check()?;
 
+        // A figure stands in front of its ground: an "object" band across the picture (a
+        // rail, a shore, a row of rooftops) is ground, not a figure; there the object cue
+        // says what the position cue says.
+        let object_work = neutral_outside_figures(&object_work, &position_work);
         let mut fused = Raster::from_fn(ww, wh, |x, y| {
             if plane(y) {
                 return position_work.at(x, y);
             }
-            (wg * position_work.at(x, y) + wo * object_work.at(x, y) + wz * haze_work.at(x, y))
+            (wg * position_work.at(x, y)
+                + wo * object_work.at(x, y)
+                + wz * haze_work.at(x, y)
+                + defocus.as_ref().map_or(0.0, |d| wf * d.nearness.at(x, y)))
                 / total
                 + wd * detail_work.at(x, y)
                 + aerial_work.as_ref().map_or(0.0, |a| {
@@ -330,6 +385,30 @@ impl ClassicalDepth {
                 }
             }
         }
+        // Parsimony: relief that no confident cue vouches for is texture, not shape. Near the
+        // edges a confident cue draws (the skyline, a figure's outline, the border of what is
+        // in focus, a pop-up's contact) the fused relief stays; elsewhere the depth is the
+        // smooth surface through it, which bends freely but does not cross those edges.
+        let close = ((0.03 * ww.max(wh) as f32).round() as usize).max(1);
+        let figures = super::filter::min_filter(
+            &super::filter::max_filter(&figure_mask(&object_work), close),
+            close,
+        );
+        let (sure_edges, evidence) = evidence_edges(
+            &[
+                (&sky_work, 1.0),
+                (&figures, wo / total),
+                (&position_work, wg / total),
+                (
+                    defocus.as_ref().map_or(&sky_work, |d| &d.nearness),
+                    if defocus.is_some() { wf / total } else { 0.0 },
+                ),
+            ],
+            p.parsimony_edge,
+            ww.max(wh),
+        );
+        let (flattened_map, flattened) = flatten_unvouched(&fused, (&sure_edges, &evidence), p);
+        fused = flattened_map;
         normalise_robust(&mut fused, Some(&sky_work));
         for (n, s) in fused.data_mut().iter_mut().zip(sky_work.data()) {
             if *s > 0.5 {
@@ -394,9 +473,16 @@ impl ClassicalDepth {
         let z_near = nearest_ground_depth(height, v_horizon, p.camera_height_m, fy);
         let depth = nearness_to_depth(&nearness, &sky, z_near, p);
 
-        // Confidence: cue agreement, lowered at depth edges; sky by its certainty.
+        // Confidence: on a ground with a horizon, the cues' agreement; without one, the plane
+        // is an assumption (¼); lowered at depth edges, raised where a confident cue draws an
+        // edge; sky by its certainty.
         let agreement = Raster::from_fn(ww, wh, |x, y| {
-            1.0 - (position_work.at(x, y) - object_work.at(x, y)).abs()
+            let base = if landscape {
+                1.0 - (position_work.at(x, y) - object_work.at(x, y)).abs()
+            } else {
+                ASSUMED_PLANE_CONFIDENCE
+            };
+            base.max(evidence.at(x, y))
         });
         let (sx, sy) = (ww as f32 / width as f32, wh as f32 / height as f32);
         let agreement = par_from_fn(width, height, |x, y| {
@@ -406,7 +492,7 @@ impl ClassicalDepth {
         let confidence = par_from_fn(width, height, |x, y| {
             let s = sky.at(x, y);
             let sky_certainty = (2.0 * s - 1.0).abs();
-            let ground = agreement.at(x, y) * (1.0 - edges.at(x, y));
+            let ground = agreement.at(x, y) * (1.0 - edges.at(x, y)).max(agreement.at(x, y));
             (s * sky_certainty + (1.0 - s) * ground).clamp(0.0, 1.0)
         });
         progress.report(1.0, "depth: done");
@@ -428,9 +514,14 @@ impl ClassicalDepth {
             haze_work,
             detail_work,
             detail_weight: wd,
+            defocus_range: defocus.as_ref().map_or((0.0, 0.0), |d| d.sigma_range),
+            defocus_work: defocus.map_or_else(|| Raster::new(ww, wh, 0.5), |d| d.nearness),
+            defocus_weight: wf,
             mirror,
             landscape,
             cues,
+            evidence_work: evidence,
+            flattened,
         })
     }
 }
@@ -448,6 +539,239 @@ impl DepthEstimator for ClassicalDepth {
     ) -> Result<DepthEstimate> {
         Ok(self.analyse(image, intrinsics, progress)?.estimate)
     }
+}
+
+/// Confidence of a depth no cue supports beyond the plane assumed under it.
+pub const ASSUMED_PLANE_CONFIDENCE: f32 = 0.25;
+
+/// Where confident cues draw depth edges: `(sharp, grown)`, both in `[0, 1]`. `sharp` is each
+/// `(cue, weight)`'s gradient magnitude (central differences) × weight, divided by `edge` (a
+/// nearness step of `edge` per working pixel at full weight is a sure edge), the largest of
+/// them; `grown` is `sharp` grown by 1 % of `long` (at least 1 px: both sides of the edge) and
+/// softened by a box of the same radius.
+pub fn evidence_edges(
+    cues: &[(&GrayRaster, f32)],
+    edge: f32,
+    long: usize,
+) -> (GrayRaster, GrayRaster) {
+    let Some((first, _)) = cues.first() else {
+        return (Raster::new(0, 0, 0.0), Raster::new(0, 0, 0.0));
+    };
+    let (w, h) = first.size();
+    let edge = edge.max(1e-6);
+    let sharp = par_from_fn(w, h, |x, y| {
+        let (xi, yi) = (x as isize, y as isize);
+        cues.iter()
+            .filter(|(c, wt)| *wt > 0.0 && c.same_size(first))
+            .map(|(c, wt)| {
+                let gx = 0.5 * (c.at_clamped(xi + 1, yi) - c.at_clamped(xi - 1, yi));
+                let gy = 0.5 * (c.at_clamped(xi, yi + 1) - c.at_clamped(xi, yi - 1));
+                (wt * (gx * gx + gy * gy).sqrt() / edge).min(1.0)
+            })
+            .fold(0.0f32, f32::max)
+    });
+    let r = ((0.01 * long as f32).round() as usize).max(1);
+    let grown = crate::raster::box_mean(&super::filter::max_filter(&sharp, r), r);
+    (sharp, grown)
+}
+
+/// The figures of an object cue: 1 where it is > ½, holes included (parts below ½ that do not
+/// reach the picture's border lie inside a figure), else 0. Its outline (closed over notches
+/// of 3 % of the picture by the caller) is where the cue draws an occlusion edge; what varies
+/// inside a figure is its texture.
+pub fn figure_mask(object: &GrayRaster) -> GrayRaster {
+    let (w, h) = object.size();
+    let o = object.data();
+    // Ground: below ½ and connected to the border.
+    let mut ground = vec![false; o.len()];
+    let mut queue: VecDeque<usize> = (0..o.len())
+        .filter(|&i| {
+            let (x, y) = (i % w, i / w);
+            (x == 0 || y == 0 || x + 1 == w || y + 1 == h) && o[i] <= 0.5
+        })
+        .collect();
+    for &i in &queue {
+        ground[i] = true;
+    }
+    while let Some(i) = queue.pop_front() {
+        for n in crate::raster::neighbours4(i, w, h).into_iter().flatten() {
+            if !ground[n] && o[n] <= 0.5 {
+                ground[n] = true;
+                queue.push_back(n);
+            }
+        }
+    }
+    Raster::from_vec(
+        w,
+        h,
+        ground.iter().map(|g| if *g { 0.0 } else { 1.0 }).collect(),
+    )
+    .unwrap_or_else(|| Raster::new(w, h, 0.0))
+}
+
+/// The smooth surface through `values` that bends freely but does not smooth across
+/// `barrier` (`[0, 1]`, 1 = a sure edge): the recursive filter of the domain transform
+/// (Gastal and Oliveira 2011, three passes of rows then columns, spatial σ `sigma_px`) with the
+/// barrier as the domain's distance: a step of `1 + 1000·clamp(2·barrier − 1, 0, 1)` pixels
+/// between neighbours (a barrier under ½ is no edge).
+pub fn smooth_within_edges(values: &GrayRaster, barrier: &GrayRaster, sigma_px: f32) -> GrayRaster {
+    let (w, h) = values.size();
+    if values.is_empty() || !values.same_size(barrier) {
+        return values.clone();
+    }
+    let mut out = values.data().to_vec();
+    let b = barrier.data();
+    let passes = 3i32;
+    let sigma = sigma_px.max(0.5);
+    // Distance between neighbours i and j in the domain.
+    // Only sure edges stop it: a barrier under ½ does not count, 1 is a wall.
+    let dist = |i: usize, j: usize| 1.0 + 1000.0 * (2.0 * b[i].max(b[j]) - 1.0).clamp(0.0, 1.0);
+    for k in 0..passes {
+        let sigma_k =
+            sigma * 3f32.sqrt() * 2f32.powi(passes - k - 1) / (4f32.powi(passes) - 1.0).sqrt();
+        let a = (-(2f32.sqrt()) / sigma_k).exp();
+        let run = |out: &mut [f32], idx: &dyn Fn(usize) -> usize, n: usize| {
+            for t in 1..n {
+                let (i, j) = (idx(t), idx(t - 1));
+                let f = a.powf(dist(i, j));
+                out[i] += f * (out[j] - out[i]);
+            }
+            for t in (0..n.saturating_sub(1)).rev() {
+                let (i, j) = (idx(t), idx(t + 1));
+                let f = a.powf(dist(i, j));
+                out[i] += f * (out[j] - out[i]);
+            }
+        };
+        for y in 0..h {
+            run(&mut out, &|t| y * w + t, w);
+        }
+        for x in 0..w {
+            run(&mut out, &|t| t * w + x, h);
+        }
+    }
+    Raster::from_vec(w, h, out).unwrap_or_else(|| values.clone())
+}
+
+/// `fused` with the relief no confident cue vouches for replaced by the smooth surface
+/// through it ([`smooth_within_edges`] with the sure edges `sharp` as barriers, σ
+/// `parsimony_radius` of the long side): `smooth + grown·(fused − smooth)`. Also returns the
+/// share of the pixels it moved by more than 0.05.
+fn flatten_unvouched(
+    fused: &GrayRaster,
+    (sharp, grown): (&GrayRaster, &GrayRaster),
+    p: &ClassicalDepthParams,
+) -> (GrayRaster, f32) {
+    let (w, h) = fused.size();
+    let sigma = p.parsimony_radius * w.max(h) as f32;
+    let smooth = smooth_within_edges(fused, sharp, sigma);
+    let out = par_from_fn(w, h, |x, y| {
+        let (f, s) = (fused.at(x, y), smooth.at(x, y));
+        if !s.is_finite() {
+            return f;
+        }
+        s + grown.at(x, y).clamp(0.0, 1.0) * (f - s)
+    });
+    let moved = out
+        .data()
+        .iter()
+        .zip(fused.data())
+        .filter(|(a, b)| (*a - *b).abs() > 0.05)
+        .count();
+    let share = moved as f32 / out.len().max(1) as f32;
+    (out, share)
+}
+
+/// Share of a row an object region must cover for the row to count as crossed by it.
+pub const BAND_ROW_SHARE: f32 = 0.7;
+
+/// `object` where its regions (4-connected pixels > ½) are figures, `neutral` in regions that
+/// are bands across the picture — at least half their pixels in rows they cover to
+/// [`BAND_ROW_SHARE`] of the width (a rail, a shore: ground, not a figure; a plant whose
+/// leaves reach both sides still covers few rows whole).
+pub fn neutral_outside_figures(object: &GrayRaster, neutral: &GrayRaster) -> GrayRaster {
+    let (w, h) = object.size();
+    let mut out = object.clone();
+    let o = object.data();
+    let mut seen = vec![false; o.len()];
+    let mut queue = VecDeque::new();
+    for start in 0..o.len() {
+        if seen[start] || o[start] <= 0.5 {
+            continue;
+        }
+        seen[start] = true;
+        queue.push_back(start);
+        let mut members = Vec::new();
+        let mut per_row = vec![0usize; h];
+        while let Some(i) = queue.pop_front() {
+            members.push(i);
+            per_row[i / w] += 1;
+            for n in crate::raster::neighbours4(i, w, h).into_iter().flatten() {
+                if !seen[n] && o[n] > 0.5 {
+                    seen[n] = true;
+                    queue.push_back(n);
+                }
+            }
+        }
+        // A band: most of its pixels lie in rows it crosses nearly whole.
+        let in_full_rows: usize = per_row
+            .iter()
+            .filter(|&&n| n as f32 >= BAND_ROW_SHARE * w as f32)
+            .sum();
+        if 2 * in_full_rows >= members.len() {
+            for i in members {
+                out.data_mut()[i] = neutral.data()[i];
+            }
+        }
+    }
+    out
+}
+
+/// Whether the sky mask covers at least 5 % of the bottom row.
+fn reaches_bottom(sky: &GrayRaster) -> bool {
+    let (w, h) = sky.size();
+    h > 0 && 20 * sky.row(h - 1).iter().filter(|s| **s > 0.5).count() >= w.max(1)
+}
+
+/// Whether the sky pixels of `sky` (> ½) are blue on the whole: the median colour's blue
+/// exceeds its red by 0.03 and is at least its green (a clear sky; grey, white, beige are not).
+fn blue_sky(work: &RgbRaster, sky: &GrayRaster) -> bool {
+    let mut ch: [Vec<f32>; 3] = Default::default();
+    for (c, s) in work.data().iter().zip(sky.data()) {
+        if *s > 0.5 {
+            for k in 0..3 {
+                ch[k].push(c[k]);
+            }
+        }
+    }
+    let m: Vec<f32> = ch.iter().map(|v| quantile(v, 0.5).unwrap_or(0.0)).collect();
+    m[2] > m[0] + 0.03 && m[2] >= m[1]
+}
+
+/// How well `nearness` agrees with a picture whose ground rises towards the top (nearer
+/// below), `[0, 1]`: the correlation of the map with the row, 0 at or below 0, 1 from 0.3.
+pub fn vertical_agreement(nearness: &GrayRaster) -> f32 {
+    let (w, h) = nearness.size();
+    if h < 2 || w == 0 {
+        return 0.0;
+    }
+    let n = (w * h) as f64;
+    let (mut sy, mut sv, mut syy, mut svv, mut syv) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
+    for y in 0..h {
+        for &v in nearness.row(y) {
+            let (yf, vf) = (y as f64, v as f64);
+            sy += yf;
+            sv += vf;
+            syy += yf * yf;
+            svv += vf * vf;
+            syv += yf * vf;
+        }
+    }
+    let cov = syv / n - sy * sv / (n * n);
+    let var = (syy / n - (sy / n).powi(2)) * (svv / n - (sv / n).powi(2));
+    if var <= 1e-12 {
+        return 0.0;
+    }
+    ((cov / var.sqrt()) / 0.3).clamp(0.0, 1.0) as f32
 }
 
 /// [`Raster::from_fn`] with the rows computed in parallel.
@@ -595,6 +919,258 @@ mod tests {
                 [0.3 + n, 0.25 + n, 0.1 + n * 0.5]
             }
         })
+    }
+
+    /// Mean and standard deviation of `v` over the box `[x0, x1) × [y0, y1)`.
+    fn box_stats(v: &GrayRaster, x0: usize, x1: usize, y0: usize, y1: usize) -> (f32, f32) {
+        let vals: Vec<f32> = (y0..y1)
+            .flat_map(|y| (x0..x1).map(move |x| (x, y)))
+            .map(|(x, y)| v.at(x, y))
+            .collect();
+        let n = vals.len() as f32;
+        let mean = vals.iter().sum::<f32>() / n;
+        let var = vals.iter().map(|a| (a - mean).powi(2)).sum::<f32>() / n;
+        (mean, var.sqrt())
+    }
+
+    /// Mean of `v` over the box and the RMS of its residual from the least-squares plane
+    /// `a + b·x + c·y` there.
+    fn plane_residual(v: &GrayRaster, x0: usize, x1: usize, y0: usize, y1: usize) -> (f32, f32) {
+        let pts: Vec<(f64, f64, f64)> = (y0..y1)
+            .flat_map(|y| (x0..x1).map(move |x| (x, y)))
+            .map(|(x, y)| (x as f64, y as f64, v.at(x, y) as f64))
+            .collect();
+        let n = pts.len() as f64;
+        let mean = |f: &dyn Fn(&(f64, f64, f64)) -> f64| pts.iter().map(f).sum::<f64>() / n;
+        let (mx, my, mv) = (mean(&|p| p.0), mean(&|p| p.1), mean(&|p| p.2));
+        let (sxx, syy, sxy) = (
+            mean(&|p| (p.0 - mx).powi(2)),
+            mean(&|p| (p.1 - my).powi(2)),
+            mean(&|p| (p.0 - mx) * (p.1 - my)),
+        );
+        let (sxv, syv) = (
+            mean(&|p| (p.0 - mx) * (p.2 - mv)),
+            mean(&|p| (p.1 - my) * (p.2 - mv)),
+        );
+        let det = sxx * syy - sxy * sxy;
+        let (b, c) = if det.abs() > 1e-12 {
+            ((sxv * syy - syv * sxy) / det, (syv * sxx - sxv * sxy) / det)
+        } else {
+            (0.0, 0.0)
+        };
+        let rms = mean(&|p| (p.2 - mv - b * (p.0 - mx) - c * (p.1 - my)).powi(2)).sqrt();
+        (mv as f32, rms as f32)
+    }
+
+    #[test]
+    fn a_printed_landscape_on_a_wall_stays_a_wall() {
+        // A pale wall with a print on it: the print's sky, clouds and textured ground are
+        // texture on one flat card, not a landscape (its sky does not reach the top).
+        let (w, h) = (192, 128);
+        let print = |x: usize, y: usize| -> Rgb {
+            let (px, py) = (x - 48, y - 32);
+            if py < 28 {
+                let cloud = 0.15 * ((px as f32 * 0.3).sin() * (py as f32 * 0.4).cos()).max(0.0);
+                [0.45 + cloud, 0.65 + cloud, 0.95]
+            } else {
+                let n = hash(px, py) * 0.5;
+                [0.25 + n, 0.35 + 0.6 * n, 0.1 + 0.3 * n]
+            }
+        };
+        let img = Raster::from_fn(w, h, |x, y| {
+            if (48..144).contains(&x) && (32..96).contains(&y) {
+                print(x, y)
+            } else {
+                let n = 0.02 * hash(x + 500, y);
+                [0.82 + n, 0.78 + n, 0.70 + n]
+            }
+        });
+        let a = estimator()
+            .analyse(&img, &intrinsics(w, h), &Progress::none())
+            .unwrap();
+        check_sane(&a.estimate, w, h);
+        assert!(!a.landscape, "a print's sky is not the sky");
+        assert!(a.estimate.sky.data().iter().all(|s| *s < 0.5));
+        // Inside the print (away from its frame) the confidence is low, and the printed
+        // ground's texture is no relief: its disparity varies by under 3 % of its mean. (The
+        // printed clouds still read as ±8 % bumps: colour regions unlike the wall, which the
+        // figure cue measures; flattening them too cost the Aloe pair's δ<1.25.)
+        let disparity = a.estimate.depth.map(|z| 1.0 / z);
+        let (mean, residual) = plane_residual(&disparity, 56, 136, 66, 90);
+        assert!(
+            residual < 0.01 * mean,
+            "printed ground: disparity {mean}, {residual} off the best plane"
+        );
+        for (y0, y1) in [(38, 56), (66, 90)] {
+            let (c, _) = box_stats(&a.estimate.confidence, 56, 136, y0, y1);
+            assert!(c < 0.5, "rows {y0}..{y1}: confidence {c}");
+        }
+    }
+
+    #[test]
+    fn pure_noise_gets_an_honest_plane() {
+        let (w, h) = (160, 120);
+        let img = Raster::from_fn(w, h, |x, y| {
+            [hash(x, y), hash(x + 1000, y), hash(x, y + 1000)]
+        });
+        let out = estimator()
+            .estimate(&img, &intrinsics(w, h), &Progress::none())
+            .unwrap();
+        check_sane(&out, w, h);
+        // No pixel-scale relief: neighbouring disparities differ by under 1 % of the range
+        // on average, and the picture is not called sky.
+        let d = out.depth.map(|z| 1.0 / z);
+        let (lo, hi) = d
+            .data()
+            .iter()
+            .fold((f32::MAX, f32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+        let mut step = 0.0;
+        for y in 0..h {
+            for x in 1..w {
+                step += (d.at(x, y) - d.at(x - 1, y)).abs();
+            }
+        }
+        let mean_step = step / ((w - 1) * h) as f32;
+        assert!(
+            mean_step < 0.01 * (hi - lo).max(1e-9),
+            "mean step {mean_step} of {lo}..{hi}"
+        );
+        assert!(out.sky.data().iter().all(|s| *s < 0.5));
+    }
+
+    #[test]
+    fn all_sky_is_far_except_what_flies_in_front_and_only_a_blue_one() {
+        let (w, h) = (120, 80);
+        // Looking up into a clear sky with a dark bird.
+        let bird = |x: usize, y: usize| (50..60).contains(&x) && (30..36).contains(&y);
+        let img = Raster::from_fn(w, h, |x, y| {
+            if bird(x, y) {
+                [0.1, 0.08, 0.06]
+            } else {
+                [0.45, 0.62, 0.92 - 0.1 * y as f32 / h as f32]
+            }
+        });
+        let out = estimator()
+            .estimate(&img, &intrinsics(w, h), &Progress::none())
+            .unwrap();
+        check_sane(&out, w, h);
+        let far = out.depth.data().iter().copied().fold(0.0f32, f32::max);
+        assert!(
+            out.sky.at(5, 5) > 0.9 && out.sky.at(110, 75) > 0.9,
+            "sky {} {} {}",
+            out.sky.at(5, 5),
+            out.sky.at(110, 75),
+            out.sky.at(55, 33)
+        );
+        assert!(
+            out.depth.at(110, 75) > 0.9 * far,
+            "the sky's bottom is far too"
+        );
+        assert!(out.depth.at(55, 33) < 0.5 * far, "the bird is in front");
+        // A pale beige "sky" to the bottom with no horizon is a surface, not the sky: a
+        // plane, nearer below.
+        let wall = Raster::from_fn(w, h, |x, y| {
+            let n = 0.01 * hash(x, y);
+            [0.85 + n, 0.8 + n, 0.7 + n]
+        });
+        let out = estimator()
+            .estimate(&wall, &intrinsics(w, h), &Progress::none())
+            .unwrap();
+        check_sane(&out, w, h);
+        assert!(out.sky.data().iter().all(|s| *s < 0.5));
+        assert!(out.depth.at(60, 75) < out.depth.at(60, 5));
+    }
+
+    #[test]
+    fn bands_across_the_picture_are_ground_and_compact_regions_figures() {
+        let (w, h) = (40, 30);
+        let neutral = Raster::new(w, h, 0.2);
+        // A band over rows 10..14 across the whole width, a blob, and a diagonal reaching
+        // both sides (a plant's leaves): only the band is neutralised.
+        let object = Raster::from_fn(w, h, |x, y| {
+            let band = (10..14).contains(&y);
+            let blob = (5..9).contains(&x) && (20..25).contains(&y);
+            let diagonal = (y as isize - (16 + x * 13 / 40) as isize).abs() <= 1;
+            if band || blob || diagonal { 0.9 } else { 0.0 }
+        });
+        let out = neutral_outside_figures(&object, &neutral);
+        assert_eq!(out.at(20, 12), 0.2);
+        assert_eq!(out.at(6, 22), 0.9);
+        assert_eq!(
+            out.at(39, 28),
+            0.9,
+            "a diagonal reaching both sides is a figure"
+        );
+        assert_eq!(out.at(0, 0), 0.0);
+    }
+
+    #[test]
+    fn smoothing_within_edges_known_answers() {
+        // Noise on two plateaus, a sure edge between them: each plateau comes out flat at its
+        // own mean, the step stays.
+        let (w, h) = (80, 20);
+        let noisy = Raster::from_fn(w, h, |x, y| {
+            (if x < 40 { 0.2 } else { 0.8 }) + 0.1 * (hash(x, y) - 0.5)
+        });
+        let barrier = Raster::from_fn(w, h, |x, _| if x == 39 || x == 40 { 1.0 } else { 0.0 });
+        let s = smooth_within_edges(&noisy, &barrier, 20.0);
+        let (left, lsd) = box_stats(&s, 5, 35, 0, h);
+        let (right, rsd) = box_stats(&s, 45, 75, 0, h);
+        assert!(
+            (left - 0.2).abs() < 0.02 && (right - 0.8).abs() < 0.02,
+            "{left} {right}"
+        );
+        assert!(lsd < 0.01 && rsd < 0.01, "{lsd} {rsd}");
+        // Without the edge the step is smoothed away; a barrier under ½ is no edge.
+        let weak = Raster::new(w, h, 0.4);
+        for b in [&Raster::new(w, h, 0.0), &weak] {
+            let s = smooth_within_edges(&noisy, b, 20.0);
+            assert!(s.at(36, 10) > 0.3 && s.at(43, 10) < 0.7);
+        }
+        // A constant stays exactly constant.
+        let c = smooth_within_edges(&Raster::new(w, h, 0.3), &barrier, 5.0);
+        assert!(c.data().iter().all(|v| (v - 0.3).abs() < 1e-6));
+    }
+
+    #[test]
+    fn figures_include_their_holes() {
+        // A ring (> ½) around a hole (< ½), and a notch open to the border.
+        let o = Raster::from_fn(20, 20, |x, y| {
+            let ring = (5..15).contains(&x) && (5..15).contains(&y);
+            let hole = (8..12).contains(&x) && (8..12).contains(&y);
+            if ring && !hole { 0.9 } else { 0.1 }
+        });
+        let f = figure_mask(&o);
+        assert_eq!(f.at(10, 10), 1.0, "the hole is inside the figure");
+        assert_eq!(f.at(6, 6), 1.0);
+        assert_eq!(f.at(2, 2), 0.0);
+        assert_eq!(f.at(17, 10), 0.0);
+    }
+
+    #[test]
+    fn vertical_agreement_known_answers() {
+        let down = Raster::from_fn(8, 10, |_, y| y as f32 / 9.0);
+        assert_eq!(vertical_agreement(&down), 1.0);
+        let up = Raster::from_fn(8, 10, |_, y| 1.0 - y as f32 / 9.0);
+        assert_eq!(vertical_agreement(&up), 0.0);
+        assert_eq!(vertical_agreement(&Raster::new(8, 10, 0.3)), 0.0);
+        assert_eq!(vertical_agreement(&Raster::new(8, 1, 0.3)), 0.0);
+    }
+
+    #[test]
+    fn evidence_edges_known_answers() {
+        // A unit step in a cue at full weight is a sure edge; half the weight, half of it
+        // (edge 0.25: the central difference of a unit step is ½).
+        let step = Raster::from_fn(100, 10, |x, _| if x < 50 { 0.0 } else { 1.0 });
+        let flat = Raster::new(100, 10, 0.4);
+        let (sharp, e) = evidence_edges(&[(&step, 1.0), (&flat, 1.0)], 0.25, 100);
+        assert_eq!(sharp.at(49, 5), 1.0);
+        assert_eq!(sharp.at(47, 5), 0.0);
+        assert!(e.at(49, 5) > 0.6 && e.at(50, 5) > 0.6);
+        assert_eq!(e.at(10, 5), 0.0);
+        assert_eq!(e.at(90, 5), 0.0);
+        let (_, half) = evidence_edges(&[(&step, 0.25)], 0.25, 100);
+        assert!(half.at(49, 5) < 0.5 * e.at(49, 5) + 1e-6);
     }
 
     #[test]
