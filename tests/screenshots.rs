@@ -142,6 +142,16 @@ fn regenerate_screenshots() {
         h.step();
     }
     shot(&mut h, &out.join("11-depth-cues.png"));
+
+    // Where the depth is unsure (no cue vouches for it): the U key toggles the overlay.
+    h.get_by_label("Show which cue decided (C)").click();
+    h.step();
+    h.key_press(egui::Key::U);
+    h.remove_cursor();
+    for _ in 0..6 {
+        h.step();
+    }
+    shot(&mut h, &out.join("12-depth-unsure.png"));
 }
 
 /// Writes the window at three quarters of its size (small files, readable text).

@@ -20,6 +20,7 @@ pub struct DepthPanel {
     transform: ViewTransform,
     show_sky: bool,
     show_cues: bool,
+    show_unsure: bool,
     tool: DepthTool,
     radius_px: f32,
     strength: f32,
@@ -33,6 +34,7 @@ impl Default for DepthPanel {
             transform: ViewTransform::default(),
             show_sky: true,
             show_cues: false,
+            show_unsure: false,
             tool: DepthTool::Horizon,
             radius_px: 20.0,
             strength: 0.3,
@@ -114,6 +116,7 @@ impl StagePanel for DepthPanel {
         let overlays = [
             (self.show_sky, "sky", Some(&shown.sky)),
             (self.show_cues, "cues", shown.cues.as_ref()),
+            (self.show_unsure, "unsure", Some(&shown.unsure)),
         ];
         for (on, name, image) in overlays {
             let Some(image) = image.filter(|_| on) else {
@@ -314,6 +317,16 @@ impl StagePanel for DepthPanel {
             });
         }
         ui.checkbox(&mut self.show_sky, "Show the sky mask");
+        ui.checkbox(&mut self.show_unsure, "Show where the depth is unsure (U)")
+            .on_hover_text(
+                "Pink where no cue vouches for the depth (a plane is assumed there): the \
+                 places to check, and to paint if the shape matters",
+            );
+        if ui.input(|i| i.key_pressed(egui::Key::U) && i.modifiers.is_none())
+            && !ui.ctx().egui_wants_keyboard_input()
+        {
+            self.show_unsure = !self.show_unsure;
+        }
         let legend = match (cx.early_depth, cx.snapshot) {
             (Some(e), _) => e.view.cue_legend.clone(),
             (None, Some(s)) => s.display.depth.cue_legend.clone(),
@@ -418,6 +431,22 @@ impl StagePanel for DepthPanel {
             ui.add(egui::Slider::new(v, 0.0..=1.0).text("object cue"))
         }) {
             cx.edit("Object weight", |p| p.depth.classical.object_weight = v);
+        }
+        if let Some(v) = committed(ui, "defocus", c.defocus_weight, |ui, v| {
+            ui.add(egui::Slider::new(v, 0.0..=2.0).text("defocus cue"))
+                .on_hover_text("In focus is nearer, where no sky or horizon applies")
+        }) {
+            cx.edit("Defocus weight", |p| p.depth.classical.defocus_weight = v);
+        }
+        if let Some(v) = committed(ui, "parsimony", c.parsimony_radius, |ui, v| {
+            ui.add(egui::Slider::new(v, 0.0..=0.05).text("flatten texture"))
+                .on_hover_text(
+                    "How far relief no cue vouches for is smoothed away (share of the picture)",
+                )
+        }) {
+            cx.edit("Flatten texture", |p| {
+                p.depth.classical.parsimony_radius = v
+            });
         }
     }
 }

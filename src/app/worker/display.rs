@@ -32,7 +32,12 @@ pub struct DepthImages {
     pub cues: Option<ColorImage>,
     /// The cues present, in legend order.
     pub cue_legend: Vec<crate::stages::depth::classical::DepthCue>,
+    /// Where the depth is unsure: `1 − confidence` as a translucent overlay.
+    pub unsure: ColorImage,
 }
+
+/// Opacity of the unsure-depth overlay where the confidence is 0.
+const UNSURE_OPACITY: f32 = 0.7;
 
 /// Opacity of the depth-cue overlay.
 const CUE_OPACITY: f32 = 0.75;
@@ -67,6 +72,12 @@ impl DepthImages {
                 .as_ref()
                 .map(|c| cue_overlay(&c.map, CUE_OPACITY)),
             cue_legend,
+            unsure: mask_overlay(
+                &e.confidence.map(|c| 1.0 - c),
+                Color32::from_rgb(255, 80, 200),
+                UNSURE_OPACITY,
+                DISPLAY_MAX_SIDE,
+            ),
         }
     }
 }

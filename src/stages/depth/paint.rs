@@ -212,7 +212,8 @@ pub fn apply_strokes(depth: &GrayRaster, strokes: &[DepthStroke]) -> Result<Gray
         .zip(depth.data())
         .zip(mask.data())
         .map(|((l, z), ok)| {
-            if *ok {
+            // Untouched pixels keep their depth exactly (exp(ln z) may be an ulp off z).
+            if *ok && *l != z.ln() {
                 l.exp().clamp(f32::MIN_POSITIVE, f32::MAX)
             } else {
                 *z
@@ -232,6 +233,25 @@ mod tests {
             points,
             radius_px: r,
             strength: s,
+        }
+    }
+
+    #[test]
+    fn pixels_a_stroke_does_not_reach_keep_their_depth_exactly() {
+        // 557.1271 is one of the depths exp(ln z) moves by an ulp.
+        let depth = Raster::from_fn(64, 64, |x, y| 557.1271 + 0.37 * (x * 64 + y) as f32);
+        let out = apply_strokes(
+            &depth,
+            &[stroke(DepthStrokeKind::Pull, vec![[48.0, 48.0]], 6.0, 0.7)],
+        )
+        .unwrap();
+        assert!(out.at(48, 48) < 0.7 * depth.at(48, 48));
+        for (x, y) in [(0, 0), (5, 9), (20, 30), (63, 0)] {
+            assert_eq!(
+                out.at(x, y).to_bits(),
+                depth.at(x, y).to_bits(),
+                "({x}, {y})"
+            );
         }
     }
 

@@ -662,6 +662,9 @@ fn flatten_unvouched(
     p: &ClassicalDepthParams,
 ) -> (GrayRaster, f32) {
     let (w, h) = fused.size();
+    if p.parsimony_radius <= 0.0 {
+        return (fused.clone(), 0.0);
+    }
     let sigma = p.parsimony_radius * w.max(h) as f32;
     let smooth = smooth_within_edges(fused, sharp, sigma);
     let out = par_from_fn(w, h, |x, y| {

@@ -98,7 +98,8 @@ pub struct ClassicalDepthParams {
     /// confident cue (sky, figure, pop-up contact, focus border); relief away from such edges
     /// is flattened to the smooth surface through it. Default 0.05.
     pub parsimony_edge: f32,
-    /// Reach (spatial σ) of that smooth surface's filter, fraction of the long working side.
+    /// Reach (spatial σ) of that smooth surface's filter, fraction of the long working side
+    /// (0: nothing is flattened).
     /// Default 0.01 (pixel-scale texture goes, region-scale shape stays: at 0.02 and 0.03
     /// the Aloe pair's δ<1.25 fell to 0.707 and 0.697, and its novel view by 0.1 dB).
     pub parsimony_radius: f32,
@@ -180,7 +181,6 @@ impl ClassicalDepthParams {
             ("aerial_scale", self.aerial_scale),
             ("refine_epsilon", self.refine_epsilon),
             ("parsimony_edge", self.parsimony_edge),
-            ("parsimony_radius", self.parsimony_radius),
         ];
         for (name, v) in positive {
             if !(v.is_finite() && v > 0.0) {
@@ -192,6 +192,7 @@ impl ClassicalDepthParams {
             ("object_weight", self.object_weight),
             ("haze_weight", self.haze_weight),
             ("defocus_weight", self.defocus_weight),
+            ("parsimony_radius", self.parsimony_radius),
             ("detail_weight", self.detail_weight),
             ("aerial_weight", self.aerial_weight),
             ("background_ramp", self.background_ramp),
