@@ -2,8 +2,8 @@
 //! unchanged (the exact canvas, the growing canvas of the editor, sketches and dry runs).
 
 use super::cache::{
-    CACHE_ENTRIES, GrownCanvas, StageCache, Stats, built, cached, key_of, remembered, spare_budget,
-    trim,
+    CACHE_ENTRIES, GrownCanvas, SpareEntries, StageCache, Stats, built, cached, key_of, remembered,
+    spare_budget, trim,
 };
 use super::camera::{OutputCamera, scene_scale};
 use super::canvas::{build_canvas, canvas_layout, grow_canvas, layout_covers, layout_union};
@@ -123,30 +123,20 @@ impl SceneBuilder {
 
     /// Drops the least recently used outputs nothing else holds (across stages) until they
     /// take at most [`spare_budget`] of what the held ones take (the shown scene's outputs
-    /// are held by it); returns `(held, spare)` bytes after. Every build calls it.
-    pub fn trim(&mut self) -> (usize, usize) {
-        let held = self.load.in_use_bytes()
-            + self.depth.in_use_bytes()
-            + self.canvas.in_use_bytes()
-            + self.layers.in_use_bytes()
-            + self.inpaint.in_use_bytes()
-            + self.layer_depth.in_use_bytes()
-            + self.cloud.in_use_bytes()
-            + self.motion.in_use_bytes();
-        let spare = trim(
-            &mut [
-                &mut self.load,
-                &mut self.depth,
-                &mut self.canvas,
-                &mut self.layers,
-                &mut self.inpaint,
-                &mut self.layer_depth,
-                &mut self.cloud,
-                &mut self.motion,
-            ],
-            spare_budget(held),
-        );
-        (held, spare)
+    /// are held by it). Every build calls it.
+    pub fn trim(&mut self) {
+        let mut caches: [&mut dyn SpareEntries; 8] = [
+            &mut self.load,
+            &mut self.depth,
+            &mut self.canvas,
+            &mut self.layers,
+            &mut self.inpaint,
+            &mut self.layer_depth,
+            &mut self.cloud,
+            &mut self.motion,
+        ];
+        let held = caches.iter().map(|c| c.in_use_bytes()).sum();
+        trim(&mut caches, spare_budget(held));
     }
 
     /// Builds with exactly the canvas `project`'s path needs, whatever the builder's rule (what

@@ -121,6 +121,8 @@ pub(super) trait SpareEntries {
     /// `(bytes, tick)` of each entry nothing outside the cache holds (dropping it frees its
     /// memory), except the most recently used one.
     fn spare(&self) -> Vec<(usize, u64)>;
+    /// Bytes of the entries something outside the cache also holds (the shown scene's).
+    fn in_use_bytes(&self) -> usize;
     /// Drops the entry of `tick`.
     fn drop_tick(&mut self, tick: u64);
 }
@@ -233,18 +235,15 @@ impl<T> StageCache<T> {
     }
 }
 
-impl<T> StageCache<T> {
-    /// Bytes of the entries something outside the cache also holds (the shown scene's).
-    pub(super) fn in_use_bytes(&self) -> usize {
+impl<T> SpareEntries for StageCache<T> {
+    fn in_use_bytes(&self) -> usize {
         self.entries
             .iter()
             .filter(|s| Arc::strong_count(&s.value) > 1)
             .map(|s| s.bytes)
             .sum()
     }
-}
 
-impl<T> SpareEntries for StageCache<T> {
     fn spare(&self) -> Vec<(usize, u64)> {
         let n = self.entries.len();
         self.entries

@@ -234,12 +234,6 @@ pub fn gaussian_blur(src: &GrayRaster, sigma_px: f32) -> GrayRaster {
     Raster::from_vec(w, h, transpose(&cols, h, w)).unwrap_or_else(|| src.clone())
 }
 
-/// Maximum over the `(2·radius_px + 1)²` window (clipped to the image): [`min_filter`] of the
-/// negated values.
-pub fn max_filter(src: &GrayRaster, radius_px: usize) -> GrayRaster {
-    min_filter(&src.map(|v| -v), radius_px).map(|v| -v)
-}
-
 /// Minimum over the `(2·radius_px + 1)²` window (clipped to the image): the "dark channel"
 /// patch minimum. Separable (row minimum, then column minimum).
 pub fn min_filter(src: &GrayRaster, radius_px: usize) -> GrayRaster {

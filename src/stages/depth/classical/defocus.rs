@@ -37,18 +37,13 @@ pub struct Defocus {
     pub sigma_range: (f32, f32),
 }
 
-/// The gradient magnitude at each pixel (central differences).
+/// The gradient's two components at each pixel ([`central_difference`]).
 fn gradient(luma: &GrayRaster) -> (GrayRaster, GrayRaster) {
     let (w, h) = luma.size();
-    let gx = Raster::from_fn(w, h, |x, y| {
-        let (xi, yi) = (x as isize, y as isize);
-        0.5 * (luma.at_clamped(xi + 1, yi) - luma.at_clamped(xi - 1, yi))
-    });
-    let gy = Raster::from_fn(w, h, |x, y| {
-        let (xi, yi) = (x as isize, y as isize);
-        0.5 * (luma.at_clamped(xi, yi + 1) - luma.at_clamped(xi, yi - 1))
-    });
-    (gx, gy)
+    (
+        par_from_fn(w, h, |x, y| central_difference(luma, x, y).0),
+        par_from_fn(w, h, |x, y| central_difference(luma, x, y).1),
+    )
 }
 
 /// The blur σ at edge pixels (0 elsewhere) and each edge pixel's weight (its gradient
@@ -61,35 +56,35 @@ pub fn edge_blur(luma: &GrayRaster, sigma0: f32) -> (GrayRaster, GrayRaster) {
     let magnitude = |g: &GrayRaster, k: &GrayRaster, x: usize, y: usize| {
         (g.at(x, y).powi(2) + k.at(x, y).powi(2)).sqrt()
     };
-    let mag = Raster::from_fn(w, h, |x, y| magnitude(&gx, &gy, x, y));
-    let mut sigma = Raster::new(w, h, 0.0f32);
-    let mut weight = Raster::new(w, h, 0.0f32);
-    for y in 0..h {
-        for x in 0..w {
-            let m = mag.at(x, y);
-            if m < MIN_EDGE_GRADIENT {
-                continue;
-            }
-            // Non-maximum suppression across the edge, along the dominant axis.
-            let (xi, yi) = (x as isize, y as isize);
-            let (a, b) = if gx.at(x, y).abs() >= gy.at(x, y).abs() {
-                (mag.at_clamped(xi - 1, yi), mag.at_clamped(xi + 1, yi))
-            } else {
-                (mag.at_clamped(xi, yi - 1), mag.at_clamped(xi, yi + 1))
-            };
-            if m < a || m < b {
-                continue;
-            }
-            let r = m / magnitude(&rx, &ry, x, y).max(1e-9);
-            let s = if r > 1.0 {
-                (sigma0 / (r * r - 1.0).sqrt()).min(MAX_BLUR_SIGMA)
-            } else {
-                MAX_BLUR_SIGMA
-            };
-            sigma.set(x, y, s);
-            weight.set(x, y, m);
+    let mag = par_from_fn(w, h, |x, y| magnitude(&gx, &gy, x, y));
+    // An edge pixel's magnitude, 0 elsewhere: above the contrast floor and a maximum across
+    // the edge (non-maximum suppression along the dominant axis).
+    let weight = par_from_fn(w, h, |x, y| {
+        let m = mag.at(x, y);
+        let (xi, yi) = (x as isize, y as isize);
+        let (a, b) = if gx.at(x, y).abs() >= gy.at(x, y).abs() {
+            (mag.at_clamped(xi - 1, yi), mag.at_clamped(xi + 1, yi))
+        } else {
+            (mag.at_clamped(xi, yi - 1), mag.at_clamped(xi, yi + 1))
+        };
+        if m < MIN_EDGE_GRADIENT || m < a || m < b {
+            0.0
+        } else {
+            m
         }
-    }
+    });
+    let sigma = par_from_fn(w, h, |x, y| {
+        let m = weight.at(x, y);
+        if m == 0.0 {
+            return 0.0;
+        }
+        let r = m / magnitude(&rx, &ry, x, y).max(1e-9);
+        if r > 1.0 {
+            (sigma0 / (r * r - 1.0).sqrt()).min(MAX_BLUR_SIGMA)
+        } else {
+            MAX_BLUR_SIGMA
+        }
+    });
     (sigma, weight)
 }
 
@@ -126,10 +121,11 @@ impl Default for DefocusParams {
     }
 }
 
-/// The defocus cue of `image` (sRGB in `[0, 1]`) at the size `(w, h)` of the estimator's
-/// working copy: measured on a copy of [`DefocusParams::long_side`], spread, guided by the
-/// working copy's luma.
-pub fn defocus_cue(image: &RgbRaster, w: usize, h: usize, p: &DefocusParams) -> Defocus {
+/// The defocus cue of `image` (sRGB in `[0, 1]`) at the size of `guide`, the luma of the
+/// estimator's working copy: measured on a copy of [`DefocusParams::long_side`], spread, and
+/// made to follow `guide`'s edges.
+pub fn defocus_cue(image: &RgbRaster, guide: &GrayRaster, p: &DefocusParams) -> Defocus {
+    let (w, h) = guide.size();
     let (iw, ih) = image.size();
     let s = (p.long_side as f32 / iw.max(ih).max(1) as f32).min(1.0);
     let (mw, mh) = (
@@ -171,9 +167,8 @@ pub fn defocus_cue(image: &RgbRaster, w: usize, h: usize, p: &DefocusParams) -> 
         let d = den.at(x, y);
         if d > 1e-6 { num.at(x, y) / d } else { mid }
     });
-    let guide = image.resized(w, h).map(luma);
     let r = ((0.02 * w.max(h) as f32).round() as usize).max(1);
-    let dense = guided_filter(&guide, &dense, r, 1e-3);
+    let dense = guided_filter(guide, &dense, r, 1e-3);
     let (llo, lhi) = (lo.max(floor).ln(), hi.max(floor).ln());
     let span = (lhi - llo).max(1e-6);
     let nearness = dense.map(|l| {
@@ -250,7 +245,8 @@ mod tests {
             };
             [v, v, v]
         });
-        let d = defocus_cue(&img, w / 2, h / 2, &DefocusParams::default());
+        let guide = img.resized(w / 2, h / 2).map(luma);
+        let d = defocus_cue(&img, &guide, &DefocusParams::default());
         assert!(d.confidence > 0.9, "confidence {}", d.confidence);
         let mean = |x0: usize, x1: usize, y0: usize, y1: usize| {
             let mut s = 0.0;
@@ -280,11 +276,11 @@ mod tests {
             };
             [v, v, v]
         });
-        let d = defocus_cue(&img, w, h, &DefocusParams::default());
+        let d = defocus_cue(&img, &img.map(luma), &DefocusParams::default());
         assert_eq!(d.confidence, 0.0, "range {:?}", d.sigma_range);
         // Flat: nothing at all to measure.
         let flat = Raster::new(w, h, [0.5f32; 3]);
-        let d = defocus_cue(&flat, w, h, &DefocusParams::default());
+        let d = defocus_cue(&flat, &flat.map(luma), &DefocusParams::default());
         assert_eq!(d.confidence, 0.0);
         assert!(d.nearness.data().iter().all(|v| v.is_finite()));
     }

@@ -24,7 +24,7 @@ use super::{DepthEstimate, DepthEstimator};
 use crate::error::{Error, Result};
 use crate::geometry::Intrinsics;
 use crate::progress::Progress;
-use crate::raster::{GrayRaster, Raster, Rgb, RgbRaster, luma, quantile};
+use crate::raster::{GrayRaster, MaskRaster, Raster, Rgb, RgbRaster, luma, quantile};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
@@ -253,14 +253,8 @@ impl ClassicalDepth {
                 sky_work.row_mut(y).fill(0.0);
             }
         }
-        let mut sky_share =
+        let sky_share =
             sky_work.data().iter().filter(|s| **s > 0.5).count() as f32 / sky_work.len() as f32;
-        if !horizon_detected && sky_share >= 0.9 && !blue_sky(&work, &sky_work) {
-            // A picture that is nearly all "sky" with no horizon is a sky seen looking up only
-            // when it is blue: a pale wall, a plank, fog or sand is as smooth and light.
-            sky_work.data_mut().fill(0.0);
-            sky_share = 0.0;
-        }
         if !horizon_detected && sky_share < 0.9 {
             // No one sky over a horizon: what is left is sky seen through gaps (a canopy),
             // the brightest thing in the picture, or bright patches that are not sky (the
@@ -321,7 +315,7 @@ impl ClassicalDepth {
         };
         // Defocus: in focus is nearer, where no landscape cue applies.
         let defocus = (!landscape && p.defocus_weight > 0.0)
-            .then(|| defocus_cue(&image, ww, wh, &DefocusParams::default()));
+            .then(|| defocus_cue(&image, &work_luma, &DefocusParams::default()));
         let wf = defocus
             .as_ref()
             .map_or(0.0, |d| p.defocus_weight * d.confidence);
@@ -389,24 +383,21 @@ impl ClassicalDepth {
         // edges a confident cue draws (the skyline, a figure's outline, the border of what is
         // in focus, a pop-up's contact) the fused relief stays; elsewhere the depth is the
         // smooth surface through it, which bends freely but does not cross those edges.
-        let close = ((0.03 * ww.max(wh) as f32).round() as usize).max(1);
-        let figures = super::filter::min_filter(
-            &super::filter::max_filter(&figure_mask(&object_work), close),
+        let close = 2 * ((0.03 * ww.max(wh) as f32).round() as usize).max(1) + 1;
+        let figures = crate::raster::morph::erode(
+            &crate::raster::morph::dilate(&figure_mask(&object_work), close),
             close,
-        );
-        let (sure_edges, evidence) = evidence_edges(
-            &[
-                (&sky_work, 1.0),
-                (&figures, wo / total),
-                (&position_work, wg / total),
-                (
-                    defocus.as_ref().map_or(&sky_work, |d| &d.nearness),
-                    if defocus.is_some() { wf / total } else { 0.0 },
-                ),
-            ],
-            p.parsimony_edge,
-            ww.max(wh),
-        );
+        )
+        .map(|f| if f { 1.0 } else { 0.0 });
+        let mut sure_cues = vec![
+            (&sky_work, 1.0),
+            (&figures, wo / total),
+            (&position_work, wg / total),
+        ];
+        if let Some(d) = &defocus {
+            sure_cues.push((&d.nearness, wf / total));
+        }
+        let (sure_edges, evidence) = evidence_edges(&sure_cues, p.parsimony_edge, ww.max(wh));
         let (flattened_map, flattened) = flatten_unvouched(&fused, (&sure_edges, &evidence), p);
         fused = flattened_map;
         normalise_robust(&mut fused, Some(&sky_work));
@@ -560,26 +551,31 @@ pub fn evidence_edges(
     let (w, h) = first.size();
     let edge = edge.max(1e-6);
     let sharp = par_from_fn(w, h, |x, y| {
-        let (xi, yi) = (x as isize, y as isize);
         cues.iter()
             .filter(|(c, wt)| *wt > 0.0 && c.same_size(first))
             .map(|(c, wt)| {
-                let gx = 0.5 * (c.at_clamped(xi + 1, yi) - c.at_clamped(xi - 1, yi));
-                let gy = 0.5 * (c.at_clamped(xi, yi + 1) - c.at_clamped(xi, yi - 1));
+                let (gx, gy) = central_difference(c, x, y);
                 (wt * (gx * gx + gy * gy).sqrt() / edge).min(1.0)
             })
             .fold(0.0f32, f32::max)
     });
     let r = ((0.01 * long as f32).round() as usize).max(1);
-    let grown = crate::raster::box_mean(&super::filter::max_filter(&sharp, r), r);
+    let widest = crate::raster::morph::sliding_extreme(
+        &sharp,
+        2 * r + 1,
+        2 * r + 1,
+        f32::NEG_INFINITY,
+        f32::max,
+    );
+    let grown = crate::raster::box_mean(&widest, r);
     (sharp, grown)
 }
 
-/// The figures of an object cue: 1 where it is > ½, holes included (parts below ½ that do not
-/// reach the picture's border lie inside a figure), else 0. Its outline (closed over notches
-/// of 3 % of the picture by the caller) is where the cue draws an occlusion edge; what varies
+/// The figures of an object cue: set where it is > ½, holes included (parts below ½ that do
+/// not reach the picture's border lie inside a figure). Its outline (closed over notches of
+/// 3 % of the picture by the caller) is where the cue draws an occlusion edge; what varies
 /// inside a figure is its texture.
-pub fn figure_mask(object: &GrayRaster) -> GrayRaster {
+pub fn figure_mask(object: &GrayRaster) -> MaskRaster {
     let (w, h) = object.size();
     let o = object.data();
     // Ground: below ½ and connected to the border.
@@ -601,12 +597,8 @@ pub fn figure_mask(object: &GrayRaster) -> GrayRaster {
             }
         }
     }
-    Raster::from_vec(
-        w,
-        h,
-        ground.iter().map(|g| if *g { 0.0 } else { 1.0 }).collect(),
-    )
-    .unwrap_or_else(|| Raster::new(w, h, 0.0))
+    Raster::from_vec(w, h, ground.iter().map(|g| !g).collect())
+        .unwrap_or_else(|| Raster::new(w, h, false))
 }
 
 /// The smooth surface through `values` that bends freely but does not smooth across
@@ -775,6 +767,16 @@ pub fn vertical_agreement(nearness: &GrayRaster) -> f32 {
         return 0.0;
     }
     ((cov / var.sqrt()) / 0.3).clamp(0.0, 1.0) as f32
+}
+
+/// The gradient `(∂x, ∂y)` of `r` at `(x, y)` by central differences (half the difference of
+/// the two neighbours; the border clamped).
+fn central_difference(r: &GrayRaster, x: usize, y: usize) -> (f32, f32) {
+    let (xi, yi) = (x as isize, y as isize);
+    (
+        0.5 * (r.at_clamped(xi + 1, yi) - r.at_clamped(xi - 1, yi)),
+        0.5 * (r.at_clamped(xi, yi + 1) - r.at_clamped(xi, yi - 1)),
+    )
 }
 
 /// [`Raster::from_fn`] with the rows computed in parallel.
@@ -1144,10 +1146,10 @@ mod tests {
             if ring && !hole { 0.9 } else { 0.1 }
         });
         let f = figure_mask(&o);
-        assert_eq!(f.at(10, 10), 1.0, "the hole is inside the figure");
-        assert_eq!(f.at(6, 6), 1.0);
-        assert_eq!(f.at(2, 2), 0.0);
-        assert_eq!(f.at(17, 10), 0.0);
+        assert!(f.at(10, 10), "the hole is inside the figure");
+        assert!(f.at(6, 6));
+        assert!(!f.at(2, 2));
+        assert!(!f.at(17, 10));
     }
 
     #[test]

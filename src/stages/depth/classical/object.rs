@@ -8,9 +8,7 @@ use super::*;
 pub fn texture_energy(luma: &GrayRaster) -> GrayRaster {
     let (w, h) = luma.size();
     let grad = Raster::from_fn(w, h, |x, y| {
-        let (xi, yi) = (x as isize, y as isize);
-        let gx = 0.5 * (luma.at_clamped(xi + 1, yi) - luma.at_clamped(xi - 1, yi));
-        let gy = 0.5 * (luma.at_clamped(xi, yi + 1) - luma.at_clamped(xi, yi - 1));
+        let (gx, gy) = central_difference(luma, x, y);
         (gx * gx + gy * gy).sqrt()
     });
     gaussian_blur(&grad, 1.5)
