@@ -104,6 +104,7 @@ fn install_model_into(dir: &Path) -> std::process::Output {
         .args([
             "models",
             "install",
+            "--no-runtime",
             "depth-anything-v2-small",
             "--skip-checksum",
             "--file",

@@ -92,7 +92,7 @@ fn catalogue_models_install_check_and_run_by_name() {
     // the fixture is refused (nothing left behind) unless the checksum is skipped.
     let (url, server) = serve(std::fs::read(fixture("catalogue_lama.onnx")).unwrap(), 1);
     let out = exe()
-        .args(["models", "install", "lama", "--url"])
+        .args(["models", "install", "--no-runtime", "lama", "--url"])
         .arg(format!("{url}/lama_fp32.onnx"))
         .arg("--dir")
         .arg(&models)
@@ -108,7 +108,14 @@ fn catalogue_models_install_check_and_run_by_name() {
     assert!(!models.join("lama").exists());
     let (url, server) = serve(std::fs::read(fixture("catalogue_lama.onnx")).unwrap(), 1);
     let out = run(exe()
-        .args(["models", "install", "lama", "--skip-checksum", "--url"])
+        .args([
+            "models",
+            "install",
+            "--no-runtime",
+            "lama",
+            "--skip-checksum",
+            "--url",
+        ])
         .arg(format!("{url}/lama_fp32.onnx"))
         .arg("--dir")
         .arg(&models));
@@ -118,7 +125,13 @@ fn catalogue_models_install_check_and_run_by_name() {
     // 99.1 MB, so it needs --skip-checksum; 5 MB of random bytes are refused either way, by
     // name, as not an ONNX model, and leave nothing behind.
     let out = exe()
-        .args(["models", "install", "depth-anything-v2-small", "--file"])
+        .args([
+            "models",
+            "install",
+            "--no-runtime",
+            "depth-anything-v2-small",
+            "--file",
+        ])
         .arg(fixture("catalogue_depth_anything_v2_small.onnx"))
         .arg("--dir")
         .arg(&models)
@@ -144,6 +157,7 @@ fn catalogue_models_install_check_and_run_by_name() {
         .args([
             "models",
             "install",
+            "--no-runtime",
             "depth-anything-v2-small",
             "--skip-checksum",
             "--file",
@@ -164,6 +178,7 @@ fn catalogue_models_install_check_and_run_by_name() {
         .args([
             "models",
             "install",
+            "--no-runtime",
             "depth-anything-v2-small",
             "--skip-checksum",
             "--file",
@@ -176,6 +191,7 @@ fn catalogue_models_install_check_and_run_by_name() {
         .args([
             "models",
             "install",
+            "--no-runtime",
             "depth-anything-v2-base",
             "--skip-checksum",
             "--file",
@@ -213,6 +229,7 @@ fn catalogue_models_install_check_and_run_by_name() {
             .args([
                 "models",
                 "install",
+                "--no-runtime",
                 "lama-opencv",
                 "--skip-checksum",
                 "--file",
@@ -253,7 +270,14 @@ fn catalogue_models_install_check_and_run_by_name() {
             ("midas-v2.1-small", "catalogue_midas_v2_1_small.onnx"),
         ] {
             run(exe()
-                .args(["models", "install", name, "--skip-checksum", "--file"])
+                .args([
+                    "models",
+                    "install",
+                    "--no-runtime",
+                    name,
+                    "--skip-checksum",
+                    "--file",
+                ])
                 .arg(fixture(file))
                 .arg("--dir")
                 .arg(&models));
@@ -301,6 +325,7 @@ fn catalogue_models_install_check_and_run_by_name() {
             .args([
                 "models",
                 "install",
+                "--no-runtime",
                 "lama-opencv",
                 "--skip-checksum",
                 "--file",
@@ -368,7 +393,119 @@ fn catalogue_models_install_check_and_run_by_name() {
         .arg(&models));
     assert!(!models.join("lama").exists());
     // An unknown name lists the catalogue.
-    let out = exe().args(["models", "install", "nope"]).output().unwrap();
+    let out = exe()
+        .args(["models", "install", "--no-runtime", "nope"])
+        .output()
+        .unwrap();
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("depth-anything-v2-small"));
+}
+
+/// A wheel (zip) holding ONNX Runtime's library as PyPI's wheel does, built from the library
+/// this machine runs its tests with.
+fn runtime_wheel(library: &Path) -> Vec<u8> {
+    let mut out = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    let options = zip::write::SimpleFileOptions::default()
+        .compression_method(zip::CompressionMethod::Deflated)
+        .compression_level(Some(1));
+    for (name, bytes) in [
+        ("onnxruntime/__init__.py", b"# the package".to_vec()),
+        (
+            "onnxruntime/capi/libonnxruntime.so.1.31.1",
+            std::fs::read(library).unwrap(),
+        ),
+    ] {
+        out.start_file(name, options).unwrap();
+        out.write_all(&bytes).unwrap();
+    }
+    out.finish().unwrap().into_inner()
+}
+
+#[test]
+fn the_runtime_installs_from_a_loopback_server_with_the_model() {
+    if !runtime_ready() || std::env::consts::OS != "linux" {
+        return;
+    }
+    let library = ml::ort_status().found.expect("a runtime").0;
+    let wheel = runtime_wheel(&library);
+    let dir = tempfile::tempdir().unwrap();
+    // A user without the runtime: nothing in the data folder, no ORT_DYLIB_PATH.
+    let bare = |home: &Path| {
+        let mut c = exe();
+        c.env("XDG_DATA_HOME", home.join("data"))
+            .env("HOME", home)
+            .env("ORT_DYLIB_PATH", "")
+            .env("MAKEIT4D_MODELS_DIR", home.join("models"));
+        c
+    };
+    let capi = dir.path().join("data/makeit4d/ort/onnxruntime/capi");
+
+    // The fixture wheel is not the pinned one: refused by size, nothing left behind.
+    let (url, server) = serve(wheel.clone(), 1);
+    let out = bare(dir.path())
+        .args(["models", "install-runtime", "--url"])
+        .arg(format!("{url}/onnxruntime.whl"))
+        .output()
+        .unwrap();
+    server.join().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("23760988 bytes") && err.contains("--skip-checksum"),
+        "{err}"
+    );
+    // What it was about to do, then the one-line refusal.
+    let lines: Vec<&str> = err.trim().lines().collect();
+    assert_eq!(lines.len(), 2, "{err}");
+    assert!(lines[0].starts_with("installing ONNX Runtime 1.31.1 for linux x86_64 (23.8 MB)"));
+    assert!(lines[1].starts_with("error: "));
+    assert!(!dir.path().join("data/makeit4d/ort").exists());
+
+    // Accepted as a rebuild: the library loads and reports 1.31.1, and is found from then on.
+    let (url, server) = serve(wheel.clone(), 1);
+    let out = run(bare(dir.path())
+        .args(["models", "install-runtime", "--skip-checksum", "--url"])
+        .arg(format!("{url}/onnxruntime.whl")));
+    server.join().unwrap();
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(said.contains("installed ONNX Runtime 1.31.1"), "{said}");
+    assert!(capi.join("libonnxruntime.so.1.31.1").is_file());
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path().join("data/makeit4d/ort"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(leftovers, ["onnxruntime"]);
+    let doctor = run(bare(dir.path()).arg("doctor"));
+    let doctor = String::from_utf8_lossy(&doctor.stdout);
+    assert!(
+        doctor.contains("1.31.1") && doctor.contains(&capi.display().to_string()),
+        "{doctor}"
+    );
+    let again = run(bare(dir.path()).args(["models", "install-runtime"]));
+    assert!(String::from_utf8_lossy(&again.stdout).contains("already installed"));
+
+    // One command for a model on a machine without the runtime: the runtime comes first, then
+    // the model, whose graph is checked with it at once.
+    let fresh = tempfile::tempdir().unwrap();
+    let (url, server) = serve(wheel, 1);
+    let out = run(bare(fresh.path())
+        .args([
+            "models",
+            "install",
+            "depth-anything-v2-small",
+            "--skip-checksum",
+            "--runtime-url",
+        ])
+        .arg(format!("{url}/onnxruntime.whl"))
+        .arg("--file")
+        .arg(fixture("catalogue_depth_anything_v2_small.onnx")));
+    server.join().unwrap();
+    let said = String::from_utf8_lossy(&out.stdout);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        said.contains("installed ONNX Runtime 1.31.1")
+            && said.contains("installed depth-anything-v2-small"),
+        "{said}"
+    );
+    assert!(!err.contains("checked on first use"), "{err}");
 }

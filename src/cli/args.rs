@@ -116,6 +116,25 @@ pub(crate) enum ModelsCommand {
     Remove(ModelsNameArgs),
     /// Print a model's manifest (to adapt it to another export).
     Manifest(ModelsNameArgs),
+    /// Download ONNX Runtime (the pinned release, checked) into the folder makeit4d looks in.
+    InstallRuntime(RuntimeInstallArgs),
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct RuntimeInstallArgs {
+    /// Install from this wheel (downloaded by hand) instead of downloading.
+    #[arg(long)]
+    pub(crate) file: Option<PathBuf>,
+    /// Download from this address instead of PyPI's (a mirror).
+    #[arg(long)]
+    pub(crate) url: Option<String>,
+    /// Accept a wheel that differs from the pinned size and SHA-256 (a rebuild of the same
+    /// release); the library must still load and report the pinned version.
+    #[arg(long)]
+    pub(crate) skip_checksum: bool,
+    /// Install even when a runtime is already found.
+    #[arg(long)]
+    pub(crate) force: bool,
 }
 
 #[derive(Args, Debug)]
@@ -148,6 +167,12 @@ pub(crate) struct ModelsInstallArgs {
     /// the same export); the graph is still checked against the manifest.
     #[arg(long)]
     pub(crate) skip_checksum: bool,
+    /// Do not install ONNX Runtime when none is found (by default it comes with the model).
+    #[arg(long)]
+    pub(crate) no_runtime: bool,
+    /// Download ONNX Runtime from this address instead of PyPI's (a mirror).
+    #[arg(long)]
+    pub(crate) runtime_url: Option<String>,
     #[command(flatten)]
     pub(crate) dir: ModelsDirArgs,
 }

@@ -80,10 +80,16 @@ pub fn main() -> ExitCode {
             }
         });
     }
-    let result = match cli
+    let command = cli
         .command
-        .unwrap_or(Command::Edit(EditArgs { path: None }))
-    {
+        .unwrap_or(Command::Edit(EditArgs { path: None }));
+    let cancelled_note = match &command {
+        Command::Models(_) => {
+            "the partial download is kept: run the same command again to resume it"
+        }
+        _ => "frames written so far are complete",
+    };
+    let result = match command {
         Command::Edit(args) => makeit4d::app::run(args.path),
         Command::Render(args) => render::render(*args, cancel),
         Command::Depth(args) => stages::depth(args, cancel),
@@ -93,7 +99,7 @@ pub fn main() -> ExitCode {
         Command::Eval(EvalCommand::Ordinal(args)) => eval::eval_ordinal(args, cancel),
         Command::Eval(EvalCommand::Gltf(args)) => eval::eval_gltf(args, cancel),
         Command::Eval(EvalCommand::Scribbles(args)) => eval::eval_scribbles(args, cancel),
-        Command::Models(command) => models::models(command),
+        Command::Models(command) => models::models(command, cancel),
         Command::Bench(BenchCommand::Depth(args)) => bench::bench_depth(args),
         Command::Bench(BenchCommand::Inpaint(args)) => bench::bench_inpaint(args, cancel),
         Command::Bench(BenchCommand::Motion(args)) => bench::bench_motion(args),
@@ -114,7 +120,7 @@ pub fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) if matches!(e.downcast_ref::<Error>(), Some(Error::Cancelled)) => {
-            eprintln!("cancelled: frames written so far are complete");
+            eprintln!("cancelled: {cancelled_note}");
             ExitCode::from(EXIT_CANCELLED)
         }
         Err(e) => {

@@ -3,6 +3,67 @@
 use super::args::{ModelsCommand, ModelsDirArgs};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+/// A byte-counting bar on stderr for a download called `name`; the callback that moves it.
+fn download_bar(name: &str) -> ProgressBar {
+    let bar = ProgressBar::new(0);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{msg} [{bar:40}] {bytes}/{total_bytes} {bytes_per_sec} {eta}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    bar.set_message(name.to_string());
+    bar
+}
+
+/// Installs ONNX Runtime (the pinned wheel for this machine) into the runtime folder, with a
+/// progress bar; prints what it installed.
+fn install_runtime(
+    file: Option<&std::path::Path>,
+    url: Option<&str>,
+    bytes: makeit4d::models::ByteCheck,
+    cancel: &AtomicBool,
+) -> anyhow::Result<()> {
+    use makeit4d::models;
+    let release = models::release_for_this_platform()?;
+    let folder = makeit4d::ml::runtime_install_dir()
+        .ok_or_else(|| anyhow::anyhow!("no folder for ONNX Runtime: set XDG_DATA_HOME or HOME"))?;
+    let installed = match file {
+        Some(wheel) => models::install_runtime_from_file(&folder, release, wheel, bytes)?,
+        None => {
+            eprintln!(
+                "installing {} ({:.1} MB) from {}",
+                release.describe(),
+                release.size_bytes as f64 / 1e6,
+                url.unwrap_or(release.url)
+            );
+            let bar = download_bar("onnxruntime");
+            let progress = |done: u64, total: Option<u64>| {
+                if let Some(t) = total {
+                    bar.set_length(t);
+                }
+                bar.set_position(done);
+            };
+            let result = models::install_runtime(&folder, release, url, &progress, cancel, bytes);
+            bar.finish_and_clear();
+            result?
+        }
+    };
+    println!(
+        "installed ONNX Runtime {} ({:.1} MB) in {}",
+        installed.version,
+        installed.bytes as f64 / 1e6,
+        folder.display()
+    );
+    if !makeit4d::ml::retry_runtime() {
+        eprintln!("note: restart makeit4d to use it");
+    }
+    Ok(())
+}
 
 /// The models folder of `args`, or the default one.
 pub(crate) fn models_dir(args: &ModelsDirArgs) -> anyhow::Result<PathBuf> {
@@ -47,7 +108,7 @@ pub(crate) fn check_model_graph(manifest: &makeit4d::ml::ModelManifest) -> makei
     }
 }
 
-pub(crate) fn models(command: ModelsCommand) -> anyhow::Result<()> {
+pub(crate) fn models(command: ModelsCommand, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
     use makeit4d::models::{self, CATALOGUE};
     match command {
         ModelsCommand::List(args) => {
@@ -91,9 +152,34 @@ pub(crate) fn models(command: ModelsCommand) -> anyhow::Result<()> {
             }
             Ok(())
         }
+        ModelsCommand::InstallRuntime(args) => {
+            if !args.force && makeit4d::ml::ort_available() {
+                println!(
+                    "ONNX Runtime is already installed ({}); add --force to install it again",
+                    makeit4d::ml::ort_status().to_string().replace('\n', "; ")
+                );
+                return Ok(());
+            }
+            let bytes = if args.skip_checksum {
+                models::ByteCheck::Skip
+            } else {
+                models::ByteCheck::Catalogue
+            };
+            install_runtime(args.file.as_deref(), args.url.as_deref(), bytes, &cancel)
+        }
         ModelsCommand::Install(args) => {
             let entry = catalogue_entry(&args.name)?;
             let dir = models_dir(&args.dir)?;
+            if !args.no_runtime && !makeit4d::ml::ort_available() {
+                // The model is of no use without the runtime: it comes first, so that the graph
+                // is checked against the manifest right away.
+                let bytes = if args.skip_checksum {
+                    models::ByteCheck::Skip
+                } else {
+                    models::ByteCheck::Catalogue
+                };
+                install_runtime(None, args.runtime_url.as_deref(), bytes, &cancel)?;
+            }
             if entry.non_commercial {
                 eprintln!(
                     "note: {} is licensed {}: not for commercial use",
@@ -110,15 +196,7 @@ pub(crate) fn models(command: ModelsCommand) -> anyhow::Result<()> {
                     models::install_from_file(&dir, entry, file, bytes, &check_model_graph)?
                 }
                 None => {
-                    let bar = ProgressBar::new(0);
-                    bar.set_style(
-                        ProgressStyle::with_template(
-                            "{msg} [{bar:40}] {bytes}/{total_bytes} {bytes_per_sec} {eta}",
-                        )
-                        .unwrap_or_else(|_| ProgressStyle::default_bar())
-                        .progress_chars("=> "),
-                    );
-                    bar.set_message(entry.name);
+                    let bar = download_bar(entry.name);
                     let progress = |done: u64, total: Option<u64>| {
                         if let Some(t) = total {
                             bar.set_length(t);
@@ -130,6 +208,7 @@ pub(crate) fn models(command: ModelsCommand) -> anyhow::Result<()> {
                         entry,
                         args.url.as_deref(),
                         &progress,
+                        &cancel,
                         bytes,
                         &check_model_graph,
                     );

@@ -15,8 +15,15 @@ pub const MIN_ORT_MINOR_VERSION: u32 = ort::MINOR_VERSION;
 pub const ORT_INSTALL_HINT: &str = "python3 -m pip install --target ~/.local/share/makeit4d/ort \
      onnxruntime==1.31.1 (or set ORT_DYLIB_PATH to libonnxruntime.so)";
 
-/// The folder, below the data directory, where the runtime's shared library lies.
-const DATA_SUBDIR_IN_APP: &str = "ort/onnxruntime/capi";
+/// The folder, below the data directory, where the runtime's shared library lies (where
+/// `pip install --target <data>/ort onnxruntime` and `makeit4d models install-runtime` put it).
+pub const DATA_SUBDIR_IN_APP: &str = "ort/onnxruntime/capi";
+
+/// The folder the program installs ONNX Runtime into and looks in last:
+/// `<user data>/ort/onnxruntime/capi`; `None` without a home.
+pub fn runtime_install_dir() -> Option<PathBuf> {
+    user_data_dir().map(|d| d.join(DATA_SUBDIR_IN_APP))
+}
 
 /// The program's per-user data folder: `$XDG_DATA_HOME/makeit4d` (an absolute
 /// `XDG_DATA_HOME` only, as the XDG spec says), else `~/.local/share/makeit4d`; `None` without
@@ -61,7 +68,7 @@ impl OrtSearch {
         Self {
             dylib_path,
             exe_dir,
-            data_dir: user_data_dir().map(|d| d.join(DATA_SUBDIR_IN_APP)),
+            data_dir: runtime_install_dir(),
         }
     }
 
@@ -212,6 +219,8 @@ pub(super) struct Runtime {
 pub(super) struct LoadFailure {
     pub(super) message: String,
     searched: Vec<PathBuf>,
+    /// `ort` took a library and failed with it: nothing else can be tried in this process.
+    is_final: bool,
 }
 
 /// Tries every candidate of `search` in order and initialises `ort` with the first usable one.
@@ -221,6 +230,7 @@ pub(super) fn load_runtime(search: &OrtSearch) -> std::result::Result<Runtime, L
     let fail = |message: String| LoadFailure {
         message,
         searched: searched.clone(),
+        is_final: false,
     };
     if candidates.is_empty() {
         let places: Vec<String> = searched.iter().map(|p| p.display().to_string()).collect();
@@ -258,10 +268,13 @@ pub(super) fn load_runtime(search: &OrtSearch) -> std::result::Result<Runtime, L
                 environment,
                 _library: library,
             }),
-            Err(err) => Err(fail(format!(
-                "{}: ONNX Runtime {version} failed to start: {err}",
-                path.display()
-            ))),
+            Err(err) => Err(LoadFailure {
+                is_final: true,
+                ..fail(format!(
+                    "{}: ONNX Runtime {version} failed to start: {err}",
+                    path.display()
+                ))
+            }),
         };
     }
     let problems = problems.join("; ");
@@ -272,13 +285,50 @@ pub(super) fn load_runtime(search: &OrtSearch) -> std::result::Result<Runtime, L
     }))
 }
 
-static RUNTIME: OnceLock<std::result::Result<Runtime, LoadFailure>> = OnceLock::new();
+static RUNTIME: OnceLock<Runtime> = OnceLock::new();
+
+/// Why the last attempt found no runtime; later uses answer with it until [`retry_runtime`]
+/// forgets it (each failure is kept for the life of the process: a few bytes per install).
+static FAILURE: Mutex<Option<&'static LoadFailure>> = Mutex::new(None);
 
 /// The process's runtime, loaded on first use from [`OrtSearch::from_env`].
 pub(super) fn runtime() -> std::result::Result<&'static Runtime, &'static LoadFailure> {
-    RUNTIME
-        .get_or_init(|| load_runtime(&OrtSearch::from_env()))
-        .as_ref()
+    if let Some(runtime) = RUNTIME.get() {
+        return Ok(runtime);
+    }
+    // Loads are serialised by the lock; the runtime is set only under it.
+    let mut failure = FAILURE.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(runtime) = RUNTIME.get() {
+        return Ok(runtime);
+    }
+    if let Some(known) = *failure {
+        return Err(known);
+    }
+    match load_runtime(&OrtSearch::from_env()) {
+        Ok(loaded) => Ok(RUNTIME.get_or_init(|| loaded)),
+        Err(why) => {
+            let why: &'static LoadFailure = Box::leak(Box::new(why));
+            *failure = Some(why);
+            Err(why)
+        }
+    }
+}
+
+/// Forgets why no runtime was found, so that the next use looks again (after
+/// `models install-runtime` put one in place). False when that cannot help: `ort` already took
+/// a library that failed to start, which no process can replace.
+pub fn retry_runtime() -> bool {
+    if RUNTIME.get().is_some() {
+        return true;
+    }
+    let mut failure = FAILURE.lock().unwrap_or_else(|e| e.into_inner());
+    match *failure {
+        Some(known) if known.is_final => false,
+        _ => {
+            *failure = None;
+            true
+        }
+    }
 }
 
 /// True when ONNX Runtime is loaded (loading it on first call).

@@ -134,6 +134,7 @@ pub fn bench_download(megabytes: u64, runs: usize, scratch: &Path) -> Result<Dow
             &BENCH,
             Some(&url),
             &|_, _| {},
+            &std::sync::atomic::AtomicBool::new(false),
             ByteCheck::Catalogue,
             &|_| Ok(()),
         )?;

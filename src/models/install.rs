@@ -7,6 +7,7 @@ use crate::ml::ModelManifest;
 use sha2::{Digest, Sha256};
 use std::io::{Read, Write};
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// SHA-256 of a file, lower-case hex.
 pub fn sha256_file(path: &Path) -> Result<String> {
@@ -161,17 +162,19 @@ pub(super) fn is_loopback(url: &str) -> bool {
 }
 
 /// Downloads `entry` from `url` (its catalogue address unless given) into `dir`, resuming a
-/// `.part` left by a download that broke off, then verifies and installs it. A failed check
-/// removes the partial file; a broken connection keeps it for the next attempt and says so.
+/// `.part` left by a download that broke off or was cancelled, then verifies and installs it. A
+/// failed check removes the partial file; a broken connection or a cancel keeps it for the next
+/// attempt and says so.
 pub fn install_from_url(
     dir: &Path,
     entry: &'static CatalogueEntry,
     url: Option<&str>,
     progress: DownloadProgress<'_>,
+    cancel: &AtomicBool,
     bytes: ByteCheck,
     check_graph: &dyn Fn(&ModelManifest) -> Result<()>,
 ) -> Result<InstalledModel> {
-    let result = download_and_install(dir, entry, url, progress, bytes, check_graph);
+    let result = download_and_install(dir, entry, url, progress, cancel, bytes, check_graph);
     if result.is_err() {
         remove_if_empty(&entry_dir(dir, entry));
     }
@@ -183,6 +186,7 @@ fn download_and_install(
     entry: &'static CatalogueEntry,
     url: Option<&str>,
     progress: DownloadProgress<'_>,
+    cancel: &AtomicBool,
     bytes: ByteCheck,
     check_graph: &dyn Fn(&ModelManifest) -> Result<()>,
 ) -> Result<InstalledModel> {
@@ -194,8 +198,9 @@ fn download_and_install(
         "download {} by hand and run `makeit4d models install {} --file PATH`",
         entry.url, entry.name
     );
+    download_to_part(url, &part, &by_hand, progress, cancel)?;
     // The downloaded file checked and installed, or removed (a bad part is not resumed).
-    let verify_and_finish = || match verify(
+    match verify(
         entry,
         &part,
         url,
@@ -208,7 +213,22 @@ fn download_and_install(
             let _ = std::fs::remove_file(&part);
             Err(e)
         }
-    };
+    }
+}
+
+/// Streams `url` into `part`, resuming what `part` already holds with an HTTP `Range` request,
+/// until the server's whole file is there (`Ok`). A broken connection or a cancel (`cancel`
+/// set; [`Error::Cancelled`]) keeps the part for the next attempt; a write error removes it.
+/// `by_hand` ends the messages (how to get the file another way). Proxies come from the
+/// environment, never for loopback addresses.
+pub(super) fn download_to_part(
+    url: &str,
+    part: &Path,
+    by_hand: &str,
+    progress: DownloadProgress<'_>,
+    cancel: &AtomicBool,
+) -> Result<()> {
+    let folder = part.parent().unwrap_or(Path::new("."));
     let mut config = ureq::Agent::config_builder()
         .timeout_connect(Some(std::time::Duration::from_secs(20)))
         .timeout_recv_response(Some(std::time::Duration::from_secs(60)))
@@ -217,7 +237,7 @@ fn download_and_install(
         config = config.proxy(None);
     }
     let agent: ureq::Agent = config.build().into();
-    let have = std::fs::metadata(&part).map(|m| m.len()).unwrap_or(0);
+    let have = std::fs::metadata(part).map(|m| m.len()).unwrap_or(0);
     let mut request = agent.get(url);
     if have > 0 {
         request = request.header("Range", format!("bytes={have}-"));
@@ -229,10 +249,8 @@ fn download_and_install(
     let append = match status {
         206 if have > 0 => true,
         200 => false,
-        416 if have > 0 => {
-            // The part is already whole (or the server will not resume): check it as it is.
-            return verify_and_finish();
-        }
+        // The part is already whole (or the server will not resume): checked as it is.
+        416 if have > 0 => return Ok(()),
         code => {
             return Err(Error::invalid(format!(
                 "cannot download {url}: the server answered HTTP {code}; {by_hand}"
@@ -251,13 +269,17 @@ fn download_and_install(
         .write(true)
         .append(append)
         .truncate(!append)
-        .open(&part)
-        .map_err(|e| Error::file(&part, e))?;
+        .open(part)
+        .map_err(|e| Error::file(part, e))?;
     let mut reader = response.into_body().into_reader();
     let mut buf = vec![0u8; 1 << 16];
     let mut done = start;
     progress(done, total);
     loop {
+        if cancel.load(Ordering::Relaxed) {
+            let _ = file.flush();
+            return Err(Error::Cancelled);
+        }
         let n = match reader.read(&mut buf) {
             Ok(n) => n,
             Err(e) => {
@@ -272,20 +294,20 @@ fn download_and_install(
             break;
         }
         file.write_all(&buf[..n]).map_err(|e| {
-            let _ = std::fs::remove_file(&part);
+            let _ = std::fs::remove_file(part);
             let left = total.map(|t| t.saturating_sub(start));
             Error::file(
-                &part,
+                part,
                 format!(
                     "cannot write: {}",
-                    crate::image_io::describe_write_error(&e, &folder, left)
+                    crate::image_io::describe_write_error(&e, folder, left)
                 ),
             )
         })?;
         done += n as u64;
         progress(done, total);
     }
-    file.flush().map_err(|e| Error::file(&part, e))?;
+    file.flush().map_err(|e| Error::file(part, e))?;
     drop(file);
     if let Some(total) = total
         && done < total
@@ -295,11 +317,11 @@ fn download_and_install(
              command again to resume it, or {by_hand}"
         )));
     }
-    verify_and_finish()
+    Ok(())
 }
 
 /// Creates the model's folder; the error names it and the cause plainly (read-only, full).
-fn create_folder(folder: &Path) -> Result<()> {
+pub(super) fn create_folder(folder: &Path) -> Result<()> {
     std::fs::create_dir_all(folder).map_err(|e| {
         Error::file(
             folder,
@@ -312,7 +334,7 @@ fn create_folder(folder: &Path) -> Result<()> {
 }
 
 /// Removes `folder` when it is empty (a failed first install leaves nothing behind).
-fn remove_if_empty(folder: &Path) {
+pub(super) fn remove_if_empty(folder: &Path) {
     if std::fs::read_dir(folder).is_ok_and(|mut d| d.next().is_none()) {
         let _ = std::fs::remove_dir(folder);
     }

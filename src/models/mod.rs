@@ -15,12 +15,14 @@
 //!
 //! The folder: `catalogue.rs` (the entries and their manifests), `folder.rs` (where models
 //! live, what is installed, names to paths), `install.rs` (download, resume, checks, install,
-//! remove), `bench.rs` (the download benchmark).
+//! remove), `runtime.rs` (ONNX Runtime itself: the pinned wheel, its checks and install),
+//! `bench.rs` (the download benchmark).
 
 mod bench;
 mod catalogue;
 mod folder;
 mod install;
+mod runtime;
 #[cfg(test)]
 mod tests;
 
@@ -28,3 +30,4 @@ pub use bench::*;
 pub use catalogue::*;
 pub use folder::*;
 pub use install::*;
+pub use runtime::*;

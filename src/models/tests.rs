@@ -154,6 +154,7 @@ fn fetch(dir: &Path, entry: &'static CatalogueEntry, url: &str) -> Result<Instal
         entry,
         Some(url),
         &|_, _| {},
+        &std::sync::atomic::AtomicBool::new(false),
         ByteCheck::Catalogue,
         &no_graph_check,
     )
@@ -196,6 +197,7 @@ fn a_download_installs_the_file_and_its_manifest() {
         &TEST_ENTRY,
         Some(&format!("{url}/test.onnx")),
         &progress,
+        &std::sync::atomic::AtomicBool::new(false),
         ByteCheck::Catalogue,
         &no_graph_check,
     )
@@ -241,6 +243,245 @@ fn a_broken_download_resumes_to_the_same_bytes() {
     server.join().unwrap();
     assert_eq!(std::fs::read(&m.model_path).unwrap(), body);
     assert!(!part.exists());
+}
+
+#[test]
+fn a_cancelled_download_keeps_its_part_and_resumes() {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let dir = tempfile::tempdir().unwrap();
+    let body = payload();
+    let (url, server) = serve(vec![ranged(body.clone()), ranged(body.clone())]);
+    let url = format!("{url}/test.onnx");
+    let cancel = AtomicBool::new(false);
+    // Cancelled once the first 64 KiB are on disk.
+    let progress = |done: u64, _: Option<u64>| {
+        if done > 0 {
+            cancel.store(true, Ordering::Relaxed);
+        }
+    };
+    let run = |cancel: &AtomicBool| {
+        install_from_url(
+            dir.path(),
+            &TEST_ENTRY,
+            Some(&url),
+            &progress,
+            cancel,
+            ByteCheck::Catalogue,
+            &no_graph_check,
+        )
+    };
+    assert!(matches!(run(&cancel), Err(Error::Cancelled)));
+    let part = dir.path().join("test-model/test.onnx.part");
+    let kept = std::fs::metadata(&part).unwrap().len();
+    assert!(kept > 0 && kept < body.len() as u64, "{kept}");
+    assert!(installed(dir.path(), &TEST_ENTRY).is_none());
+    let m = run(&AtomicBool::new(false)).unwrap();
+    server.join().unwrap();
+    assert_eq!(std::fs::read(&m.model_path).unwrap(), body);
+    assert!(!part.exists());
+}
+
+/// A zip holding `members` (name, bytes), stored uncompressed.
+fn zip_of(members: &[(&str, &[u8])]) -> Vec<u8> {
+    use std::io::Write;
+    let mut out = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    let options =
+        zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+    for (name, bytes) in members {
+        out.start_file(*name, options).unwrap();
+        out.write_all(bytes).unwrap();
+    }
+    out.finish().unwrap().into_inner()
+}
+
+/// A runtime release pinned to `wheel`'s own size and SHA-256.
+fn release_of(wheel: &[u8]) -> RuntimeRelease {
+    use sha2::Digest;
+    let sha: String = sha2::Sha256::digest(wheel)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
+    RuntimeRelease {
+        os: "linux",
+        arch: "x86_64",
+        url: "http://127.0.0.1:9/onnxruntime-test.whl",
+        size_bytes: wheel.len() as u64,
+        sha256: Box::leak(sha.into_boxed_str()),
+        library: "onnxruntime/capi/libonnxruntime.so.1.31.1",
+        companions: &["onnxruntime/capi/libonnxruntime_providers_shared.so"],
+    }
+}
+
+#[test]
+fn the_pinned_runtime_wheels_are_complete() {
+    let mine = this_platform_release();
+    if std::env::consts::OS == "linux" && std::env::consts::ARCH == "x86_64" {
+        assert_eq!(mine.unwrap().size_bytes, 23_760_988);
+    }
+    for r in RUNTIME_RELEASES {
+        assert!(
+            r.url.starts_with("https://files.pythonhosted.org/"),
+            "{}",
+            r.url
+        );
+        assert!(
+            r.file_name()
+                .starts_with(&format!("onnxruntime-{RUNTIME_VERSION}-"))
+        );
+        assert!(r.file_name().ends_with(".whl"));
+        assert_eq!(r.sha256.len(), 64);
+        assert!(
+            r.sha256
+                .bytes()
+                .all(|b| b.is_ascii_hexdigit() && !b.is_ascii_uppercase())
+        );
+        assert!(r.size_bytes > 10_000_000 && r.size_bytes < 40_000_000);
+        assert!(r.library.starts_with("onnxruntime/capi/"));
+    }
+}
+
+#[test]
+fn a_wheel_that_is_not_the_runtime_is_refused_and_leaves_nothing() {
+    use std::sync::atomic::AtomicBool;
+    let not_a_library: &[u8] = b"\x7fELF but not really a shared library";
+    let cases: Vec<(Vec<u8>, &str)> = vec![
+        (
+            (0..300_000u32).map(|i| (i * 31 % 253) as u8).collect(),
+            "not a zip archive",
+        ),
+        (
+            zip_of(&[("onnxruntime/__init__.py", b"# nothing")]),
+            "no onnxruntime/capi/libonnxruntime.so.1.31.1 in it",
+        ),
+        (
+            zip_of(&[("onnxruntime/capi/libonnxruntime.so.1.31.1", not_a_library)]),
+            "the library in it is unusable",
+        ),
+    ];
+    for (wheel, needle) in cases {
+        let dir = tempfile::tempdir().unwrap();
+        let folder = dir.path().join("ort/onnxruntime/capi");
+        let release = release_of(&wheel);
+        let (url, server) = serve(vec![ranged(wheel.clone())]);
+        let err = install_runtime(
+            &folder,
+            &release,
+            Some(&format!("{url}/w.whl")),
+            &|_, _| {},
+            &AtomicBool::new(false),
+            ByteCheck::Catalogue,
+        )
+        .unwrap_err()
+        .to_string();
+        server.join().unwrap();
+        assert!(err.contains(needle), "{needle}: {err}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(
+            files_in(dir.path()).is_empty(),
+            "{needle}: {:?}",
+            files_in(dir.path())
+        );
+        // The same wheel from a file: the same refusal, and the file itself left alone.
+        let file = dir.path().join("w.whl");
+        std::fs::write(&file, &wheel).unwrap();
+        let err = install_runtime_from_file(&folder, &release, &file, ByteCheck::Catalogue)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(needle), "{needle}: {err}");
+        assert_eq!(files_in(dir.path()), ["w.whl"]);
+    }
+    // Another size or SHA-256 than the pin: refused before it is opened, unless skipped.
+    let wheel = zip_of(&[("onnxruntime/capi/libonnxruntime.so.1.31.1", not_a_library)]);
+    let dir = tempfile::tempdir().unwrap();
+    let folder = dir.path().join("ort/onnxruntime/capi");
+    let file = dir.path().join("w.whl");
+    std::fs::write(&file, &wheel).unwrap();
+    let sized = RuntimeRelease {
+        size_bytes: 7,
+        ..release_of(&wheel)
+    };
+    let err = install_runtime_from_file(&folder, &sized, &file, ByteCheck::Catalogue)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains(&format!("is {} bytes", wheel.len())) && err.contains("is 7 bytes"),
+        "{err}"
+    );
+    assert!(err.contains("--skip-checksum"), "{err}");
+    let hashed = RuntimeRelease {
+        sha256: "00",
+        ..release_of(&wheel)
+    };
+    let err = install_runtime_from_file(&folder, &hashed, &file, ByteCheck::Catalogue)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("SHA-256"), "{err}");
+    // Skipped: the bytes pass, the library still does not.
+    let err = install_runtime_from_file(&folder, &hashed, &file, ByteCheck::Skip)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("unusable"), "{err}");
+    assert_eq!(files_in(dir.path()), ["w.whl"]);
+}
+
+#[test]
+fn a_cancelled_runtime_download_resumes() {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    // A wheel big enough for several reads; its library is not one, so the resumed download
+    // ends in a refusal that cleans up everything, part included.
+    let filler: Vec<u8> = (0..400_000u32).map(|i| (i * 13 % 251) as u8).collect();
+    let wheel = zip_of(&[
+        (
+            "onnxruntime/capi/libonnxruntime.so.1.31.1",
+            b"not a library",
+        ),
+        ("onnxruntime/filler.bin", &filler),
+    ]);
+    let release = release_of(&wheel);
+    let dir = tempfile::tempdir().unwrap();
+    let folder = dir.path().join("ort/onnxruntime/capi");
+    let (url, server) = serve(vec![ranged(wheel.clone()), ranged(wheel.clone())]);
+    let url = format!("{url}/w.whl");
+    let cancel = AtomicBool::new(false);
+    let seen = std::sync::Mutex::new(Vec::new());
+    let progress = |done: u64, total: Option<u64>| {
+        seen.lock().unwrap().push((done, total));
+        if done > 0 {
+            cancel.store(true, Ordering::Relaxed);
+        }
+    };
+    let first = install_runtime(
+        &folder,
+        &release,
+        Some(&url),
+        &progress,
+        &cancel,
+        ByteCheck::Catalogue,
+    );
+    assert!(matches!(first, Err(Error::Cancelled)), "{first:?}");
+    let part = dir.path().join("ort/onnxruntime-test.whl.part");
+    let kept = std::fs::metadata(&part).unwrap().len();
+    assert!(kept > 0 && kept < wheel.len() as u64);
+    assert_eq!(seen.lock().unwrap()[0], (0, Some(wheel.len() as u64)));
+    let never = AtomicBool::new(false);
+    let err = install_runtime(
+        &folder,
+        &release,
+        Some(&url),
+        &|_, _| {},
+        &never,
+        ByteCheck::Catalogue,
+    )
+    .unwrap_err()
+    .to_string();
+    server.join().unwrap();
+    // The resumed bytes were whole and right (the SHA-256 passed): the refusal is the library's.
+    assert!(err.contains("unusable"), "{err}");
+    assert!(
+        files_in(dir.path()).is_empty(),
+        "{:?}",
+        files_in(dir.path())
+    );
 }
 
 #[test]
