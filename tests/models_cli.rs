@@ -481,6 +481,21 @@ fn the_runtime_installs_from_a_loopback_server_with_the_model() {
         doctor.contains("1.31.1") && doctor.contains(&capi.display().to_string()),
         "{doctor}"
     );
+    // This runtime is the CPU build: learned models say they run on the CPU, and why.
+    assert!(
+        doctor.contains(
+            "learned models run on the CPU (auto: this ONNX Runtime has no GPU provider)"
+        ),
+        "{doctor}"
+    );
+    let cpu = run(bare(dir.path())
+        .env("MAKEIT4D_EXECUTION", "cpu")
+        .arg("doctor"));
+    let cpu = String::from_utf8_lossy(&cpu.stdout);
+    assert!(
+        cpu.contains("learned models run on the CPU (set to cpu)"),
+        "{cpu}"
+    );
     let again = run(bare(dir.path()).args(["models", "install-runtime"]));
     assert!(String::from_utf8_lossy(&again.stdout).contains("already installed"));
 

@@ -91,6 +91,8 @@ pub(super) struct Persisted {
     pub(super) recent: Vec<PathBuf>,
     pub(super) tab: Tab,
     pub(super) preview_side: usize,
+    /// Where learned models run (`MAKEIT4D_EXECUTION` overrides it for the session).
+    pub(super) execution: crate::ml::ExecutionChoice,
 }
 
 impl Default for Persisted {
@@ -99,6 +101,7 @@ impl Default for Persisted {
             recent: Vec::new(),
             tab: Tab::Input,
             preview_side: 360,
+            execution: crate::ml::ExecutionChoice::Auto,
         }
     }
 }
@@ -334,6 +337,9 @@ impl EditorApp {
                 .and_then(|s| eframe::get_value::<Persisted>(s, STORAGE_KEY))
                 .unwrap_or_default()
         };
+        if std::env::var_os("MAKEIT4D_EXECUTION").is_none_or(|v| v.is_empty()) {
+            crate::ml::set_execution(persisted.execution);
+        }
         let adapter = match render_state {
             Some(rs) => {
                 let info = rs.adapter.get_info();

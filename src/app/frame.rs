@@ -23,6 +23,7 @@ impl eframe::App for EditorApp {
         }
         self.persisted.tab = self.tab;
         self.persisted.preview_side = self.preview.max_side;
+        self.persisted.execution = crate::ml::execution();
         eframe::set_value(storage, STORAGE_KEY, &self.persisted);
     }
 }

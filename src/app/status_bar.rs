@@ -62,7 +62,13 @@ impl EditorApp {
                 ui.label(RichText::new(format!("UI {mean:.1} ms (max {max:.0})")).weak())
                     .on_hover_text("Time spent laying out and drawing the window per frame");
                 ui.separator();
-                ui.label(&self.ort);
+                let ort = match crate::ml::ort_status().found {
+                    Some((_, version)) => {
+                        format!("ONNX Runtime {version} · {}", crate::ml::execution_device())
+                    }
+                    None => self.ort.clone(),
+                };
+                ui.label(ort).on_hover_text(crate::ml::execution_summary());
                 ui.separator();
                 let short = if self.preview_uses_gpu() {
                     "GPU preview"

@@ -12,6 +12,7 @@ pub(crate) fn doctor(args: DoctorArgs) -> anyhow::Result<()> {
         Err(e) => println!("GPU adapter: none ({e:#}); the CPU renderer is used"),
     }
     println!("{}", makeit4d::ml::ort_status());
+    println!("{}", makeit4d::ml::execution_summary());
     match &args.project {
         Some(p) => {
             let project = Project::load(p)?;

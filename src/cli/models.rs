@@ -90,7 +90,6 @@ pub(crate) fn catalogue_entry(
 /// Loads `manifest`'s graph through ONNX Runtime and checks it against the manifest; without
 /// the runtime, says that the check waits for the first use.
 pub(crate) fn check_model_graph(manifest: &makeit4d::ml::ModelManifest) -> makeit4d::Result<()> {
-    use makeit4d::ml::ModelKind;
     if !makeit4d::ml::ort_available() {
         eprintln!(
             "note: ONNX Runtime is not installed, so the graph is checked on first use ({})",
@@ -98,14 +97,7 @@ pub(crate) fn check_model_graph(manifest: &makeit4d::ml::ModelManifest) -> makei
         );
         return Ok(());
     }
-    match manifest.kind() {
-        ModelKind::Depth => {
-            makeit4d::stages::depth::onnx::OnnxDepth::new(manifest.clone()).map(|_| ())
-        }
-        ModelKind::Inpaint => {
-            makeit4d::stages::inpaint::onnx::OnnxInpainter::new(manifest.clone()).map(|_| ())
-        }
-    }
+    makeit4d::models::check_model_graph(manifest)
 }
 
 pub(crate) fn models(command: ModelsCommand, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {

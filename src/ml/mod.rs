@@ -217,7 +217,7 @@ mod tests {
         let text = status.to_string();
         assert!(text.starts_with("ONNX Runtime: not available: ONNX Runtime not found\n"));
         assert!(text.contains("classical methods are used"));
-        assert!(text.contains("pip install"));
+        assert!(text.contains("pip install") && text.contains("makeit4d models install-runtime"));
         let ok = OrtStatus {
             found: Some((PathBuf::from("/lib/libonnxruntime.so"), "1.31.1".into())),
             error: None,
@@ -239,5 +239,24 @@ mod tests {
         assert_eq!(spatial_size(&[4, 5], 1), Some((4, 5)));
         assert_eq!(spatial_size(&[1, 3, 4, 5], 3), Some((4, 5)));
         assert_eq!(spatial_size(&[1, 2, 4, 5], 1), None);
+    }
+
+    #[test]
+    fn the_execution_setting_reads_auto_and_cpu() {
+        assert_eq!(ExecutionChoice::parse("auto"), Ok(ExecutionChoice::Auto));
+        assert_eq!(ExecutionChoice::parse(" CPU "), Ok(ExecutionChoice::Cpu));
+        let err = ExecutionChoice::parse("gpu").unwrap_err();
+        assert!(
+            err.contains("\"gpu\"") && err.contains("auto or cpu"),
+            "{err}"
+        );
+        assert_eq!(ExecutionChoice::Cpu.name(), "cpu");
+        assert_eq!(short_provider("CUDAExecutionProvider"), "CUDA");
+        assert_eq!(short_provider("DmlExecutionProvider"), "DirectML");
+        assert_eq!(short_provider("CoreMLExecutionProvider"), "CoreML");
+        assert_eq!(
+            serde_json::to_string(&ExecutionChoice::Cpu).unwrap(),
+            "\"cpu\""
+        );
     }
 }

@@ -12,8 +12,9 @@ use std::sync::{Mutex, OnceLock};
 pub const MIN_ORT_MINOR_VERSION: u32 = ort::MINOR_VERSION;
 
 /// The command that installs ONNX Runtime where [`OrtSearch::from_env`] looks for it.
-pub const ORT_INSTALL_HINT: &str = "python3 -m pip install --target ~/.local/share/makeit4d/ort \
-     onnxruntime==1.31.1 (or set ORT_DYLIB_PATH to libonnxruntime.so)";
+pub const ORT_INSTALL_HINT: &str = "makeit4d models install-runtime (or python3 -m pip install \
+     --target ~/.local/share/makeit4d/ort onnxruntime==1.31.1, or set ORT_DYLIB_PATH to \
+     libonnxruntime.so)";
 
 /// The folder, below the data directory, where the runtime's shared library lies (where
 /// `pip install --target <data>/ort onnxruntime` and `makeit4d models install-runtime` put it).
@@ -334,6 +335,169 @@ pub fn retry_runtime() -> bool {
 /// True when ONNX Runtime is loaded (loading it on first call).
 pub fn ort_available() -> bool {
     runtime().is_ok()
+}
+
+// ---------------------------------------------------------------------------------------------
+// Where learned models run.
+// ---------------------------------------------------------------------------------------------
+
+/// Where learned models run: the setting (`MAKEIT4D_EXECUTION=auto|cpu`, the editor's Settings).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ExecutionChoice {
+    /// A GPU execution provider when the runtime offers one (CUDA, DirectML, CoreML, in that
+    /// order), else the CPU.
+    #[default]
+    Auto,
+    /// Always the CPU.
+    Cpu,
+}
+
+impl ExecutionChoice {
+    /// Reads `auto` or `cpu` (any case).
+    pub fn parse(text: &str) -> std::result::Result<Self, String> {
+        match text.trim().to_ascii_lowercase().as_str() {
+            "auto" => Ok(Self::Auto),
+            "cpu" => Ok(Self::Cpu),
+            other => Err(format!(
+                "\"{other}\" is not an execution setting (auto or cpu)"
+            )),
+        }
+    }
+
+    /// `auto` or `cpu`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::Cpu => "cpu",
+        }
+    }
+}
+
+/// 0: not read yet; 1: auto; 2: cpu.
+static EXECUTION: std::sync::atomic::AtomicU8 = std::sync::atomic::AtomicU8::new(0);
+
+/// The process's execution setting: set by [`set_execution`], else `MAKEIT4D_EXECUTION`, else
+/// auto (an unreadable value is said once and taken as auto).
+pub fn execution() -> ExecutionChoice {
+    use std::sync::atomic::Ordering;
+    match EXECUTION.load(Ordering::Relaxed) {
+        1 => ExecutionChoice::Auto,
+        2 => ExecutionChoice::Cpu,
+        _ => {
+            let choice = match std::env::var("MAKEIT4D_EXECUTION") {
+                Ok(text) if !text.is_empty() => {
+                    ExecutionChoice::parse(&text).unwrap_or_else(|why| {
+                        eprintln!("warning: MAKEIT4D_EXECUTION: {why}; using auto");
+                        ExecutionChoice::Auto
+                    })
+                }
+                _ => ExecutionChoice::Auto,
+            };
+            set_execution(choice);
+            choice
+        }
+    }
+}
+
+/// Sets where learned models run from now on (sessions made before keep theirs).
+pub fn set_execution(choice: ExecutionChoice) {
+    EXECUTION.store(
+        match choice {
+            ExecutionChoice::Auto => 1,
+            ExecutionChoice::Cpu => 2,
+        },
+        std::sync::atomic::Ordering::Relaxed,
+    );
+}
+
+/// The GPU execution providers the loaded runtime offers, in the order they are tried
+/// (ONNX Runtime's names, e.g. `CUDAExecutionProvider`); empty without a runtime.
+pub fn gpu_providers() -> Vec<&'static str> {
+    // A runtime's providers do not change while it is loaded: asked once.
+    static FOUND: OnceLock<Vec<&'static str>> = OnceLock::new();
+    if runtime().is_err() {
+        return Vec::new();
+    }
+    FOUND.get_or_init(ask_gpu_providers).clone()
+}
+
+fn ask_gpu_providers() -> Vec<&'static str> {
+    use ort::ep::ExecutionProvider;
+    let mut found = Vec::new();
+    if ort::ep::CUDA::is_available().unwrap_or(false) {
+        found.push(ort::ep::CUDA::NAME);
+    }
+    if ort::ep::DirectML::is_available().unwrap_or(false) {
+        found.push(ort::ep::DirectML::NAME);
+    }
+    if ort::ep::CoreML::is_available().unwrap_or(false) {
+        found.push(ort::ep::CoreML::NAME);
+    }
+    found
+}
+
+/// The providers a new session asks for under the current setting (the CPU always follows).
+pub(super) fn session_providers() -> Vec<ort::ep::ExecutionProviderDispatch> {
+    if execution() == ExecutionChoice::Cpu {
+        return Vec::new();
+    }
+    gpu_providers()
+        .into_iter()
+        .filter_map(|name| match name {
+            n if n == <ort::ep::CUDA as ort::ep::ExecutionProvider>::NAME => {
+                Some(ort::ep::CUDA::default().build())
+            }
+            n if n == <ort::ep::DirectML as ort::ep::ExecutionProvider>::NAME => {
+                Some(ort::ep::DirectML::default().build())
+            }
+            n if n == <ort::ep::CoreML as ort::ep::ExecutionProvider>::NAME => {
+                Some(ort::ep::CoreML::default().build())
+            }
+            _ => None,
+        })
+        .collect()
+}
+
+/// One line on where learned models run, for `doctor` and the editor's status bar:
+/// "learned models run on CUDA (auto)", "… on the CPU (auto: this runtime has no GPU
+/// provider)", "… on the CPU (set to cpu)".
+pub fn execution_summary() -> String {
+    let choice = execution();
+    if runtime().is_err() {
+        return "learned models: off (no ONNX Runtime)".into();
+    }
+    let gpu = gpu_providers();
+    match (choice, gpu.first()) {
+        (ExecutionChoice::Cpu, Some(_)) => format!(
+            "learned models run on the CPU (set to cpu; {} is there)",
+            short_provider(gpu[0])
+        ),
+        (ExecutionChoice::Cpu, None) => "learned models run on the CPU (set to cpu)".into(),
+        (ExecutionChoice::Auto, Some(first)) => {
+            format!("learned models run on {} (auto)", short_provider(first))
+        }
+        (ExecutionChoice::Auto, None) => {
+            "learned models run on the CPU (auto: this ONNX Runtime has no GPU provider)".into()
+        }
+    }
+}
+
+/// Where a new session's work runs, in a word for the status bar: `CUDA`, `DirectML`,
+/// `CoreML` or `CPU`.
+pub fn execution_device() -> &'static str {
+    match (execution(), gpu_providers().first()) {
+        (ExecutionChoice::Auto, Some(first)) => short_provider(first),
+        _ => "CPU",
+    }
+}
+
+/// `CUDAExecutionProvider` → `CUDA`, `DmlExecutionProvider` → `DirectML`.
+pub fn short_provider(name: &'static str) -> &'static str {
+    match name {
+        "DmlExecutionProvider" => "DirectML",
+        other => other.strip_suffix("ExecutionProvider").unwrap_or(other),
+    }
 }
 
 /// What `doctor` prints about ONNX Runtime. `Display` writes one line per fact.

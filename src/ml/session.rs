@@ -167,7 +167,19 @@ impl OnnxSession {
             Ok(_) => return Err(error("not a file".into())),
             Err(err) => return Err(error(format!("cannot open the model: {err}"))),
         }
+        let providers = super::runtime::session_providers();
         let session = ort::session::Session::builder(&runtime.environment)
+            .and_then(|builder| {
+                if providers.is_empty() {
+                    Ok(builder)
+                } else {
+                    // A provider that fails to register (no driver, no device) falls back to
+                    // the next one and finally the CPU, silently: `doctor` says what is there.
+                    builder
+                        .with_execution_providers(&providers)
+                        .map_err(ort::Error::from)
+                }
+            })
             .and_then(|mut builder| builder.commit_from_file(path))
             .map_err(|err| error(format!("ONNX Runtime cannot load it: {err}")))?;
         let inputs = session

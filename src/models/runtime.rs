@@ -14,7 +14,7 @@
 //! is reachable wherever `pip` is; the library inside is the same build.
 
 use super::install::{DownloadProgress, create_folder, download_to_part, remove_if_empty};
-use super::{ByteCheck, sha256_file};
+use super::{ByteCheck, CatalogueEntry, InstalledModel, install_from_url, sha256_file};
 use crate::error::{Error, Result};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
@@ -315,4 +315,71 @@ fn extract_and_check(
         )));
     }
     Ok((names, version))
+}
+
+/// Loads `manifest`'s graph through ONNX Runtime and checks it against the manifest (inputs,
+/// outputs, ranks). The runtime must be there: callers without one say that the check waits
+/// for the first use.
+pub fn check_model_graph(manifest: &crate::ml::ModelManifest) -> Result<()> {
+    use crate::ml::ModelKind;
+    match manifest.kind() {
+        ModelKind::Depth => {
+            crate::stages::depth::onnx::OnnxDepth::new(manifest.clone()).map(|_| ())
+        }
+        ModelKind::Inpaint => {
+            crate::stages::inpaint::onnx::OnnxInpainter::new(manifest.clone()).map(|_| ())
+        }
+    }
+}
+
+/// What [`install_with_runtime`] is doing, for a progress bar.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InstallStep {
+    /// Downloading ONNX Runtime.
+    Runtime,
+    /// Downloading the model.
+    Model,
+}
+
+/// Installs `entry` into `models_dir` the way the editor's one click does: ONNX Runtime first
+/// when none is found (into [`crate::ml::runtime_install_dir`], from `runtime_url` or PyPI),
+/// then the model (from `model_url` or its catalogue address), its bytes checked against the
+/// catalogue and its graph against its manifest. `progress` hears each step's bytes; `cancel`
+/// stops either download (its part kept for the next try).
+pub fn install_with_runtime(
+    entry: &'static CatalogueEntry,
+    models_dir: &Path,
+    urls: (Option<&str>, Option<&str>),
+    progress: &dyn Fn(InstallStep, u64, Option<u64>),
+    cancel: &AtomicBool,
+) -> Result<InstalledModel> {
+    if !crate::ml::ort_available() {
+        let release = release_for_this_platform()?;
+        let folder = crate::ml::runtime_install_dir().ok_or_else(|| {
+            Error::invalid("no folder for ONNX Runtime: set XDG_DATA_HOME or HOME")
+        })?;
+        install_runtime(
+            &folder,
+            release,
+            urls.0,
+            &|done, total| progress(InstallStep::Runtime, done, total),
+            cancel,
+            ByteCheck::Catalogue,
+        )?;
+        if !crate::ml::retry_runtime() || !crate::ml::ort_available() {
+            return Err(Error::invalid(format!(
+                "ONNX Runtime was installed in {} but cannot be used until makeit4d restarts",
+                folder.display()
+            )));
+        }
+    }
+    install_from_url(
+        models_dir,
+        entry,
+        urls.1,
+        &|done, total| progress(InstallStep::Model, done, total),
+        cancel,
+        ByteCheck::Catalogue,
+        &check_model_graph,
+    )
 }

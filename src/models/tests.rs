@@ -667,3 +667,69 @@ fn sha256_known_answer() {
         "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
     );
 }
+
+#[test]
+fn one_click_installs_a_model_with_progress_and_checks_its_graph() {
+    use std::sync::atomic::AtomicBool;
+    if !crate::ml::ort_available() {
+        // Without the runtime this would fetch it from PyPI: only loopback servers in tests.
+        assert!(std::env::var_os("CI").is_none(), "CI needs ONNX Runtime");
+        return;
+    }
+    let body = std::fs::read(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/fixtures/catalogue_depth_anything_v2_small.onnx"),
+    )
+    .unwrap();
+    let real = find("depth-anything-v2-small").unwrap();
+    let entry: &'static CatalogueEntry = Box::leak(Box::new(CatalogueEntry {
+        published_size: "fixture",
+        size_bytes: None,
+        sha256: None,
+        ..*real
+    }));
+    let dir = tempfile::tempdir().unwrap();
+    let (url, server) = serve(vec![ranged(body.clone())]);
+    let url = format!("{url}/model.onnx");
+    let steps = std::sync::Mutex::new(Vec::new());
+    let m = install_with_runtime(
+        entry,
+        dir.path(),
+        (Some("http://127.0.0.1:9/never-asked"), Some(&url)),
+        &|step, done, _| steps.lock().unwrap().push((step, done)),
+        &AtomicBool::new(false),
+    )
+    .unwrap();
+    server.join().unwrap();
+    assert_eq!(std::fs::read(&m.model_path).unwrap(), body);
+    let steps = steps.into_inner().unwrap();
+    // The runtime was there: only the model's bytes were heard, up to the whole file.
+    assert!(steps.iter().all(|(s, _)| *s == InstallStep::Model));
+    assert_eq!(steps.last().unwrap().1, body.len() as u64);
+    // A graph that does not match the manifest is refused and leaves nothing behind.
+    let wrong = std::fs::read(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/inpaint_grey.onnx"),
+    )
+    .unwrap();
+    let other = tempfile::tempdir().unwrap();
+    let (url, server) = serve(vec![ranged(wrong)]);
+    let err = install_with_runtime(
+        entry,
+        other.path(),
+        (None, Some(&format!("{url}/model.onnx"))),
+        &|_, _, _| {},
+        &AtomicBool::new(false),
+    )
+    .unwrap_err()
+    .to_string();
+    server.join().unwrap();
+    assert!(
+        err.contains("pixel_values") || err.contains("input"),
+        "{err}"
+    );
+    assert!(
+        files_in(other.path()).is_empty(),
+        "{:?}",
+        files_in(other.path())
+    );
+}

@@ -26,6 +26,7 @@ pub struct DepthPanel {
     strength: f32,
     stroke: Vec<[f32; 2]>,
     horizon_drag: Option<f32>,
+    shelf: super::shelf::ModelShelf,
 }
 
 impl Default for DepthPanel {
@@ -40,6 +41,7 @@ impl Default for DepthPanel {
             strength: 0.3,
             stroke: Vec::new(),
             horizon_drag: None,
+            shelf: Default::default(),
         }
     }
 }
@@ -316,6 +318,17 @@ impl StagePanel for DepthPanel {
                 p.depth.model = model;
             });
         }
+        egui::CollapsingHeader::new("Learned depth models")
+            .id_salt("depth-shelf")
+            .default_open(cx.project.depth.model.is_none())
+            .show(ui, |ui| {
+                if let Some(name) = self.shelf.ui(ui, crate::ml::ModelKind::Depth) {
+                    cx.edit("Depth model", |p| {
+                        p.depth.method = DepthMethod::Onnx;
+                        p.depth.model = Some(name.into());
+                    });
+                }
+            });
         ui.checkbox(&mut self.show_sky, "Show the sky mask");
         ui.checkbox(&mut self.show_unsure, "Show where the depth is unsure (U)")
             .on_hover_text(

@@ -13,6 +13,7 @@ pub mod input;
 pub mod layers;
 pub mod motion;
 pub mod preview;
+pub mod shelf;
 
 pub use super::context::{
     CameraInfo, FlyCamera, GpuDraw, PanelContext, PanelMessage, PreviewInfo, Probe, Request, Tab,
