@@ -1171,3 +1171,79 @@ fn the_scene_exports_as_gltf_and_the_preview_shows_the_anaglyph() {
     }
     assert!(h.state().notices().iter().all(|n| !n.contains("failed")));
 }
+
+#[test]
+fn depth_targets_are_picked_painted_spread_hidden_and_undone() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(mut h) = harness(fast_project(dir.path())) else {
+        return;
+    };
+    let limit = Duration::from_secs(600);
+    wait_idle(&mut h, limit);
+    h.get_by_label("3 Depth").click();
+    h.step();
+    h.step();
+    // The eyedropper: the depth under the cursor is shown, and a click takes it.
+    h.get_by_label("pick depth (E)").click();
+    h.step();
+    let view = h.state().probe().view.expect("the depth view");
+    let near = view.rect.lerp_inside(egui::vec2(0.5, 0.95));
+    h.hover_at(near);
+    h.step();
+    h.step();
+    let picked = h.state().probe().depth_readout.expect("a depth readout");
+    h.drag_at(near);
+    h.step();
+    h.drop_at(near);
+    h.step();
+    h.step();
+    // Back on "set depth": a stroke higher up carries the picked depth.
+    let a = view.rect.lerp_inside(egui::vec2(0.35, 0.7));
+    let b = view.rect.lerp_inside(egui::vec2(0.6, 0.7));
+    drag(&mut h, a, b);
+    let targets = h.state().project().unwrap().depth.targets.clone();
+    assert_eq!(targets.len(), 1, "one target stroke");
+    assert_eq!(targets[0].depth, picked);
+    assert!(
+        targets[0].points.iter().all(|p| (p[1] - 0.7).abs() < 0.02),
+        "{:?}",
+        targets[0].points
+    );
+    wait_idle(&mut h, limit);
+    // The built depth under the stroke is the picked depth (the solver spread it there).
+    let snapshot = h.state().snapshot().unwrap();
+    let depth = &snapshot.scene.depth.estimate.depth;
+    let (w, hgt) = depth.size();
+    let (x, y) = (
+        (0.5 * (w - 1) as f32) as usize,
+        (0.7 * (hgt - 1) as f32) as usize,
+    );
+    let z = depth.at(x, y);
+    assert!((z / picked - 1.0).abs() < 0.05, "{z} vs {picked}");
+    // Hide it (one undo step), undo, delete it, undo.
+    h.get_by_label_contains("#1 Z").scroll_to_me();
+    h.step();
+    h.step();
+    // (The rebuild's notices float over the inspector's foot: dismissed first.)
+    h.state_mut().clear_notices();
+    h.step();
+    h.get_by_label_contains("#1 Z").click();
+    h.step();
+    h.step();
+    assert!(h.state().project().unwrap().depth.targets[0].hidden);
+    h.state_mut().undo();
+    h.step();
+    assert!(!h.state().project().unwrap().depth.targets[0].hidden);
+    h.state_mut().clear_notices();
+    h.get_by_label("Delete").scroll_to_me();
+    h.step();
+    h.step();
+    h.get_by_label("Delete").click();
+    h.step();
+    h.step();
+    assert!(h.state().project().unwrap().depth.targets.is_empty());
+    h.state_mut().undo();
+    h.step();
+    assert_eq!(h.state().project().unwrap().depth.targets.len(), 1);
+    wait_idle(&mut h, limit);
+}

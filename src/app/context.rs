@@ -279,6 +279,8 @@ pub struct Probe {
     pub threshold_handles: Vec<egui::Pos2>,
     /// Screen positions of the keyframe markers in the camera's top-view plot, by key index.
     pub key_handles: Vec<egui::Pos2>,
+    /// The depth shown under the cursor in the Depth tab (scene units).
+    pub depth_readout: Option<f32>,
 }
 
 /// Everything a panel may read, and where it puts its edits and requests.

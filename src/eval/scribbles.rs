@@ -18,10 +18,9 @@ use crate::eval::nvs::{NvsDepth, NvsMethod, NvsOptions, StereoPair, eval_nvs};
 use crate::progress::Progress;
 use crate::raster::{GrayRaster, MaskRaster, Raster};
 use crate::stages::depth::eval::depth_metrics;
-use crate::stages::depth::propagate::{DepthTarget, PropagateParams, propagate};
+use crate::stages::depth::propagate::{PropagateParams, TargetStroke, apply_target_strokes};
 use crate::stages::depth::{DepthSettings, run_depth_stage};
 use serde::Serialize;
-use std::time::Instant;
 
 /// The simulated user's settings.
 #[derive(Clone, Debug)]
@@ -88,7 +87,7 @@ pub struct ScribbleTable {
     pub oracle: Option<OracleRow>,
     /// The strokes drawn, in order.
     #[serde(skip)]
-    pub targets: Vec<DepthTarget>,
+    pub targets: Vec<TargetStroke>,
 }
 
 impl ScribbleTable {
@@ -215,7 +214,7 @@ pub fn eval_scribbles(
         Ok((row.psnr_db, row.psnr_known_db))
     };
     let mut rows = Vec::new();
-    let mut targets: Vec<DepthTarget> = Vec::new();
+    let mut targets: Vec<TargetStroke> = Vec::new();
     let mut current = estimate.clone();
     let mut warm: Option<GrayRaster> = None;
     let mut solve_s = 0.0;
@@ -267,21 +266,27 @@ pub fn eval_scribbles(
             if !(inv.is_finite() && inv > 0.0) {
                 break;
             }
-            targets.push(DepthTarget {
-                x: cx as f32,
-                y: cy as f32,
-                radius_px: r,
+            // The stroke as the editor stores it (image-relative), through the editor's path.
+            targets.push(TargetStroke {
+                points: vec![[
+                    cx as f32 / (w.max(2) - 1) as f32,
+                    cy as f32 / (h.max(2) - 1) as f32,
+                ]],
+                radius: r / w as f32,
                 depth: (1.0 / inv) as f32,
+                hidden: false,
             });
-            let started = Instant::now();
-            let p = propagate(
+            let (_, applied) = apply_target_strokes(
                 &pair.left,
                 &estimate,
                 &targets,
                 &options.params,
                 warm.as_ref(),
             )?;
-            solve_s = started.elapsed().as_secs_f64();
+            solve_s = applied.seconds;
+            let p = applied
+                .propagated
+                .ok_or_else(|| Error::invalid("eval scribbles: the solver did not run"))?;
             current = p.depth;
             warm = Some(p.correction);
         }

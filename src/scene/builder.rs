@@ -415,8 +415,10 @@ impl SceneBuilder {
         // estimated once and cached there too.
         let unpainted_settings = crate::stages::depth::DepthSettings {
             strokes: Vec::new(),
+            targets: Vec::new(),
             ..project.depth.clone()
         };
+        let edited = !strokes.is_empty() || !project.depth.targets.is_empty();
         let unpainted_key = key_of(key, &(&unpainted_settings, project.camera.hfov_deg));
         let key = key_of(
             key,
@@ -426,10 +428,10 @@ impl SceneBuilder {
                 project.working.coordinates_size,
             ),
         );
-        let unpainted = if strokes.is_empty() {
-            None
-        } else {
+        let unpainted = if edited {
             self.depth.get(unpainted_key)
+        } else {
+            None
         };
         let mut estimated = None;
         let depth = match cached(
@@ -440,7 +442,7 @@ impl SceneBuilder {
             dry,
             p_depth,
             |p| {
-                if strokes.is_empty() {
+                if !edited {
                     return run_depth_stage(&project.depth, &input.rgb, &intrinsics, p);
                 }
                 let bare = match unpainted {
@@ -457,8 +459,12 @@ impl SceneBuilder {
                     }
                 };
                 let mut out = (*bare).clone();
-                out.estimate.depth =
-                    crate::stages::depth::paint::apply_strokes(&out.estimate.depth, strokes)?;
+                crate::stages::depth::apply_depth_edits(
+                    &mut out,
+                    &input.rgb,
+                    &project.depth.targets,
+                    strokes,
+                )?;
                 Ok(out)
             },
         )? {

@@ -4,6 +4,7 @@ use super::{PanelContext, StagePanel, Tab, committed, scene_image_ui};
 use crate::app::viewport::{ImageView, ViewTransform};
 use crate::stages::depth::DepthMethod;
 use crate::stages::depth::paint::{DepthStroke, DepthStrokeKind};
+use crate::stages::depth::propagate::TargetStroke;
 use eframe::egui::{self, Color32, Rect, Sense, Stroke, Ui, pos2};
 
 /// What a drag on the depth view does.
@@ -13,6 +14,10 @@ pub enum DepthTool {
     Horizon,
     /// Paint depth.
     Brush(DepthStrokeKind),
+    /// Paint a target depth that spreads along the photo's edges (T).
+    Target,
+    /// Pick the target depth from the map (E; Alt+click with the target tool).
+    Eyedropper,
 }
 
 /// The Depth tab.
@@ -27,6 +32,8 @@ pub struct DepthPanel {
     stroke: Vec<[f32; 2]>,
     horizon_drag: Option<f32>,
     shelf: super::shelf::ModelShelf,
+    /// The depth the target tool paints (scene units).
+    target_depth: f32,
 }
 
 impl Default for DepthPanel {
@@ -42,6 +49,7 @@ impl Default for DepthPanel {
             stroke: Vec::new(),
             horizon_drag: None,
             shelf: Default::default(),
+            target_depth: 5.0,
         }
     }
 }
@@ -53,6 +61,28 @@ fn three_figures(v: f32) -> String {
     }
     let digits = (2 - v.abs().log10().floor() as i32).max(0) as usize;
     format!("{v:.digits$}")
+}
+
+/// One edit of the target list, applied to the project's list.
+type TargetChange = Box<dyn FnOnce(&mut Vec<TargetStroke>)>;
+
+/// The scene's depth at image point `q` (working pixels), when inside the photo and usable.
+fn depth_at(snapshot: &crate::app::worker::SceneSnapshot, q: [f32; 2]) -> Option<f32> {
+    let depth = &snapshot.scene.depth.estimate.depth;
+    let (x, y) = (q[0].round(), q[1].round());
+    if x < 0.0 || y < 0.0 || x >= depth.width() as f32 || y >= depth.height() as f32 {
+        return None;
+    }
+    Some(depth.at(x as usize, y as usize)).filter(|z| z.is_finite() && *z > 0.0)
+}
+
+/// The depth map's colour for depth `z` given the shown disparity range (near red, far blue).
+fn depth_colour(range: Option<(f32, f32)>, z: f32) -> Color32 {
+    let Some((lo, hi)) = range else {
+        return Color32::WHITE;
+    };
+    let t = ((1.0 / z.max(1e-9) - lo) / (hi - lo).max(1e-9)).clamp(0.0, 1.0);
+    super::turbo_colour(t)
 }
 
 /// Screen y of the horizon at `fraction` of the photo height.
@@ -142,7 +172,20 @@ impl StagePanel for DepthPanel {
         let horizon = self.horizon_drag.or(classical.horizon).unwrap_or(auto);
         let y = horizon_y(&view, horizon);
         let primary = response.dragged_by(egui::PointerButton::Primary);
+        let picking = self.tool == DepthTool::Eyedropper
+            || (self.tool == DepthTool::Target && ui.input(|i| i.modifiers.alt));
         match self.tool {
+            _ if picking => {
+                ui.ctx().set_cursor_icon(egui::CursorIcon::Crosshair);
+                if response.clicked()
+                    && let Some(p) = response.interact_pointer_pos()
+                    && let Some(z) = depth_at(snapshot, view.to_image(p))
+                {
+                    self.target_depth = z;
+                    self.tool = DepthTool::Target;
+                }
+            }
+            DepthTool::Eyedropper => {}
             DepthTool::Horizon => {
                 let near_line = response.hover_pos().is_some_and(|p| (p.y - y).abs() < 8.0);
                 if near_line || self.horizon_drag.is_some() {
@@ -165,6 +208,33 @@ impl StagePanel for DepthPanel {
                     && let Some(v) = self.horizon_drag.take()
                 {
                     cx.edit("Move horizon", |p| p.depth.classical.horizon = Some(v));
+                }
+            }
+            DepthTool::Target => {
+                if let Some(points) = view.track_stroke(ui, &response, &mut self.stroke) {
+                    let (w, h) = snapshot.scene.input.rgb.size();
+                    let stroke = TargetStroke {
+                        points: points
+                            .iter()
+                            .map(|q| [q[0] / (w.max(2) - 1) as f32, q[1] / (h.max(2) - 1) as f32])
+                            .collect(),
+                        radius: self.radius_px / w.max(1) as f32,
+                        depth: self.target_depth,
+                        hidden: false,
+                    };
+                    cx.edit("Depth target", |p| p.depth.targets.push(stroke));
+                }
+                let r = self.radius_px * view.scale();
+                let colour = depth_colour(shown.depth_range, self.target_depth);
+                if let Some(p) = response.hover_pos() {
+                    painter.circle_stroke(p, r, Stroke::new(2.0, colour));
+                }
+                if self.stroke.len() > 1 {
+                    let pts = self.stroke.iter().map(|q| view.to_screen(*q)).collect();
+                    painter.add(egui::Shape::line(
+                        pts,
+                        Stroke::new((2.0 * r).max(1.0), colour.gamma_multiply(0.5)),
+                    ));
                 }
             }
             DepthTool::Brush(kind) => {
@@ -218,6 +288,52 @@ impl StagePanel for DepthPanel {
                     painter.add(egui::Shape::line(pts, Stroke::new(2.0 * r, colour)));
                 }
             }
+        }
+        // The target strokes, outlined in their depth's colour (hidden ones not drawn).
+        let (w, h) = snapshot.scene.input.rgb.size();
+        for t in cx.current().depth.targets.iter().filter(|t| !t.hidden) {
+            let r = (t.radius * w as f32 * view.scale()).max(1.0);
+            let pts: Vec<_> = t
+                .points
+                .iter()
+                .map(|q| {
+                    view.to_screen([q[0] * (w.max(2) - 1) as f32, q[1] * (h.max(2) - 1) as f32])
+                })
+                .collect();
+            // Its depth's colour over a dark edge, so it shows on a map of the same colour.
+            let colour = depth_colour(shown.depth_range, t.depth);
+            let dark = Color32::from_black_alpha(200);
+            if pts.len() == 1 {
+                painter.circle_stroke(pts[0], r, Stroke::new(4.0, dark));
+                painter.circle_stroke(pts[0], r, Stroke::new(2.0, colour));
+            } else {
+                painter.add(egui::Shape::line(pts.clone(), Stroke::new(5.0, dark)));
+                painter.add(egui::Shape::line(pts, Stroke::new(3.0, colour)));
+            }
+        }
+        // The depth under the cursor, as a number and its colour.
+        if let Some(p) = response.hover_pos()
+            && let Some(z) = depth_at(snapshot, view.to_image(p))
+        {
+            let at = p + egui::vec2(14.0, 14.0);
+            let text = format!("Z {}", three_figures(z));
+            let galley = painter.layout_no_wrap(
+                text,
+                egui::FontId::proportional(12.0),
+                Color32::from_gray(235),
+            );
+            let bg = Rect::from_min_size(at, galley.size() + egui::vec2(22.0, 4.0));
+            painter.rect_filled(bg, 3.0, Color32::from_black_alpha(170));
+            painter.rect_filled(
+                Rect::from_min_size(
+                    at + egui::vec2(3.0, 3.0),
+                    egui::vec2(12.0, galley.size().y - 2.0),
+                ),
+                2.0,
+                depth_colour(shown.depth_range, z),
+            );
+            painter.galley(at + egui::vec2(19.0, 2.0), galley, Color32::WHITE);
+            cx.probe.depth_readout = Some(z);
         }
         // The colour legend: near (red) to far (dark blue), with the depths at both ends.
         if let Some((lo, hi)) = shown.depth_range {
@@ -401,7 +517,22 @@ impl StagePanel for DepthPanel {
             ] {
                 ui.selectable_value(&mut self.tool, DepthTool::Brush(kind), name);
             }
+            ui.selectable_value(&mut self.tool, DepthTool::Target, "set depth (T)")
+                .on_hover_text(
+                    "Paint the target depth below: it spreads over the region the photo's edges \
+                     bound, and the estimate keeps its relief elsewhere",
+                );
+            ui.selectable_value(&mut self.tool, DepthTool::Eyedropper, "pick depth (E)")
+                .on_hover_text("Click the map to take its depth (Alt+click with set depth)");
         });
+        if !ui.ctx().egui_wants_keyboard_input() {
+            if ui.input(|i| i.key_pressed(egui::Key::T) && i.modifiers.is_none()) {
+                self.tool = DepthTool::Target;
+            }
+            if ui.input(|i| i.key_pressed(egui::Key::E) && i.modifiers.is_none()) {
+                self.tool = DepthTool::Eyedropper;
+            }
+        }
         ui.add(
             egui::Slider::new(&mut self.radius_px, 2.0..=200.0)
                 .text("size px")
@@ -423,6 +554,7 @@ impl StagePanel for DepthPanel {
                 cx.edit("Clear depth strokes", |p| p.depth.strokes.clear());
             }
         });
+        self.targets_ui(ui, cx);
         ui.separator();
         ui.heading("Classical estimator");
         let c = &cx.project.depth.classical;
@@ -460,6 +592,88 @@ impl StagePanel for DepthPanel {
             cx.edit("Flatten texture", |p| {
                 p.depth.classical.parsimony_radius = v
             });
+        }
+    }
+}
+
+impl DepthPanel {
+    /// The target depth (typed, picked or dragged) and the list of target strokes, each of
+    /// which can be hidden or deleted (one undo step each).
+    fn targets_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>) {
+        ui.separator();
+        ui.heading("Depth targets");
+        let range = match (cx.early_depth, cx.snapshot) {
+            (Some(e), _) => e.view.depth_range,
+            (None, Some(s)) => s.display.depth.depth_range,
+            (None, None) => None,
+        };
+        ui.horizontal(|ui| {
+            let (rect, _) = ui.allocate_exact_size(egui::vec2(14.0, 14.0), Sense::hover());
+            ui.painter()
+                .rect_filled(rect, 2.0, depth_colour(range, self.target_depth));
+            let label = ui.label("target depth");
+            let speed = 0.02 * self.target_depth.max(0.01);
+            ui.add(
+                egui::DragValue::new(&mut self.target_depth)
+                    .range(1e-3..=1e6)
+                    .speed(speed)
+                    .max_decimals(3),
+            )
+            .labelled_by(label.id);
+        });
+        let targets = cx.project.depth.targets.clone();
+        if targets.is_empty() {
+            ui.weak("none: pick a depth (E), then paint it (T) where the map is wrong");
+            return;
+        }
+        let mut change: Option<(&str, TargetChange)> = None;
+        egui::ScrollArea::vertical()
+            .id_salt("depth-targets")
+            .max_height(140.0)
+            .show(ui, |ui| {
+                for (i, t) in targets.iter().enumerate() {
+                    ui.horizontal(|ui| {
+                        let (rect, _) =
+                            ui.allocate_exact_size(egui::vec2(10.0, 10.0), Sense::hover());
+                        ui.painter()
+                            .rect_filled(rect, 2.0, depth_colour(range, t.depth));
+                        let mut shown = !t.hidden;
+                        if ui
+                            .checkbox(
+                                &mut shown,
+                                format!("#{} Z {}", i + 1, three_figures(t.depth)),
+                            )
+                            .on_hover_text("Hide or show this target (kept in the project)")
+                            .changed()
+                        {
+                            change = Some((
+                                if shown {
+                                    "Show depth target"
+                                } else {
+                                    "Hide depth target"
+                                },
+                                Box::new(move |v: &mut Vec<TargetStroke>| v[i].hidden = !shown),
+                            ));
+                        }
+                        if ui.small_button("Delete").clicked() {
+                            change = Some((
+                                "Delete depth target",
+                                Box::new(move |v: &mut Vec<TargetStroke>| {
+                                    v.remove(i);
+                                }),
+                            ));
+                        }
+                    });
+                }
+            });
+        if ui.button("Clear targets").clicked() {
+            change = Some((
+                "Clear depth targets",
+                Box::new(|v: &mut Vec<TargetStroke>| v.clear()),
+            ));
+        }
+        if let Some((name, apply)) = change {
+            cx.edit(name, |p| apply(&mut p.depth.targets));
         }
     }
 }

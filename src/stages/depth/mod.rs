@@ -81,8 +81,11 @@ pub struct DepthSettings {
     pub horizon: horizon::HorizonParams,
     /// Use this file instead of any estimator.
     pub import: Option<DepthImport>,
-    /// Painted corrections, applied in order on top of the estimate.
+    /// Painted corrections, applied in order on top of the estimate (after the targets).
     pub strokes: Vec<paint::DepthStroke>,
+    /// Strokes carrying a target depth, spread along the photo's edges into a correction of
+    /// the estimate ([`propagate::apply_target_strokes`]); image-relative coordinates.
+    pub targets: Vec<propagate::TargetStroke>,
 }
 
 /// The depth stage's output plus what the user should be told about it.
@@ -150,7 +153,7 @@ pub fn run_depth_stage(
         ));
         Ok(analysis.estimate)
     };
-    let (mut estimate, estimator) = if let Some(import) = &settings.import {
+    let (estimate, estimator) = if let Some(import) = &settings.import {
         let imported = io::import_depth(&import.path, import.kind, w, h)?;
         warnings.extend(imported.warnings);
         let far = imported.depth.data().iter().copied().fold(0.0f32, f32::max);
@@ -209,15 +212,40 @@ pub fn run_depth_stage(
     if let Some(share) = flattened.filter(|s| *s >= FLATTENED_NOTE_SHARE) {
         warnings.push(flattened_note(share));
     }
-    if !settings.strokes.is_empty() {
-        estimate.depth = paint::apply_strokes(&estimate.depth, &settings.strokes)?;
-    }
-    Ok(DepthStageOutput {
+    let mut out = DepthStageOutput {
         estimate,
         estimator,
         warnings,
         cues,
-    })
+    };
+    apply_depth_edits(&mut out, image, &settings.targets, &settings.strokes)?;
+    Ok(out)
+}
+
+/// Applies the artist's depth edits to a stage output computed without them: the target
+/// strokes first (spread by the solver), then the brush strokes (`strokes`, in the photo's
+/// pixels), in order. Adds the solver's lines to the warnings.
+pub fn apply_depth_edits(
+    out: &mut DepthStageOutput,
+    image: &RgbRaster,
+    targets: &[propagate::TargetStroke],
+    strokes: &[paint::DepthStroke],
+) -> Result<()> {
+    if !targets.is_empty() {
+        let (depth, applied) = propagate::apply_target_strokes(
+            image,
+            &out.estimate.depth,
+            targets,
+            &propagate::PropagateParams::default(),
+            None,
+        )?;
+        out.estimate.depth = depth;
+        out.warnings.extend(applied.warnings);
+    }
+    if !strokes.is_empty() {
+        out.estimate.depth = paint::apply_strokes(&out.estimate.depth, strokes)?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]

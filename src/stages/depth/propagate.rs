@@ -40,6 +40,176 @@ pub struct DepthTarget {
     pub depth: f32,
 }
 
+/// A stroke that says "the depth along here is `depth`", as the project stores it: points and
+/// radius relative to the photo (so a project keeps its strokes when the working size or the
+/// photo's resolution changes), spread over the estimate by [`apply_target_strokes`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TargetStroke {
+    /// Points along the stroke: `[x / width, y / height]` of pixel centres, each in `[0, 1]`
+    /// when inside the photo.
+    pub points: Vec<[f32; 2]>,
+    /// Radius, a fraction of the photo's width.
+    pub radius: f32,
+    /// Target depth, scene units (finite, > 0; beyond the far plane it is brought back).
+    pub depth: f32,
+    /// Kept in the project but not applied.
+    #[serde(default)]
+    pub hidden: bool,
+}
+
+/// Most dabs the strokes of one solve are turned into; beyond it, strokes are merged by
+/// spacing their dabs wider (and the stage says so). 10 000 strokes of 20 dabs fit.
+pub const MAX_TARGET_DABS: usize = 200_000;
+
+impl TargetStroke {
+    /// Checks the stroke; `index` names it in the message (`depth.targets[3].depth`).
+    pub fn validate(&self, index: usize) -> Result<()> {
+        let field = |name: &str| format!("depth.targets[{index}].{name}");
+        if self.points.is_empty() {
+            return Err(Error::invalid(format!("{}: no points", field("points"))));
+        }
+        if self
+            .points
+            .iter()
+            .any(|p| !(p[0].is_finite() && p[1].is_finite()))
+        {
+            return Err(Error::invalid(format!(
+                "{}: a point is not finite",
+                field("points")
+            )));
+        }
+        if !(self.radius.is_finite() && self.radius > 0.0 && self.radius <= 1.0) {
+            return Err(Error::invalid(format!(
+                "{}: {} must be in (0, 1] (a fraction of the photo's width)",
+                field("radius"),
+                self.radius
+            )));
+        }
+        if !(self.depth.is_finite() && self.depth > 0.0) {
+            return Err(Error::invalid(format!(
+                "{}: {} must be a finite depth > 0",
+                field("depth"),
+                self.depth
+            )));
+        }
+        Ok(())
+    }
+
+    /// The stroke as dabs on a `w`×`h` photo, `spacing` radii apart along it (at least one
+    /// pixel); dabs that do not touch the photo are dropped (a stroke wholly outside makes none).
+    pub fn dabs(&self, w: usize, h: usize, spacing: f32) -> Vec<DepthTarget> {
+        let r = (self.radius * w as f32).max(0.5);
+        let to_px = |p: [f32; 2]| [p[0] * (w.max(2) - 1) as f32, p[1] * (h.max(2) - 1) as f32];
+        let step = (spacing * r).max(1.0);
+        let mut out = Vec::new();
+        let mut push = |q: [f32; 2]| {
+            let inside =
+                q[0] > -r && q[1] > -r && q[0] < w as f32 - 1.0 + r && q[1] < h as f32 - 1.0 + r;
+            if inside {
+                out.push(DepthTarget {
+                    x: q[0],
+                    y: q[1],
+                    radius_px: r,
+                    depth: self.depth,
+                });
+            }
+        };
+        let pts: Vec<[f32; 2]> = self.points.iter().map(|p| to_px(*p)).collect();
+        push(pts[0]);
+        for pair in pts.windows(2) {
+            let (a, b) = (pair[0], pair[1]);
+            let len = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
+            // Bounded: a point far outside cannot make millions of dabs.
+            let n = ((len / step).ceil() as usize).min(4 * (w + h) / step.max(1.0) as usize + 1);
+            for k in 1..=n {
+                let t = k as f32 / n as f32;
+                push([a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]);
+            }
+        }
+        out
+    }
+}
+
+/// What [`apply_target_strokes`] did besides the depth.
+#[derive(Clone, Debug, Default)]
+pub struct TargetsApplied {
+    /// Lines worth telling the user (far-plane clamps, merged dabs).
+    pub warnings: Vec<String>,
+    /// Seconds the solve took.
+    pub seconds: f64,
+    /// The solve's answer (its correction warm-starts the next solve).
+    pub propagated: Option<Propagated>,
+}
+
+/// Spreads the visible `strokes` over `depth` (the estimate, the photo's size) guided by
+/// `image`: the one path the editor, the command line and `eval scribbles` take. A target
+/// beyond the far plane (the estimate's largest depth) is brought back to it; more dabs than
+/// [`MAX_TARGET_DABS`] are merged by spacing them wider. `warm` is a previous solve's
+/// correction.
+pub fn apply_target_strokes(
+    image: &RgbRaster,
+    depth: &GrayRaster,
+    strokes: &[TargetStroke],
+    params: &PropagateParams,
+    warm: Option<&GrayRaster>,
+) -> Result<(GrayRaster, TargetsApplied)> {
+    let mut applied = TargetsApplied::default();
+    for (i, s) in strokes.iter().enumerate() {
+        s.validate(i)?;
+    }
+    let visible: Vec<&TargetStroke> = strokes.iter().filter(|s| !s.hidden).collect();
+    if visible.is_empty() {
+        return Ok((depth.clone(), applied));
+    }
+    let (w, h) = image.size();
+    let far = depth
+        .data()
+        .iter()
+        .copied()
+        .filter(|z| z.is_finite() && *z > 0.0)
+        .fold(0.0f32, f32::max);
+    let mut clamped = 0;
+    let mut spacing = 0.5f32;
+    let mut dabs = Vec::new();
+    loop {
+        dabs.clear();
+        for s in &visible {
+            dabs.extend(s.dabs(w, h, spacing));
+        }
+        if dabs.len() <= MAX_TARGET_DABS || spacing > 64.0 {
+            break;
+        }
+        spacing *= 2.0;
+    }
+    if spacing > 0.5 {
+        applied.warnings.push(format!(
+            "depth: {} target strokes make more dabs than {MAX_TARGET_DABS}: merged (dabs {spacing} radii apart)",
+            visible.len()
+        ));
+    }
+    if far > 0.0 {
+        for d in &mut dabs {
+            if d.depth > far {
+                d.depth = far;
+                clamped += 1;
+            }
+        }
+    }
+    if clamped > 0 {
+        applied.warnings.push(format!(
+            "depth: a target beyond the far plane ({}) was brought back to it",
+            far
+        ));
+    }
+    let started = std::time::Instant::now();
+    let p = propagate(image, depth, &dabs, params, warm)?;
+    applied.seconds = started.elapsed().as_secs_f64();
+    let out = p.depth.clone();
+    applied.propagated = Some(p);
+    Ok((out, applied))
+}
+
 /// The solver's settings.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PropagateParams {
@@ -714,5 +884,165 @@ mod tests {
         .unwrap();
         let z = p.depth.at(5, 10);
         assert!(z > 2.5 && z < 6.5, "{z}");
+    }
+
+    fn stroke(points: Vec<[f32; 2]>, radius: f32, depth: f32) -> TargetStroke {
+        TargetStroke {
+            points,
+            radius,
+            depth,
+            hidden: false,
+        }
+    }
+
+    #[test]
+    fn target_strokes_become_dabs_along_them_inside_the_photo() {
+        // A 101×51 photo: x / 100, y / 50 are pixel positions. Radius 0.02 of the width: 2 px.
+        let s = stroke(vec![[0.1, 0.2], [0.5, 0.2]], 0.02, 4.0);
+        let dabs = s.dabs(101, 51, 0.5);
+        // From x 10 to 50, a dab every radius / 2 ≈ 1 px: 40 steps, all at y 10, radius 2.02.
+        assert_eq!(dabs.len(), 41);
+        assert_eq!((dabs[0].x, dabs[0].y), (10.0, 10.0));
+        assert!((dabs[40].x - 50.0).abs() < 1e-4);
+        assert!(
+            dabs.iter()
+                .all(|d| (d.radius_px - 2.02).abs() < 1e-5 && d.depth == 4.0 && d.y == 10.0)
+        );
+        // Zero length: one dab. Wholly outside: none. Crossing in from outside: only the part
+        // that touches the photo.
+        assert_eq!(
+            stroke(vec![[0.3, 0.3]], 0.02, 4.0).dabs(101, 51, 0.5).len(),
+            1
+        );
+        assert!(
+            stroke(vec![[-3.0, 0.5], [-2.0, 0.5]], 0.02, 4.0)
+                .dabs(101, 51, 0.5)
+                .is_empty()
+        );
+        let crossing = stroke(vec![[-1.0, 0.5], [0.1, 0.5]], 0.02, 4.0).dabs(101, 51, 0.5);
+        assert!(
+            crossing.iter().all(|d| d.x > -2.0) && crossing.len() == 12,
+            "{}",
+            crossing.len()
+        );
+        // A point absurdly far away cannot make millions of dabs.
+        let huge = stroke(vec![[0.5, 0.5], [1e9, 0.5]], 0.001, 4.0).dabs(101, 51, 0.5);
+        assert!(huge.len() < 2000, "{}", huge.len());
+    }
+
+    #[test]
+    fn target_strokes_are_checked_by_field() {
+        let cases = [
+            (
+                stroke(vec![], 0.01, 2.0),
+                "depth.targets[3].points: no points",
+            ),
+            (
+                stroke(vec![[f32::NAN, 0.0]], 0.01, 2.0),
+                "depth.targets[3].points: a point is not finite",
+            ),
+            (
+                stroke(vec![[0.5, 0.5]], 0.0, 2.0),
+                "depth.targets[3].radius",
+            ),
+            (
+                stroke(vec![[0.5, 0.5]], 2.0, 2.0),
+                "depth.targets[3].radius",
+            ),
+            (
+                stroke(vec![[0.5, 0.5]], 0.01, 0.0),
+                "depth.targets[3].depth",
+            ),
+            (
+                stroke(vec![[0.5, 0.5]], 0.01, -1.0),
+                "depth.targets[3].depth",
+            ),
+            (
+                stroke(vec![[0.5, 0.5]], 0.01, f32::NAN),
+                "depth.targets[3].depth",
+            ),
+            (
+                stroke(vec![[0.5, 0.5]], 0.01, f32::INFINITY),
+                "depth.targets[3].depth",
+            ),
+        ];
+        for (s, needle) in cases {
+            let e = s.validate(3).unwrap_err().to_string();
+            assert!(e.contains(needle), "{needle}: {e}");
+        }
+        assert!(stroke(vec![[0.5, 0.5]], 0.01, 2.0).validate(0).is_ok());
+    }
+
+    #[test]
+    fn target_strokes_spread_clamp_at_the_far_plane_and_stay_bounded() {
+        let (w, h) = (160, 100);
+        let (image, estimate) = two_regions(w, h);
+        let params = PropagateParams::default();
+        // One stroke per region, image-relative: the regions take their depths as the dabs do.
+        let left = stroke(vec![[30.0 / 159.0, 0.5]], 4.0 / 160.0, 2.0);
+        let right = stroke(vec![[130.0 / 159.0, 0.5]], 4.0 / 160.0, 4.0);
+        let (depth, applied) = apply_target_strokes(
+            &image,
+            &estimate,
+            &[left.clone(), right.clone()],
+            &params,
+            None,
+        )
+        .unwrap();
+        assert!(applied.warnings.is_empty(), "{:?}", applied.warnings);
+        assert!(
+            (depth.at(10, 50) / 2.0 - 1.0).abs() < 0.01,
+            "{}",
+            depth.at(10, 50)
+        );
+        assert!(
+            (depth.at(150, 50) / 4.0 - 1.0).abs() < 0.01,
+            "{}",
+            depth.at(150, 50)
+        );
+        // Hidden: as if it were not there.
+        let hidden = TargetStroke {
+            hidden: true,
+            ..right.clone()
+        };
+        let (only_left, _) =
+            apply_target_strokes(&image, &estimate, &[left.clone(), hidden], &params, None)
+                .unwrap();
+        let (alone, _) = apply_target_strokes(
+            &image,
+            &estimate,
+            std::slice::from_ref(&left),
+            &params,
+            None,
+        )
+        .unwrap();
+        assert_eq!(only_left, alone);
+        // Beyond the far plane (the estimate's largest depth, 5.1): brought back to it, said once.
+        let beyond = stroke(vec![[130.0 / 159.0, 0.5]], 4.0 / 160.0, 1e6);
+        let (depth, applied) =
+            apply_target_strokes(&image, &estimate, &[beyond], &params, None).unwrap();
+        let far = estimate.data().iter().copied().fold(0.0f32, f32::max);
+        assert!(
+            (depth.at(150, 50) / far - 1.0).abs() < 0.01,
+            "{} vs {far}",
+            depth.at(150, 50)
+        );
+        assert_eq!(applied.warnings.len(), 1, "{:?}", applied.warnings);
+        assert!(applied.warnings[0].contains("far plane"));
+        // 10 000 long strokes: merged to a bounded number of dabs, said once, no panic.
+        let many: Vec<TargetStroke> = (0..10_000)
+            .map(|k| {
+                let y = (k % 100) as f32 / 99.0;
+                stroke(vec![[0.0, y], [1.0, y]], 0.5 / 160.0, 2.0 + (k % 7) as f32)
+            })
+            .collect();
+        let (depth, applied) =
+            apply_target_strokes(&image, &estimate, &many, &params, None).unwrap();
+        assert!(depth.data().iter().all(|z| z.is_finite() && *z > 0.0));
+        assert!(
+            applied.warnings.iter().any(|w| w.contains("merged")),
+            "{:?}",
+            applied.warnings
+        );
     }
 }
