@@ -58,7 +58,7 @@ impl RuntimeRelease {
 }
 
 /// The CPython 3.12 wheels of onnxruntime 1.31.1 (any CPython tag carries the same library;
-/// sizes and SHA-256 from PyPI's index, https://pypi.org/simple/onnxruntime/).
+/// sizes and SHA-256 from PyPI's index, <https://pypi.org/simple/onnxruntime/>).
 pub static RUNTIME_RELEASES: &[RuntimeRelease] = &[
     RuntimeRelease {
         os: "linux",
