@@ -1247,3 +1247,59 @@ fn depth_targets_are_picked_painted_spread_hidden_and_undone() {
     assert_eq!(h.state().project().unwrap().depth.targets.len(), 1);
     wait_idle(&mut h, limit);
 }
+
+#[test]
+fn a_region_pops_up_as_a_card() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(mut h) = harness(fast_project(dir.path())) else {
+        return;
+    };
+    let limit = Duration::from_secs(600);
+    wait_idle(&mut h, limit);
+    h.get_by_label("3 Depth").click();
+    h.step();
+    h.step();
+    h.key_press(egui::Key::R);
+    h.step();
+    let view = h.state().probe().view.expect("the depth view");
+    let at = view.rect.lerp_inside(egui::vec2(0.5, 0.85));
+    h.hover_at(at);
+    h.step();
+    h.drag_at(at);
+    h.step();
+    h.drop_at(at);
+    h.step();
+    h.step();
+    h.state_mut().clear_notices();
+    h.get_by_label("Card facing the camera").scroll_to_me();
+    h.step();
+    h.step();
+    h.step();
+    h.get_by_label("Card facing the camera").click();
+    h.step();
+    h.step();
+    let popups = h.state().project().unwrap().depth.popups.clone();
+    assert_eq!(popups.len(), 1, "one pop-up");
+    let makeit4d::stages::depth::regions::PopUpShape::Facing { depth: want } = popups[0].shape
+    else {
+        panic!("a card facing the camera: {:?}", popups[0].shape);
+    };
+    assert!(
+        (popups[0].seeds[0][1] - 0.85).abs() < 0.02,
+        "{:?}",
+        popups[0].seeds
+    );
+    wait_idle(&mut h, limit);
+    // The built depth at the click is the card's depth.
+    let snapshot = h.state().snapshot().unwrap();
+    let depth = &snapshot.scene.depth.estimate.depth;
+    let (w, hgt) = depth.size();
+    let z = depth.at(
+        (0.5 * (w - 1) as f32) as usize,
+        (0.85 * (hgt - 1) as f32) as usize,
+    );
+    assert_eq!(z, want);
+    h.state_mut().undo();
+    wait_idle(&mut h, limit);
+    assert!(h.state().project().unwrap().depth.popups.is_empty());
+}

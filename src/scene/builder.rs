@@ -416,9 +416,12 @@ impl SceneBuilder {
         let unpainted_settings = crate::stages::depth::DepthSettings {
             strokes: Vec::new(),
             targets: Vec::new(),
+            popups: Vec::new(),
             ..project.depth.clone()
         };
-        let edited = !strokes.is_empty() || !project.depth.targets.is_empty();
+        let edited = !strokes.is_empty()
+            || !project.depth.targets.is_empty()
+            || !project.depth.popups.is_empty();
         let unpainted_key = key_of(key, &(&unpainted_settings, project.camera.hfov_deg));
         let key = key_of(
             key,
@@ -462,7 +465,8 @@ impl SceneBuilder {
                 crate::stages::depth::apply_depth_edits(
                     &mut out,
                     &input.rgb,
-                    &project.depth.targets,
+                    &intrinsics,
+                    &project.depth,
                     strokes,
                 )?;
                 Ok(out)

@@ -51,6 +51,7 @@ impl CacheBytes for crate::stages::depth::DepthStageOutput {
             + e.sky.heap_bytes()
             + e.confidence.heap_bytes()
             + self.cues.as_ref().map_or(0, |c| c.map.heap_bytes())
+            + self.unedited.as_ref().map_or(0, |d| d.heap_bytes())
     }
 }
 

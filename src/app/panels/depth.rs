@@ -5,6 +5,7 @@ use crate::app::viewport::{ImageView, ViewTransform};
 use crate::stages::depth::DepthMethod;
 use crate::stages::depth::paint::{DepthStroke, DepthStrokeKind};
 use crate::stages::depth::propagate::TargetStroke;
+use crate::stages::depth::regions::{PopUp, PopUpShape, Regions};
 use eframe::egui::{self, Color32, Rect, Sense, Stroke, Ui, pos2};
 
 /// What a drag on the depth view does.
@@ -18,6 +19,8 @@ pub enum DepthTool {
     Target,
     /// Pick the target depth from the map (E; Alt+click with the target tool).
     Eyedropper,
+    /// Choose regions to pop up (R; Shift+click adds).
+    Region,
 }
 
 /// The Depth tab.
@@ -34,6 +37,10 @@ pub struct DepthPanel {
     shelf: super::shelf::ModelShelf,
     /// The depth the target tool paints (scene units).
     target_depth: f32,
+    /// The regions chosen with the region tool (image-relative clicks).
+    selection: Vec<[f32; 2]>,
+    /// The photo's regions, for the scene generation they were found for.
+    regions: Option<(u64, std::sync::Arc<Regions>)>,
 }
 
 impl Default for DepthPanel {
@@ -50,6 +57,8 @@ impl Default for DepthPanel {
             horizon_drag: None,
             shelf: Default::default(),
             target_depth: 5.0,
+            selection: Vec::new(),
+            regions: None,
         }
     }
 }
@@ -61,6 +70,47 @@ fn three_figures(v: f32) -> String {
     }
     let digits = (2 - v.abs().log10().floor() as i32).max(0) as usize;
     format!("{v:.digits$}")
+}
+
+/// Draws the boundary of the regions `labels` over the view (the photo is `size` pixels).
+fn outline(
+    painter: &egui::Painter,
+    view: &ImageView,
+    regions: &Regions,
+    labels: &[u32],
+    size: [usize; 2],
+    colour: Color32,
+) {
+    if labels.is_empty() {
+        return;
+    }
+    let (sw, sh) = regions.labels.size();
+    let fx = size[0] as f32 / sw as f32;
+    let fy = size[1] as f32 / sh as f32;
+    let inside = |x: usize, y: usize| labels.contains(&regions.labels.at(x, y));
+    let stroke = Stroke::new(1.5, colour);
+    for y in 0..sh {
+        for x in 0..sw {
+            let here = inside(x, y);
+            // An edge between this cell and its right / lower neighbour (or the photo's side).
+            let right = if x + 1 < sw { inside(x + 1, y) } else { false };
+            let below = if y + 1 < sh { inside(x, y + 1) } else { false };
+            let (x0, y0) = (x as f32 * fx - 0.5, y as f32 * fy - 0.5);
+            let (x1, y1) = ((x + 1) as f32 * fx - 0.5, (y + 1) as f32 * fy - 0.5);
+            if here != right && (here || x + 1 < sw) {
+                painter.line_segment([view.to_screen([x1, y0]), view.to_screen([x1, y1])], stroke);
+            }
+            if here != below && (here || y + 1 < sh) {
+                painter.line_segment([view.to_screen([x0, y1]), view.to_screen([x1, y1])], stroke);
+            }
+            if here && x == 0 {
+                painter.line_segment([view.to_screen([x0, y0]), view.to_screen([x0, y1])], stroke);
+            }
+            if here && y == 0 {
+                painter.line_segment([view.to_screen([x0, y0]), view.to_screen([x1, y0])], stroke);
+            }
+        }
+    }
 }
 
 /// One edit of the target list, applied to the project's list.
@@ -186,6 +236,48 @@ impl StagePanel for DepthPanel {
                 }
             }
             DepthTool::Eyedropper => {}
+            DepthTool::Region => {
+                let regions = self.regions_of(snapshot);
+                let (w, h) = snapshot.scene.input.rgb.size();
+                let rel =
+                    |q: [f32; 2]| [q[0] / (w.max(2) - 1) as f32, q[1] / (h.max(2) - 1) as f32];
+                ui.ctx().set_cursor_icon(egui::CursorIcon::PointingHand);
+                if let Some(p) = response.hover_pos()
+                    && let Some(label) = regions.at(rel(view.to_image(p)))
+                {
+                    outline(
+                        &painter,
+                        &view,
+                        &regions,
+                        &[label],
+                        [w, h],
+                        Color32::from_gray(230),
+                    );
+                }
+                if response.clicked()
+                    && let Some(p) = response.interact_pointer_pos()
+                {
+                    let at = rel(view.to_image(p));
+                    if ui.input(|i| i.modifiers.shift) {
+                        self.selection.push(at);
+                    } else {
+                        self.selection = vec![at];
+                    }
+                }
+                let chosen: Vec<u32> = self
+                    .selection
+                    .iter()
+                    .filter_map(|s| regions.at(*s))
+                    .collect();
+                outline(
+                    &painter,
+                    &view,
+                    &regions,
+                    &chosen,
+                    [w, h],
+                    Color32::from_rgb(255, 220, 0),
+                );
+            }
             DepthTool::Horizon => {
                 let near_line = response.hover_pos().is_some_and(|p| (p.y - y).abs() < 8.0);
                 if near_line || self.horizon_drag.is_some() {
@@ -532,6 +624,9 @@ impl StagePanel for DepthPanel {
             if ui.input(|i| i.key_pressed(egui::Key::E) && i.modifiers.is_none()) {
                 self.tool = DepthTool::Eyedropper;
             }
+            if ui.input(|i| i.key_pressed(egui::Key::R) && i.modifiers.is_none()) {
+                self.tool = DepthTool::Region;
+            }
         }
         ui.add(
             egui::Slider::new(&mut self.radius_px, 2.0..=200.0)
@@ -555,6 +650,7 @@ impl StagePanel for DepthPanel {
             }
         });
         self.targets_ui(ui, cx);
+        self.popups_ui(ui, cx);
         ui.separator();
         ui.heading("Classical estimator");
         let c = &cx.project.depth.classical;
@@ -596,7 +692,202 @@ impl StagePanel for DepthPanel {
     }
 }
 
+/// One edit of the pop-up list.
+type PopUpChange = Box<dyn FnOnce(&mut Vec<PopUp>)>;
+
 impl DepthPanel {
+    /// The photo's regions as the depth stage finds them (on the depth before edits), found
+    /// once per scene.
+    fn regions_of(
+        &mut self,
+        snapshot: &crate::app::worker::SceneSnapshot,
+    ) -> std::sync::Arc<Regions> {
+        if let Some((generation, r)) = &self.regions
+            && *generation == snapshot.generation
+        {
+            return r.clone();
+        }
+        let depth = &snapshot.scene.depth;
+        let guide = depth.unedited.as_deref().unwrap_or(&depth.estimate.depth);
+        let found = Regions::find(&snapshot.scene.input.rgb, guide).unwrap_or(Regions {
+            labels: crate::raster::Raster::new(1, 1, 0),
+            count: 1,
+        });
+        let found = std::sync::Arc::new(found);
+        self.regions = Some((snapshot.generation, found.clone()));
+        found
+    }
+
+    /// The chosen regions' buttons (card facing the camera, on the ground, tilted) and the
+    /// list of pop-ups, each of which can be edited, hidden or deleted (one undo step each).
+    fn popups_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>) {
+        ui.separator();
+        ui.heading("Pop-up regions");
+        ui.selectable_value(&mut self.tool, DepthTool::Region, "choose regions (R)")
+            .on_hover_text("Click a region of the photo; Shift+click adds another");
+        if self.selection.is_empty() {
+            ui.weak("none chosen: choose regions (R), then make them a plane");
+        } else {
+            ui.label(format!("{} click(s) chosen", self.selection.len()));
+            let seeds = self.selection.clone();
+            let mut made = None;
+            ui.horizontal_wrapped(|ui| {
+                if ui
+                    .button("Card facing the camera")
+                    .on_hover_text("Every pixel of the region at the target depth")
+                    .clicked()
+                {
+                    made = Some(PopUpShape::Facing {
+                        depth: self.target_depth,
+                    });
+                }
+                if ui
+                    .button("Card on the ground")
+                    .on_hover_text("Facing the camera, standing where its lowest pixels touch the ground plane")
+                    .clicked()
+                {
+                    made = Some(PopUpShape::Ground);
+                }
+                if ui
+                    .button("Tilted plane")
+                    .on_hover_text("From the region's top to its foot, each end at the depth the map has there; edit the two depths below")
+                    .clicked()
+                    && let Some(snapshot) = cx.snapshot
+                {
+                    let regions = self.regions_of(snapshot);
+                    let chosen: Vec<u32> = seeds.iter().filter_map(|s| regions.at(*s)).collect();
+                    let (sw, sh) = regions.labels.size();
+                    let mut rows = (usize::MAX, 0usize);
+                    let mut xs = (0usize, 0usize);
+                    for y in 0..sh {
+                        for x in 0..sw {
+                            if chosen.contains(&regions.labels.at(x, y)) {
+                                rows = (rows.0.min(y), rows.1.max(y));
+                                xs = (xs.0 + x, xs.1 + 1);
+                            }
+                        }
+                    }
+                    if xs.1 > 0 {
+                        let cx_rel = (xs.0 as f32 / xs.1 as f32) / (sw.max(2) - 1) as f32;
+                        let from = [cx_rel, rows.0 as f32 / (sh.max(2) - 1) as f32];
+                        let to = [cx_rel, rows.1 as f32 / (sh.max(2) - 1) as f32];
+                        let (w, h) = snapshot.scene.input.rgb.size();
+                        let px = |q: [f32; 2]| [q[0] * (w.max(2) - 1) as f32, q[1] * (h.max(2) - 1) as f32];
+                        let fallback = self.target_depth;
+                        made = Some(PopUpShape::Tilted {
+                            from,
+                            from_depth: depth_at(snapshot, px(from)).unwrap_or(fallback),
+                            to,
+                            to_depth: depth_at(snapshot, px(to)).unwrap_or(fallback),
+                        });
+                    }
+                }
+                if ui.button("Clear choice").clicked() {
+                    self.selection.clear();
+                }
+            });
+            if let Some(shape) = made {
+                let popup = PopUp {
+                    seeds,
+                    shape,
+                    hidden: false,
+                };
+                cx.edit("Pop-up region", |p| p.depth.popups.push(popup));
+                self.selection.clear();
+            }
+        }
+        let popups = cx.project.depth.popups.clone();
+        let mut change: Option<(&str, PopUpChange)> = None;
+        for (i, p) in popups.iter().enumerate() {
+            ui.horizontal(|ui| {
+                let what = match &p.shape {
+                    PopUpShape::Facing { .. } => "card",
+                    PopUpShape::Ground => "on the ground",
+                    PopUpShape::Tilted { .. } => "tilted",
+                };
+                let mut shown = !p.hidden;
+                if ui
+                    .checkbox(&mut shown, format!("pop-up #{} {what}", i + 1))
+                    .changed()
+                {
+                    change = Some((
+                        if shown { "Show pop-up" } else { "Hide pop-up" },
+                        Box::new(move |v: &mut Vec<PopUp>| v[i].hidden = !shown),
+                    ));
+                }
+                match p.shape {
+                    PopUpShape::Facing { depth } => {
+                        if let Some(d) =
+                            committed(ui, &format!("popup-depth-{i}"), depth, |ui, v| {
+                                ui.add(
+                                    egui::DragValue::new(v)
+                                        .range(1e-3..=1e6)
+                                        .speed(0.02 * depth.max(0.01)),
+                                )
+                            })
+                        {
+                            change = Some((
+                                "Pop-up depth",
+                                Box::new(move |v: &mut Vec<PopUp>| {
+                                    v[i].shape = PopUpShape::Facing { depth: d }
+                                }),
+                            ));
+                        }
+                    }
+                    PopUpShape::Tilted {
+                        from,
+                        from_depth,
+                        to,
+                        to_depth,
+                    } => {
+                        let top = committed(ui, &format!("popup-from-{i}"), from_depth, |ui, v| {
+                            ui.add(
+                                egui::DragValue::new(v)
+                                    .range(1e-3..=1e6)
+                                    .speed(0.02 * from_depth.max(0.01))
+                                    .prefix("top "),
+                            )
+                        });
+                        let foot = committed(ui, &format!("popup-to-{i}"), to_depth, |ui, v| {
+                            ui.add(
+                                egui::DragValue::new(v)
+                                    .range(1e-3..=1e6)
+                                    .speed(0.02 * to_depth.max(0.01))
+                                    .prefix("foot "),
+                            )
+                        });
+                        if top.is_some() || foot.is_some() {
+                            let (a, b) = (top.unwrap_or(from_depth), foot.unwrap_or(to_depth));
+                            change = Some((
+                                "Pop-up tilt",
+                                Box::new(move |v: &mut Vec<PopUp>| {
+                                    v[i].shape = PopUpShape::Tilted {
+                                        from,
+                                        from_depth: a,
+                                        to,
+                                        to_depth: b,
+                                    }
+                                }),
+                            ));
+                        }
+                    }
+                    PopUpShape::Ground => {}
+                }
+                if ui.small_button("Delete").clicked() {
+                    change = Some((
+                        "Delete pop-up",
+                        Box::new(move |v: &mut Vec<PopUp>| {
+                            v.remove(i);
+                        }),
+                    ));
+                }
+            });
+        }
+        if let Some((name, apply)) = change {
+            cx.edit(name, |p| apply(&mut p.depth.popups));
+        }
+    }
+
     /// The target depth (typed, picked or dragged) and the list of target strokes, each of
     /// which can be hidden or deleted (one undo step each).
     fn targets_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>) {

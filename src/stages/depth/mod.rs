@@ -11,6 +11,7 @@ pub mod ordinal;
 pub mod paint;
 pub mod preview;
 pub mod propagate;
+pub mod regions;
 
 use crate::error::Result;
 use crate::geometry::Intrinsics;
@@ -86,6 +87,9 @@ pub struct DepthSettings {
     /// Strokes carrying a target depth, spread along the photo's edges into a correction of
     /// the estimate ([`propagate::apply_target_strokes`]); image-relative coordinates.
     pub targets: Vec<propagate::TargetStroke>,
+    /// Regions made planes (cards facing the camera, standing on the ground, tilted), applied
+    /// after the targets; image-relative clicks.
+    pub popups: Vec<regions::PopUp>,
 }
 
 /// The depth stage's output plus what the user should be told about it.
@@ -99,6 +103,9 @@ pub struct DepthStageOutput {
     pub warnings: Vec<String>,
     /// Which cue decided each region, when the classical estimator ran.
     pub cues: Option<DepthCues>,
+    /// The depth before the artist's edits (targets, pop-ups, brushes), when there were any:
+    /// what the editor's regions are found on, so they match the stage's.
+    pub unedited: Option<std::sync::Arc<GrayRaster>>,
 }
 
 /// The classical estimator's account of a depth map, for the editor.
@@ -217,30 +224,59 @@ pub fn run_depth_stage(
         estimator,
         warnings,
         cues,
+        unedited: None,
     };
-    apply_depth_edits(&mut out, image, &settings.targets, &settings.strokes)?;
+    apply_depth_edits(&mut out, image, intrinsics, settings, &settings.strokes)?;
     Ok(out)
 }
 
 /// Applies the artist's depth edits to a stage output computed without them: the target
-/// strokes first (spread by the solver), then the brush strokes (`strokes`, in the photo's
-/// pixels), in order. Adds the solver's lines to the warnings.
+/// strokes first (spread by the solver), then the pop-up regions (planes; the ground card's
+/// ground from the classical settings' camera height and the horizon set, detected or
+/// assumed), then the brush strokes (`strokes`, in the photo's pixels), in order. Adds the
+/// solver's lines to the warnings.
 pub fn apply_depth_edits(
     out: &mut DepthStageOutput,
     image: &RgbRaster,
-    targets: &[propagate::TargetStroke],
+    intrinsics: &Intrinsics,
+    settings: &DepthSettings,
     strokes: &[paint::DepthStroke],
 ) -> Result<()> {
-    if !targets.is_empty() {
+    if settings.targets.is_empty() && settings.popups.is_empty() && strokes.is_empty() {
+        return Ok(());
+    }
+    let before = std::sync::Arc::new(out.estimate.depth.clone());
+    out.unedited = Some(before.clone());
+    let estimate = (!settings.popups.is_empty()).then_some(before);
+    if !settings.targets.is_empty() {
         let (depth, applied) = propagate::apply_target_strokes(
             image,
             &out.estimate.depth,
-            targets,
+            &settings.targets,
             &propagate::PropagateParams::default(),
             None,
         )?;
         out.estimate.depth = depth;
         out.warnings.extend(applied.warnings);
+    }
+    if let Some(estimate) = estimate {
+        let horizon = settings
+            .classical
+            .horizon
+            .or(out.cues.as_ref().and_then(|c| c.detected_horizon))
+            .unwrap_or(settings.classical.default_horizon);
+        let ground = regions::GroundPlane {
+            horizon,
+            camera_height: settings.classical.camera_height_m,
+        };
+        regions::apply_popups(
+            image,
+            &estimate,
+            &mut out.estimate.depth,
+            &settings.popups,
+            ground,
+            intrinsics,
+        )?;
     }
     if !strokes.is_empty() {
         out.estimate.depth = paint::apply_strokes(&out.estimate.depth, strokes)?;
@@ -323,5 +359,55 @@ mod tests {
         settings.method = DepthMethod::Horizon;
         let out = run_depth_stage(&settings, &img, &intrinsics, &Progress::none()).unwrap();
         assert!(out.cues.is_none());
+    }
+
+    #[test]
+    fn targets_and_popups_round_trip_and_apply_in_the_stage() {
+        use super::propagate::TargetStroke;
+        use super::regions::{PopUp, PopUpShape};
+        let (w, h) = (96, 64);
+        let img = Raster::from_fn(w, h, |x, y| {
+            if y < 24 {
+                [0.5, 0.7, 0.95]
+            } else if (30..60).contains(&x) && (34..54).contains(&y) {
+                [0.8, 0.1, 0.1]
+            } else {
+                [0.3, 0.25, 0.1]
+            }
+        });
+        let intrinsics = Intrinsics::from_hfov(w, h, 60.0);
+        let mut settings = DepthSettings::default();
+        settings.targets.push(TargetStroke {
+            points: vec![[0.1, 0.9], [0.2, 0.9]],
+            radius: 0.03,
+            depth: 2.5,
+            hidden: false,
+        });
+        settings.popups.push(PopUp {
+            seeds: vec![[45.0 / 95.0, 44.0 / 63.0]],
+            shape: PopUpShape::Facing { depth: 3.25 },
+            hidden: false,
+        });
+        let json = serde_json::to_string(&settings).unwrap();
+        let back: DepthSettings = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, settings);
+        let out = run_depth_stage(&settings, &img, &intrinsics, &Progress::none()).unwrap();
+        assert_eq!(out.estimate.depth.at(45, 44), 3.25);
+        let z = out.estimate.depth.at(14, 57);
+        assert!((z / 2.5 - 1.0).abs() < 0.05, "{z}");
+        // The depth before the edits is kept for the editor's regions.
+        let bare = run_depth_stage(
+            &DepthSettings::default(),
+            &img,
+            &intrinsics,
+            &Progress::none(),
+        )
+        .unwrap();
+        assert_eq!(out.unedited.as_deref(), Some(&bare.estimate.depth));
+        assert!(bare.unedited.is_none());
+        // A bad field is named.
+        settings.popups[0].shape = PopUpShape::Facing { depth: -1.0 };
+        let e = run_depth_stage(&settings, &img, &intrinsics, &Progress::none()).unwrap_err();
+        assert!(e.to_string().contains("depth.popups[0].shape.depth"), "{e}");
     }
 }
