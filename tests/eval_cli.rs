@@ -359,3 +359,29 @@ fn eval_scribbles_strokes_improve_the_depth() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("ascending"));
 }
+
+#[test]
+fn bench_depth_times_the_strokes_solve() {
+    let out = exe()
+        .args(["bench", "depth", "--runs", "1", "--strokes", "3", "--image"])
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/evening_glow_320.jpg"))
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let row = text
+        .lines()
+        .find(|l| l.starts_with("| 3 | 320×"))
+        .unwrap_or_else(|| panic!("a strokes row:\n{text}"));
+    let cells: Vec<f64> = row
+        .split('|')
+        .filter_map(|c| c.trim().parse::<f64>().ok())
+        .collect();
+    // strokes, cold seconds, warm seconds.
+    assert_eq!(cells.len(), 3, "{row}");
+    assert!(cells[1] > 0.0 && cells[2] > 0.0, "{row}");
+}

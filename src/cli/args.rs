@@ -312,6 +312,9 @@ pub(crate) struct EvalScribblesArgs {
     /// Feature-space solver: the weight of "no correction".
     #[arg(long)]
     pub(crate) kappa: Option<f32>,
+    /// Smallest neighbour affinity of the Laplacian solver (default: the solver's own).
+    #[arg(long)]
+    pub(crate) affinity_floor: Option<f32>,
     /// Inpainting preset of the novel views: draft, preview or final.
     #[arg(long, default_value = "preview")]
     pub(crate) inpaint_preset: String,
@@ -680,6 +683,11 @@ pub(crate) struct BenchDepthArgs {
     /// Number of runs.
     #[arg(long, default_value_t = 5)]
     pub(crate) runs: usize,
+    /// Also time the solve of depth targets: N strokes (spread over the photo, depths the
+    /// estimate's × 0.7 or × 1.4), the N-th warm-started from the first N − 1, as the editor's
+    /// next stroke is.
+    #[arg(long)]
+    pub(crate) strokes: Option<usize>,
 }
 
 #[derive(Args, Debug)]

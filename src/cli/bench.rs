@@ -17,6 +17,59 @@ pub(crate) fn bench_depth(args: BenchDepthArgs) -> anyhow::Result<()> {
     let image = makeit4d::image_io::load_image(&args.image)?;
     let bench = makeit4d::stages::depth::eval::bench_classical_depth(&image.rgb, args.runs.max(1))?;
     print!("{}", bench.to_markdown());
+    if let Some(n) = args.strokes.filter(|n| *n > 0) {
+        bench_strokes(&image.rgb, n, args.runs.max(1))?;
+    }
+    Ok(())
+}
+
+/// `bench depth --strokes N`: the median seconds of a cold solve of N target strokes and of
+/// the N-th stroke warm-started from the solve of the first N − 1.
+fn bench_strokes(image: &makeit4d::raster::RgbRaster, n: usize, runs: usize) -> anyhow::Result<()> {
+    use makeit4d::stages::depth::propagate::{PropagateParams, TargetStroke, apply_target_strokes};
+    let (w, h) = image.size();
+    let intrinsics = makeit4d::geometry::Intrinsics::from_hfov(w, h, 60.0);
+    let out = makeit4d::stages::depth::run_depth_stage(
+        &Default::default(),
+        image,
+        &intrinsics,
+        &makeit4d::progress::Progress::none(),
+    )?;
+    let depth = &out.estimate.depth;
+    // Strokes on a golden-ratio lattice, each a short horizontal dab line.
+    let strokes: Vec<TargetStroke> = (0..n)
+        .map(|k| {
+            let x = (0.1 + 0.8 * ((k as f32 * 0.618_034) % 1.0)).min(0.85);
+            let y = 0.1 + 0.8 * (k as f32 + 0.5) / n as f32;
+            let z = depth.at((x * (w - 1) as f32) as usize, (y * (h - 1) as f32) as usize);
+            TargetStroke {
+                points: vec![[x, y], [x + 0.05, y]],
+                radius: 0.01,
+                depth: z * if k % 2 == 0 { 0.7 } else { 1.4 },
+                hidden: false,
+            }
+        })
+        .collect();
+    let params = PropagateParams::default();
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let mut cold = Vec::new();
+    let mut warm = Vec::new();
+    for _ in 0..runs {
+        let (_, all) = apply_target_strokes(image, depth, &strokes, &params, None)?;
+        cold.push(all.seconds);
+        let (_, first) = apply_target_strokes(image, depth, &strokes[..n - 1], &params, None)?;
+        let start = first.propagated.as_ref().map(|p| &p.correction);
+        let (_, next) = apply_target_strokes(image, depth, &strokes, &params, start)?;
+        warm.push(next.seconds);
+    }
+    println!(
+        "\n| strokes | photo | cold solve (s, median of {runs}) | next stroke warm-started (s) |\n|---:|---|---:|---:|\n| {n} | {w}×{h} | {:.3} | {:.3} |",
+        median(cold),
+        median(warm)
+    );
     Ok(())
 }
 

@@ -198,6 +198,9 @@ pub(crate) fn eval_scribbles(
     if let Some(v) = args.sigma_space {
         options.params.sigma_space = v;
     }
+    if let Some(v) = args.affinity_floor {
+        options.params.affinity_floor = v;
+    }
     if let Some(v) = args.kappa {
         options.params.kappa = v;
     }

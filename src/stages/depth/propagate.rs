@@ -236,6 +236,11 @@ pub struct PropagateParams {
     /// stroke is similar).
     #[serde(default = "default_kappa")]
     pub kappa: f32,
+    /// Smallest affinity between neighbours (Laplacian mode), so that a small patch enclosed by
+    /// strong edges (an eye in a face) follows what surrounds it instead of keeping the
+    /// estimate's depth; strokes of two depths still make a step at an edge.
+    #[serde(default)]
+    pub affinity_floor: f32,
 }
 
 fn default_sigma_space() -> f32 {
@@ -273,6 +278,7 @@ impl Default for PropagateParams {
             mode: PropagateMode::default(),
             sigma_space: default_sigma_space(),
             kappa: default_kappa(),
+            affinity_floor: 0.0,
         }
     }
 }
@@ -549,7 +555,7 @@ fn solve_level(
         let (ca, cb) = (colour_grid.data()[a], colour_grid.data()[b]);
         let dc = (ca[0] - cb[0]).powi(2) + (ca[1] - cb[1]).powi(2) + (ca[2] - cb[2]).powi(2);
         let dz = (log_grid.data()[a] - log_grid.data()[b]).powi(2);
-        params.lambda * (-dc / two_sc).exp() * (-dz / two_sz).exp()
+        params.lambda * ((-dc / two_sc).exp() * (-dz / two_sz).exp()).max(params.affinity_floor)
     };
     let n = gw * gh;
     let mut right = vec![0.0f32; n];
