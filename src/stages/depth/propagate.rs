@@ -424,6 +424,7 @@ pub fn propagate(
         let (gx, gy) = ((x as f32 + 0.5) * sx - 0.5, (y as f32 + 0.5) * sy - 0.5);
         let (fx, fy) = (gx.floor(), gy.floor());
         let colour = image.at(x, y);
+        let here = log_e.at(x, y);
         let (mut acc, mut total) = (0.0f32, 0.0f32);
         for dy in -1i32..=2 {
             for dx in -1i32..=2 {
@@ -438,8 +439,9 @@ pub fn propagate(
                 let dc = (colour[0] - cc[0]).powi(2)
                     + (colour[1] - cc[1]).powi(2)
                     + (colour[2] - cc[2]).powi(2);
-                let dz = (log_e.at(x, y) - log_grid.at(cxu, cyu)).powi(2);
-                let wgt = spatial * (-dc / two_sc).exp() * (-dz / two_sz).exp() + 1e-12 * spatial;
+                let dz = (here - log_grid.at(cxu, cyu)).powi(2);
+                // One exponential for both range terms (this loop is most of a solve).
+                let wgt = spatial * ((-dc / two_sc - dz / two_sz).exp() + 1e-12);
                 acc += wgt * correction.at(cxu, cyu);
                 total += wgt;
             }
