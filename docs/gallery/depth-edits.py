@@ -1,0 +1,35 @@
+# The edits behind docs/gallery/depth-edits-before-after.jpg (docs/measurements.md, "Depth edits"):
+# adds depth.targets and depth.popups to projects saved by `makeit4d render PHOTO --save-project NAME.json`
+# for ../shared/data/wild/{astronaut.png,garden.jpg,storm.jpg}, writing NAME_edited.json.
+import json
+def stroke(pts, depth, radius=0.02):
+    return {"points": pts, "radius": radius, "depth": depth, "hidden": False}
+def facing(seeds, depth):
+    return {"seeds": seeds, "shape": {"kind": "facing", "depth": depth}, "hidden": False}
+def tilted(seeds, a, da, b, db):
+    return {"seeds": seeds, "shape": {"kind": "tilted", "from": a, "from_depth": da, "to": b, "to_depth": db}, "hidden": False}
+edits = {
+  "astronaut": (
+    [stroke([[0.36,0.27],[0.5,0.27]], 4.3), stroke([[0.38,0.12],[0.52,0.12]], 4.5),
+     stroke([[0.33,0.42],[0.52,0.42]], 4.0), stroke([[0.72,0.2],[0.78,0.45]], 6.0),
+     stroke([[0.05,0.3],[0.1,0.6]], 7.0)],
+    [facing([[0.6,0.08],[0.62,0.3]], 12.0), facing([[0.72,0.82]], 2.8)]),
+  "garden": (
+    [stroke([[0.65,0.25],[0.8,0.45]], 5.0), stroke([[0.42,0.55],[0.55,0.58]], 5.0),
+     stroke([[0.05,0.5],[0.3,0.5]], 14.0), stroke([[0.85,0.1],[0.95,0.1]], 14.0),
+     stroke([[0.15,0.85]], 7.0, 0.03)],
+    [facing([[0.2,0.3],[0.4,0.15]], 16.0), facing([[0.15,0.85]], 7.0)]),
+  "storm": (
+    [stroke([[0.1,0.97],[0.9,0.97]], 9.0), stroke([[0.1,0.85],[0.9,0.85]], 11.5),
+     stroke([[0.1,0.75],[0.9,0.75]], 21.0), stroke([[0.1,0.7],[0.9,0.7]], 45.0),
+     stroke([[0.1,0.66],[0.9,0.66]], 120.0)],
+    [tilted([[0.5,0.66],[0.5,0.7],[0.5,0.73],[0.5,0.75],[0.5,0.8],[0.5,0.85],[0.5,0.9],[0.5,0.95],[0.2,0.8],[0.8,0.8]],
+            [0.5,0.63], 250.0, [0.5,0.99], 9.0),
+     facing([[0.5,0.64],[0.2,0.63],[0.8,0.63]], 250.0)]),
+}
+for name,(targets,popups) in edits.items():
+    p = json.load(open(f'{name}.json'))
+    p['depth']['targets'] = targets
+    p['depth']['popups'] = popups
+    json.dump(p, open(f'{name}_edited.json','w'), indent=1)
+print("ok")
