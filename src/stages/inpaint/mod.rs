@@ -16,6 +16,7 @@ pub mod harmonic;
 pub mod onnx;
 pub mod patchmatch;
 pub mod salient;
+pub mod schedule;
 
 pub use bench::{BenchOptions, BenchRow, bench_inpaint, format_bench_table};
 pub use command::{inpaint_command, read_hole_mask};
