@@ -9,6 +9,9 @@
 #   - The Khronos glTF validator (npm gltf-validator, pinned) into
 #     ${XDG_CACHE_HOME:-~/.cache}/makeit4d/gltf-validator, for the .glb export's test (Debian's
 #     nodejs and npm first when npm is missing).
+#   - OpenAI's CLIP merges list (bpe_simple_vocab_16e6.txt.gz, MIT) out of PyPI's open-clip-torch
+#     3.3.0 wheel, into ${XDG_CACHE_HOME:-~/.cache}/makeit4d/clip, for the tokenizer's known-answer
+#     tests.
 #   - Rust crates through cargo (Cargo.lock pins them).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -47,5 +50,22 @@ if [ ! -e "$validator_dir/node_modules/gltf-validator/package.json" ]; then
     npm install --silent --no-audit --no-fund --prefix "$validator_dir" gltf-validator@2.0.0-dev.3.10 >/dev/null
 fi
 export MAKEIT4D_GLTF_VALIDATOR="$validator_dir/node_modules"
+
+clip_dir="${XDG_CACHE_HOME:-$HOME/.cache}/makeit4d/clip"
+clip_bpe="$clip_dir/bpe_simple_vocab_16e6.txt.gz"
+if [ ! -e "$clip_bpe" ]; then
+    echo "tests/run.sh: fetching the CLIP merges list (open-clip-torch 3.3.0) into $clip_dir"
+    mkdir -p "$clip_dir"
+    python3 -m pip download --quiet --disable-pip-version-check --no-deps -d "$clip_dir/wheel" open-clip-torch==3.3.0
+    python3 - "$clip_dir" <<'PY'
+import glob, sys, zipfile
+folder = sys.argv[1]
+wheel = glob.glob(folder + "/wheel/open_clip_torch-3.3.0-*.whl")[0]
+with zipfile.ZipFile(wheel) as z, open(folder + "/bpe_simple_vocab_16e6.txt.gz", "wb") as out:
+    out.write(z.read("open_clip/bpe_simple_vocab_16e6.txt.gz"))
+PY
+    rm -rf "$clip_dir/wheel"
+fi
+export MAKEIT4D_CLIP_BPE="$clip_bpe"
 
 cargo test --locked --all-targets "$@"

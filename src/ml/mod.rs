@@ -21,6 +21,7 @@
 //! says what the model's inputs and outputs are called and mean. [`OnnxSession`] checks those
 //! claims against what the session itself reports and refuses a mismatch.
 
+pub mod clip;
 mod manifest;
 mod proto;
 mod runtime;
