@@ -97,7 +97,7 @@ pub(crate) fn check_model_graph(manifest: &makeit4d::ml::ModelManifest) -> makei
         );
         return Ok(());
     }
-    makeit4d::models::check_model_graph(manifest)
+    makeit4d::stages::check_model_graph(manifest)
 }
 
 pub(crate) fn models(command: ModelsCommand, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {

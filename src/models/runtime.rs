@@ -317,21 +317,6 @@ fn extract_and_check(
     Ok((names, version))
 }
 
-/// Loads `manifest`'s graph through ONNX Runtime and checks it against the manifest (inputs,
-/// outputs, ranks). The runtime must be there: callers without one say that the check waits
-/// for the first use.
-pub fn check_model_graph(manifest: &crate::ml::ModelManifest) -> Result<()> {
-    use crate::ml::ModelKind;
-    match manifest.kind() {
-        ModelKind::Depth => {
-            crate::stages::depth::onnx::OnnxDepth::new(manifest.clone()).map(|_| ())
-        }
-        ModelKind::Inpaint => {
-            crate::stages::inpaint::onnx::OnnxInpainter::new(manifest.clone()).map(|_| ())
-        }
-    }
-}
-
 /// What [`install_with_runtime`] is doing, for a progress bar.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum InstallStep {
@@ -344,14 +329,16 @@ pub enum InstallStep {
 /// Installs `entry` into `models_dir` the way the editor's one click does: ONNX Runtime first
 /// when none is found (into [`crate::ml::runtime_install_dir`], from `runtime_url` or PyPI),
 /// then the model (from `model_url` or its catalogue address), its bytes checked against the
-/// catalogue and its graph against its manifest. `progress` hears each step's bytes; `cancel`
-/// stops either download (its part kept for the next try).
+/// catalogue and its graph against its manifest by `check_graph` (the stages' own check,
+/// `stages::check_model_graph`). `progress` hears each step's bytes; `cancel` stops either
+/// download (its part kept for the next try).
 pub fn install_with_runtime(
     entry: &'static CatalogueEntry,
     models_dir: &Path,
     urls: (Option<&str>, Option<&str>),
     progress: &dyn Fn(InstallStep, u64, Option<u64>),
     cancel: &AtomicBool,
+    check_graph: &dyn Fn(&crate::ml::ModelManifest) -> Result<()>,
 ) -> Result<InstalledModel> {
     if !crate::ml::ort_available() {
         let release = release_for_this_platform()?;
@@ -380,6 +367,6 @@ pub fn install_with_runtime(
         &|done, total| progress(InstallStep::Model, done, total),
         cancel,
         ByteCheck::Catalogue,
-        &check_model_graph,
+        check_graph,
     )
 }

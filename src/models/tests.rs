@@ -698,6 +698,7 @@ fn one_click_installs_a_model_with_progress_and_checks_its_graph() {
         (Some("http://127.0.0.1:9/never-asked"), Some(&url)),
         &|step, done, _| steps.lock().unwrap().push((step, done)),
         &AtomicBool::new(false),
+        &crate::stages::check_model_graph,
     )
     .unwrap();
     server.join().unwrap();
@@ -719,6 +720,7 @@ fn one_click_installs_a_model_with_progress_and_checks_its_graph() {
         (None, Some(&format!("{url}/model.onnx"))),
         &|_, _, _| {},
         &AtomicBool::new(false),
+        &crate::stages::check_model_graph,
     )
     .unwrap_err()
     .to_string();

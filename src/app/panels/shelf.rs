@@ -66,6 +66,7 @@ impl ModelShelf {
                     (None, None),
                     &progress,
                     &thread_cancel,
+                    &crate::stages::check_model_graph,
                 );
                 let outcome = match result {
                     Ok(m) => Ok(format!(
