@@ -37,6 +37,10 @@ pub enum TensorKind {
     F16,
     /// 8-bit unsigned integer (MI-GAN's pipeline).
     U8,
+    /// 32-bit integer (token ids of diffusers' text encoders); fed rounded.
+    I32,
+    /// 64-bit integer (optimum's token ids and timesteps); fed rounded.
+    I64,
     /// Anything else (refused).
     Other,
 }
@@ -51,6 +55,8 @@ impl TensorInfo {
                 Some(ort::value::TensorElementType::Float32) => TensorKind::F32,
                 Some(ort::value::TensorElementType::Float16) => TensorKind::F16,
                 Some(ort::value::TensorElementType::Uint8) => TensorKind::U8,
+                Some(ort::value::TensorElementType::Int32) => TensorKind::I32,
+                Some(ort::value::TensorElementType::Int64) => TensorKind::I64,
                 _ => TensorKind::Other,
             },
             element: dtype.to_string(),
@@ -76,7 +82,10 @@ impl TensorInfo {
     /// Checks that this is a float tensor of rank `dims.len()` whose static dimensions agree
     /// with `dims` (`None` = anything). `role` names it in the error (e.g. "input 'image'").
     pub fn expect(&self, role: &str, dims: &[Option<i64>]) -> std::result::Result<(), String> {
-        if self.kind == TensorKind::Other {
+        if matches!(
+            self.kind,
+            TensorKind::Other | TensorKind::I32 | TensorKind::I64
+        ) {
             return Err(format!(
                 "{role} is {} but must be a float32, float16 or uint8 tensor",
                 self.element
@@ -359,6 +368,26 @@ impl OnnxSession {
                         .map_err(made)?
                         .into()
                 }
+                TensorKind::I32 => {
+                    let data: Vec<i32> = input
+                        .data
+                        .iter()
+                        .map(|&v| if v.is_finite() { v.round() as i32 } else { 0 })
+                        .collect();
+                    ort::value::Tensor::from_array((shape, data))
+                        .map_err(made)?
+                        .into()
+                }
+                TensorKind::I64 => {
+                    let data: Vec<i64> = input
+                        .data
+                        .iter()
+                        .map(|&v| if v.is_finite() { v.round() as i64 } else { 0 })
+                        .collect();
+                    ort::value::Tensor::from_array((shape, data))
+                        .map_err(made)?
+                        .into()
+                }
                 TensorKind::F32 | TensorKind::Other => {
                     ort::value::TensorRef::from_array_view((shape, input.data))
                         .map_err(made)?
@@ -408,6 +437,14 @@ impl OnnxSession {
                             }
                             TensorKind::U8 => {
                                 let (shape, data) = value.try_extract_tensor::<u8>()?;
+                                (shape.to_vec(), data.iter().map(|&v| v as f32).collect())
+                            }
+                            TensorKind::I32 => {
+                                let (shape, data) = value.try_extract_tensor::<i32>()?;
+                                (shape.to_vec(), data.iter().map(|&v| v as f32).collect())
+                            }
+                            TensorKind::I64 => {
+                                let (shape, data) = value.try_extract_tensor::<i64>()?;
                                 (shape.to_vec(), data.iter().map(|&v| v as f32).collect())
                             }
                             TensorKind::F32 | TensorKind::Other => {

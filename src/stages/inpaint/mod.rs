@@ -11,6 +11,7 @@
 pub mod bench;
 pub mod command;
 mod common;
+pub mod diffusion;
 pub mod distinct;
 pub mod harmonic;
 pub mod onnx;
