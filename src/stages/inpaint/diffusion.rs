@@ -294,3 +294,439 @@ mod tests {
         assert!(e.contains("not a model folder"), "{e}");
     }
 }
+
+/// Latent-space factor of Stable Diffusion's VAE.
+pub const LATENT_SCALE: f32 = 0.18215;
+
+/// Unit Gaussian noise from `seed`: SplitMix64 bits through Box–Muller, so a seed gives the
+/// same latent noise on every machine (no platform generator involved).
+pub fn gaussian_noise(seed: u64, n: usize) -> Vec<f32> {
+    let mut state = seed;
+    let mut next = || {
+        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    };
+    let mut out = Vec::with_capacity(n + 1);
+    while out.len() < n {
+        // Uniforms in (0, 1]: 53 random bits, never 0.
+        let u1 = ((next() >> 11) as f64 + 1.0) / (1u64 << 53) as f64;
+        let u2 = (next() >> 11) as f64 / (1u64 << 53) as f64;
+        let r = (-2.0 * u1.ln()).sqrt();
+        let a = std::f64::consts::TAU * u2;
+        out.push((r * a.cos()) as f32);
+        out.push((r * a.sin()) as f32);
+    }
+    out.truncate(n);
+    out
+}
+
+/// Settings of one diffusion fill.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DiffusionParams {
+    /// Sampler.
+    pub sampler: super::schedule::SamplerKind,
+    /// Denoising steps.
+    pub steps: usize,
+    /// Classifier-free guidance scale (1: the prompt alone; 0: the negative prompt alone).
+    pub guidance: f32,
+    /// Latent noise seed.
+    pub seed: u64,
+}
+
+impl Default for DiffusionParams {
+    fn default() -> Self {
+        Self {
+            sampler: super::schedule::SamplerKind::Ddim,
+            steps: 30,
+            guidance: 7.5,
+            seed: 0,
+        }
+    }
+}
+
+/// A fill's picture and what it reports.
+#[derive(Clone, Debug)]
+pub struct DiffusionFill {
+    /// The window, RGB in `[0, 1]`, known pixels exactly the input's.
+    pub image: crate::raster::RgbRaster,
+}
+
+impl DiffusionModel {
+    /// Runs the text encoder on 77 token ids; the states, `[77 · hidden]`.
+    pub fn encode_text(&self, ids: &[u32]) -> Result<Vec<f32>> {
+        let data: Vec<f32> = ids.iter().map(|&i| i as f32).collect();
+        let out = self.sessions[0].run(
+            &[crate::ml::InputTensor {
+                name: "input_ids",
+                shape: &[1, ids.len()],
+                data: &data,
+            }],
+            "last_hidden_state",
+            &crate::progress::Progress::none(),
+        )?;
+        Ok(out.data)
+    }
+
+    /// Fills the `hole` (1 = to fill; binarised at 0.5) of `image` (RGB in `[0, 1]`, sides a
+    /// multiple of 8) from the prompt's and the negative prompt's token ids. Cancellable
+    /// between steps through `progress`; a non-finite value from a graph is an error (the
+    /// caller falls back). Known pixels come back bit-identical.
+    pub fn inpaint(
+        &self,
+        image: &crate::raster::RgbRaster,
+        hole: &crate::raster::GrayRaster,
+        prompt: &[u32],
+        negative: &[u32],
+        params: &DiffusionParams,
+        progress: &crate::progress::Progress,
+    ) -> Result<DiffusionFill> {
+        use super::schedule::Sampler;
+        use crate::ml::InputTensor;
+        let (w, h) = image.size();
+        if w == 0 || h == 0 || w % 8 != 0 || h % 8 != 0 || !hole.same_size(image) {
+            return Err(Error::invalid(format!(
+                "diffusion fill: a {w}×{h} window (sides must be multiples of 8) with a {}×{} hole",
+                hole.width(),
+                hole.height()
+            )));
+        }
+        if !(params.guidance.is_finite() && (0.0..=100.0).contains(&params.guidance)) {
+            return Err(Error::invalid(format!(
+                "diffusion fill: guidance {} must be in [0, 100]",
+                params.guidance
+            )));
+        }
+        let mut sampler = Sampler::new(params.sampler, params.steps)?;
+        let (lw, lh) = (w / 8, h / 8);
+        let plane = lw * lh;
+        let finite = |what: &str, v: &[f32]| -> Result<()> {
+            if v.iter().all(|x| x.is_finite()) {
+                Ok(())
+            } else {
+                Err(Error::invalid(format!(
+                    "diffusion fill: the {what} gave a non-finite value"
+                )))
+            }
+        };
+        // The text conditioning: [unconditional, prompt].
+        let mut cond = self.encode_text(negative)?;
+        cond.extend(self.encode_text(prompt)?);
+        finite("text encoder", &cond)?;
+        let tokens = prompt.len();
+        // The masked image in [-1, 1], channel-first, and its latents.
+        let known = |x: usize, y: usize| hole.at(x, y) < 0.5;
+        let mut masked = vec![0.0f32; 3 * w * h];
+        for y in 0..h {
+            for x in 0..w {
+                if known(x, y) {
+                    let c = image.at(x, y);
+                    for k in 0..3 {
+                        masked[k * w * h + y * w + x] = 2.0 * c[k] - 1.0;
+                    }
+                }
+            }
+        }
+        let enc = &self.sessions[2];
+        let (name, _) = match self.family {
+            ExportFamily::Diffusers => ("latent_sample", 4),
+            ExportFamily::Optimum => ("latent_parameters", 8),
+        };
+        let encoded = enc.run(
+            &[InputTensor {
+                name: "sample",
+                shape: &[1, 3, h, w],
+                data: &masked,
+            }],
+            name,
+            progress,
+        )?;
+        finite("VAE encoder", &encoded.data)?;
+        // optimum: mean ‖ log-variance; the mean is the first four channels.
+        let masked_latents: Vec<f32> = encoded.data[..4 * plane]
+            .iter()
+            .map(|v| v * LATENT_SCALE)
+            .collect();
+        // The mask at latent resolution: a cell is to fill when any of its pixels is.
+        let mask: Vec<f32> = (0..plane)
+            .map(|i| {
+                let (cx, cy) = (i % lw, i / lw);
+                let any = (0..8).any(|dy| (0..8).any(|dx| !known(cx * 8 + dx, cy * 8 + dy)));
+                if any { 1.0 } else { 0.0 }
+            })
+            .collect();
+        let sigma0 = sampler.init_noise_sigma() as f32;
+        let mut latents: Vec<f32> = gaussian_noise(params.seed, 4 * plane)
+            .iter()
+            .map(|v| v * sigma0)
+            .collect();
+        let unet = &self.sessions[1];
+        let steps = sampler.timesteps().len();
+        for i in 0..steps {
+            progress.check()?;
+            progress.report(
+                i as f32 / steps as f32,
+                &format!("diffusion step {}/{steps}", i + 1),
+            );
+            let scale = sampler.input_scale(i) as f32;
+            let mut sample = Vec::with_capacity(2 * 9 * plane);
+            for _ in 0..2 {
+                sample.extend(latents.iter().map(|v| v * scale));
+                sample.extend_from_slice(&mask);
+                sample.extend_from_slice(&masked_latents);
+            }
+            let t = sampler.timesteps()[i] as f32;
+            let t_data = [t, t];
+            let t_shape: &[usize] = if self.timestep.1 == 0 { &[] } else { &[2] };
+            let t_values: &[f32] = if self.timestep.1 == 0 {
+                &t_data[..1]
+            } else {
+                &t_data
+            };
+            let out = unet.run(
+                &[
+                    InputTensor {
+                        name: "sample",
+                        shape: &[2, 9, lh, lw],
+                        data: &sample,
+                    },
+                    InputTensor {
+                        name: "timestep",
+                        shape: t_shape,
+                        data: t_values,
+                    },
+                    InputTensor {
+                        name: "encoder_hidden_states",
+                        shape: &[2, tokens, self.hidden as usize],
+                        data: &cond,
+                    },
+                ],
+                "out_sample",
+                progress,
+            )?;
+            finite("UNet", &out.data)?;
+            let (uncond, text) = out.data.split_at(4 * plane);
+            let eps: Vec<f32> = uncond
+                .iter()
+                .zip(text)
+                .map(|(u, c)| u + params.guidance * (c - u))
+                .collect();
+            let noise = params
+                .sampler
+                .is_stochastic()
+                .then(|| gaussian_noise(params.seed.wrapping_add(1 + i as u64), 4 * plane));
+            sampler.step(i, &eps, &mut latents, noise.as_deref())?;
+        }
+        progress.check()?;
+        let scaled: Vec<f32> = latents.iter().map(|v| v / LATENT_SCALE).collect();
+        let decoded = self.sessions[3].run(
+            &[InputTensor {
+                name: "latent_sample",
+                shape: &[1, 4, lh, lw],
+                data: &scaled,
+            }],
+            "sample",
+            progress,
+        )?;
+        finite("VAE decoder", &decoded.data)?;
+        if decoded.data.len() != 3 * w * h {
+            return Err(Error::invalid(format!(
+                "diffusion fill: the VAE decoder gave shape {:?} for a {w}×{h} window",
+                decoded.shape
+            )));
+        }
+        // Known pixels pasted back exactly; the fill in [0, 1].
+        let filled = crate::raster::Raster::from_fn(w, h, |x, y| {
+            if known(x, y) {
+                image.at(x, y)
+            } else {
+                let v =
+                    |k: usize| ((decoded.data[k * w * h + y * w + x] + 1.0) * 0.5).clamp(0.0, 1.0);
+                [v(0), v(1), v(2)]
+            }
+        });
+        progress.report(1.0, "diffusion done");
+        Ok(DiffusionFill { image: filled })
+    }
+}
+
+#[cfg(test)]
+mod pipeline_tests {
+    use super::*;
+    use crate::progress::Progress;
+    use crate::raster::Raster;
+
+    #[test]
+    fn the_noise_is_a_seeded_unit_gaussian() {
+        let a = gaussian_noise(7, 20_001);
+        assert_eq!(a, gaussian_noise(7, 20_001));
+        assert_ne!(a[..8], gaussian_noise(8, 8)[..]);
+        let mean = a.iter().map(|&v| v as f64).sum::<f64>() / a.len() as f64;
+        let var = a.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / a.len() as f64;
+        assert!(
+            mean.abs() < 0.02 && (var - 1.0).abs() < 0.03,
+            "{mean} {var}"
+        );
+        assert!(a.iter().all(|v| v.is_finite()));
+        // A longer draw starts with the shorter one (the noise of a window does not depend on
+        // how much is drawn after it).
+        assert_eq!(
+            format!("{:.6}", gaussian_noise(0, 1)[0]),
+            format!("{:.6}", gaussian_noise(0, 2)[0])
+        );
+    }
+
+    fn picture(w: usize, h: usize) -> (crate::raster::RgbRaster, crate::raster::GrayRaster) {
+        let img = Raster::from_fn(w, h, |x, y| [x as f32 / w as f32, y as f32 / h as f32, 0.5]);
+        let hole = Raster::from_fn(w, h, |x, y| {
+            if (16..40).contains(&x) && (8..24).contains(&y) {
+                1.0
+            } else {
+                0.0
+            }
+        });
+        (img, hole)
+    }
+
+    #[test]
+    fn the_fixture_pipeline_fills_deterministically_and_keeps_known_pixels() {
+        if !crate::ml::ort_available() {
+            assert!(std::env::var_os("CI").is_none(), "CI needs ONNX Runtime");
+            return;
+        }
+        let folder = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/diffusion");
+        let (img, hole) = picture(64, 32);
+        let ids: Vec<u32> = [49406u32, 320, 2368, 49407]
+            .into_iter()
+            .chain(std::iter::repeat(49407))
+            .take(77)
+            .collect();
+        let neg: Vec<u32> = [49406u32, 49407]
+            .into_iter()
+            .chain(std::iter::repeat(49407))
+            .take(77)
+            .collect();
+        for family in ["diffusers", "optimum"] {
+            let model = DiffusionModel::open(&folder.join(family)).unwrap();
+            for sampler in [
+                super::super::schedule::SamplerKind::Ddim,
+                super::super::schedule::SamplerKind::EulerAncestral,
+                super::super::schedule::SamplerKind::DpmSolver2m,
+                super::super::schedule::SamplerKind::Lcm,
+            ] {
+                let params = DiffusionParams {
+                    sampler,
+                    steps: 4,
+                    guidance: 7.5,
+                    seed: 3,
+                };
+                let a = model
+                    .inpaint(&img, &hole, &ids, &neg, &params, &Progress::none())
+                    .unwrap();
+                let b = model
+                    .inpaint(&img, &hole, &ids, &neg, &params, &Progress::none())
+                    .unwrap();
+                assert_eq!(a.image, b.image, "{family} {sampler:?}: deterministic");
+                for y in 0..32 {
+                    for x in 0..64 {
+                        if hole.at(x, y) < 0.5 {
+                            assert_eq!(a.image.at(x, y), img.at(x, y));
+                        }
+                    }
+                }
+                assert!(
+                    a.image
+                        .data()
+                        .iter()
+                        .flatten()
+                        .all(|v| (0.0..=1.0).contains(v))
+                );
+            }
+        }
+        let model = DiffusionModel::open(&folder.join("diffusers")).unwrap();
+        // Another seed, another fill; guidance 0 and 100 and a whole-image hole run.
+        let p = DiffusionParams {
+            steps: 3,
+            ..DiffusionParams::default()
+        };
+        let a = model
+            .inpaint(&img, &hole, &ids, &neg, &p, &Progress::none())
+            .unwrap();
+        let c = model
+            .inpaint(
+                &img,
+                &hole,
+                &ids,
+                &neg,
+                &DiffusionParams {
+                    seed: 9,
+                    ..p.clone()
+                },
+                &Progress::none(),
+            )
+            .unwrap();
+        assert_ne!(a.image, c.image);
+        let all = Raster::new(64, 32, 1.0f32);
+        for g in [0.0, 100.0] {
+            model
+                .inpaint(
+                    &img,
+                    &all,
+                    &ids,
+                    &neg,
+                    &DiffusionParams {
+                        guidance: g,
+                        ..p.clone()
+                    },
+                    &Progress::none(),
+                )
+                .unwrap();
+        }
+        // Refused: steps 0, guidance 1000, a side not a multiple of 8.
+        assert!(
+            model
+                .inpaint(
+                    &img,
+                    &hole,
+                    &ids,
+                    &neg,
+                    &DiffusionParams {
+                        steps: 0,
+                        ..p.clone()
+                    },
+                    &Progress::none()
+                )
+                .is_err()
+        );
+        assert!(
+            model
+                .inpaint(
+                    &img,
+                    &hole,
+                    &ids,
+                    &neg,
+                    &DiffusionParams {
+                        guidance: 1000.0,
+                        ..p.clone()
+                    },
+                    &Progress::none()
+                )
+                .is_err()
+        );
+        let (odd, odd_hole) = picture(60, 32);
+        assert!(
+            model
+                .inpaint(&odd, &odd_hole, &ids, &neg, &p, &Progress::none())
+                .is_err()
+        );
+        // Cancelled between steps: a clean Cancelled.
+        let progress = Progress::none();
+        progress.cancel();
+        assert!(matches!(
+            model.inpaint(&img, &hole, &ids, &neg, &p, &progress),
+            Err(Error::Cancelled)
+        ));
+    }
+}
