@@ -719,3 +719,84 @@ fn a_reader_that_goes_away_stops_the_output_without_a_panic() {
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert_eq!(out.status.code(), Some(141), "{stderr}");
 }
+
+#[test]
+fn inpaint_fills_from_a_prompt_with_a_diffusion_folder() {
+    if !makeit4d::ml::ort_available() {
+        assert!(std::env::var_os("CI").is_none(), "CI needs ONNX Runtime");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let photo = data("evening_glow_320.jpg");
+    let (w, h) = image::image_dimensions(&photo).unwrap();
+    let mask = image::GrayImage::from_fn(w, h, |x, y| {
+        image::Luma([if (100..140).contains(&x) && (60..90).contains(&y) {
+            255
+        } else {
+            0
+        }])
+    });
+    let mask_path = dir.path().join("mask.png");
+    mask.save(&mask_path).unwrap();
+    let folder = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/diffusion/diffusers");
+    let fill = |out: &Path, scheduler: &str| {
+        exe()
+            .arg("inpaint")
+            .arg(&photo)
+            .arg("--mask")
+            .arg(&mask_path)
+            .arg("--out")
+            .arg(out)
+            .arg("--diffusion")
+            .arg(&folder)
+            .args([
+                "--prompt",
+                "a boat on the lake",
+                "--steps",
+                "3",
+                "--scheduler",
+                scheduler,
+            ])
+            .output()
+            .unwrap()
+    };
+    let (a, b) = (dir.path().join("a.png"), dir.path().join("b.png"));
+    for (out, scheduler) in [(&a, "ddim"), (&b, "ddim")] {
+        let done = fill(out, scheduler);
+        assert!(
+            done.status.success(),
+            "{}",
+            String::from_utf8_lossy(&done.stderr)
+        );
+        let said = String::from_utf8_lossy(&done.stdout);
+        assert!(
+            said.contains("filled 1200 pixels") && said.contains("3 steps of ddim"),
+            "{said}"
+        );
+    }
+    assert_eq!(
+        std::fs::read(&a).unwrap(),
+        std::fs::read(&b).unwrap(),
+        "a seed, the same bytes"
+    );
+    // A scheduler that is not one: one line, nothing written.
+    let bad = dir.path().join("c.png");
+    let done = fill(&bad, "plms");
+    assert_clean_failure(&done, &["plms", "ddim, euler-ancestral"]);
+    assert!(!bad.exists());
+    // A text-to-image model is refused by its channel count.
+    let t2i = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/diffusion/text_to_image");
+    let done = exe()
+        .arg("inpaint")
+        .arg(&photo)
+        .arg("--mask")
+        .arg(&mask_path)
+        .arg("--out")
+        .arg(&bad)
+        .arg("--diffusion")
+        .arg(&t2i)
+        .output()
+        .unwrap();
+    assert_clean_failure(&done, &["4 channels", "text-to-image"]);
+    assert!(!bad.exists());
+}

@@ -229,6 +229,25 @@ pub(crate) struct InpaintArgs {
     /// manifest file. An error, not a fallback, when it cannot run.
     #[arg(long)]
     pub(crate) model: Option<PathBuf>,
+    /// A Stable Diffusion inpainting export (a folder with text_encoder/, unet/, vae_encoder/,
+    /// vae_decoder/ and tokenizer/) to fill with, from --prompt.
+    #[arg(long, conflicts_with = "model")]
+    pub(crate) diffusion: Option<PathBuf>,
+    /// What should appear in the hole (with --diffusion).
+    #[arg(long, default_value = "", requires = "diffusion")]
+    pub(crate) prompt: String,
+    /// What should not (with --diffusion).
+    #[arg(long, default_value = "", requires = "diffusion")]
+    pub(crate) negative_prompt: String,
+    /// Denoising steps (with --diffusion; 1 to 1000).
+    #[arg(long, default_value_t = 30, requires = "diffusion")]
+    pub(crate) steps: usize,
+    /// Classifier-free guidance scale (with --diffusion; 0 to 100).
+    #[arg(long, default_value_t = 7.5, requires = "diffusion")]
+    pub(crate) guidance: f32,
+    /// Sampler (with --diffusion): ddim, euler-ancestral, dpm-solver-2m or lcm.
+    #[arg(long, default_value = "ddim", requires = "diffusion")]
+    pub(crate) scheduler: String,
 }
 
 #[derive(Subcommand, Debug)]

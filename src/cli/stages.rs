@@ -47,6 +47,42 @@ pub(crate) fn inpaint(args: InpaintArgs, cancel: Arc<AtomicBool>) -> anyhow::Res
     let preset: InpaintPreset = args.preset.parse()?;
     let image = makeit4d::image_io::load_image(&args.image)?;
     let hole = makeit4d::stages::inpaint::command::read_hole_mask(&args.mask, image.rgb.size())?;
+    if let Some(folder) = &args.diffusion {
+        use makeit4d::stages::inpaint::diffusion::{DiffusionModel, DiffusionParams};
+        let params = DiffusionParams {
+            sampler: args.scheduler.parse()?,
+            steps: args.steps,
+            guidance: args.guidance,
+            seed: args.seed,
+        };
+        let model = DiffusionModel::open(folder)?;
+        let (bar, progress) = progress_bar(cancel);
+        let start = std::time::Instant::now();
+        let filled = model.fill_hole(
+            &image.rgb,
+            &hole,
+            &args.prompt,
+            &args.negative_prompt,
+            &params,
+            &progress,
+        );
+        bar.finish_and_clear();
+        let (filled, notes) = filled?;
+        for note in notes {
+            eprintln!("note: {note}");
+        }
+        makeit4d::image_io::save_rgb_png(&args.out, &filled, false)?;
+        let holes = hole.data().iter().filter(|&&h| h).count();
+        println!(
+            "filled {holes} pixels with {} ({} steps of {}) in {:.2} s; wrote {}",
+            folder.display(),
+            params.steps,
+            params.sampler.name(),
+            start.elapsed().as_secs_f64(),
+            args.out.display()
+        );
+        return Ok(());
+    }
     if let Some(model) = &args.model {
         use makeit4d::stages::inpaint::{InpaintRequest, Inpainter, onnx::OnnxInpainter};
         let inpainter = OnnxInpainter::from_manifest(model)?;
