@@ -7,7 +7,7 @@
 //! - `text_encoder`: `input_ids` [batch, 77], int32 (diffusers) or int64 (optimum) →
 //!   `last_hidden_state` [batch, 77, hidden];
 //! - `unet`: `sample` [batch, 9, h, w] (4 noisy latents, the mask, 4 masked-image latents),
-//!   `timestep` ([batch] or a scalar; float32, float16 or int64), `encoder_hidden_states`
+//!   `timestep` (`[batch]` or a scalar; float32, float16 or int64), `encoder_hidden_states`
 //!   [batch, 77, hidden] → `out_sample` [batch, 4, h, w];
 //! - `vae_encoder`: `sample` [batch, 3, H, W] → `latent_sample` [batch, 4, H/8, W/8]
 //!   (diffusers) or `latent_parameters` [batch, 8, …] (optimum: mean ‖ log-variance);
