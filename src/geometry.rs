@@ -288,6 +288,18 @@ pub fn lerp_dvec3(a: DVec3, b: DVec3, t: f64) -> DVec3 {
     a + (b - a) * t
 }
 
+/// A photo point in pixels (pixel centres at integers) from image-relative coordinates
+/// `[x / (w − 1), y / (h − 1)]`, the form projects store points in so that they survive a change
+/// of working size. A photo one pixel wide or high counts as two.
+pub fn relative_to_pixels(q: [f32; 2], (w, h): (usize, usize)) -> [f32; 2] {
+    [q[0] * (w.max(2) - 1) as f32, q[1] * (h.max(2) - 1) as f32]
+}
+
+/// The inverse of [`relative_to_pixels`].
+pub fn pixels_to_relative(p: [f32; 2], (w, h): (usize, usize)) -> [f32; 2] {
+    [p[0] / (w.max(2) - 1) as f32, p[1] / (h.max(2) - 1) as f32]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -438,5 +450,12 @@ mod tests {
             );
             assert!(approx(dv, j[1][axis], 0.05 * (1.0 + dv.abs())));
         }
+    }
+
+    #[test]
+    fn relative_coordinates_round_trip() {
+        assert_eq!(relative_to_pixels([0.5, 1.0], (101, 51)), [50.0, 50.0]);
+        assert_eq!(pixels_to_relative([50.0, 50.0], (101, 51)), [0.5, 1.0]);
+        assert_eq!(relative_to_pixels([1.0, 1.0], (1, 1)), [1.0, 1.0]);
     }
 }

@@ -268,10 +268,10 @@ pub fn eval_scribbles(
             }
             // The stroke as the editor stores it (image-relative), through the editor's path.
             targets.push(TargetStroke {
-                points: vec![[
-                    cx as f32 / (w.max(2) - 1) as f32,
-                    cy as f32 / (h.max(2) - 1) as f32,
-                ]],
+                points: vec![crate::geometry::pixels_to_relative(
+                    [cx as f32, cy as f32],
+                    (w, h),
+                )],
                 radius: r / w as f32,
                 depth: (1.0 / inv) as f32,
                 hidden: false,

@@ -239,8 +239,7 @@ impl StagePanel for DepthPanel {
             DepthTool::Region => {
                 let regions = self.regions_of(snapshot);
                 let (w, h) = snapshot.scene.input.rgb.size();
-                let rel =
-                    |q: [f32; 2]| [q[0] / (w.max(2) - 1) as f32, q[1] / (h.max(2) - 1) as f32];
+                let rel = |q: [f32; 2]| crate::geometry::pixels_to_relative(q, (w, h));
                 ui.ctx().set_cursor_icon(egui::CursorIcon::PointingHand);
                 if let Some(p) = response.hover_pos()
                     && let Some(label) = regions.at(rel(view.to_image(p)))
@@ -308,7 +307,7 @@ impl StagePanel for DepthPanel {
                     let stroke = TargetStroke {
                         points: points
                             .iter()
-                            .map(|q| [q[0] / (w.max(2) - 1) as f32, q[1] / (h.max(2) - 1) as f32])
+                            .map(|q| crate::geometry::pixels_to_relative(*q, (w, h)))
                             .collect(),
                         radius: self.radius_px / w.max(1) as f32,
                         depth: self.target_depth,
@@ -388,9 +387,7 @@ impl StagePanel for DepthPanel {
             let pts: Vec<_> = t
                 .points
                 .iter()
-                .map(|q| {
-                    view.to_screen([q[0] * (w.max(2) - 1) as f32, q[1] * (h.max(2) - 1) as f32])
-                })
+                .map(|q| view.to_screen(crate::geometry::relative_to_pixels(*q, (w, h))))
                 .collect();
             // Its depth's colour over a dark edge, so it shows on a map of the same colour.
             let colour = depth_colour(shown.depth_range, t.depth);
@@ -768,11 +765,13 @@ impl DepthPanel {
                         }
                     }
                     if xs.1 > 0 {
-                        let cx_rel = (xs.0 as f32 / xs.1 as f32) / (sw.max(2) - 1) as f32;
-                        let from = [cx_rel, rows.0 as f32 / (sh.max(2) - 1) as f32];
-                        let to = [cx_rel, rows.1 as f32 / (sh.max(2) - 1) as f32];
+                        let mid = xs.0 as f32 / xs.1 as f32;
+                        let rel = |row: usize| {
+                            crate::geometry::pixels_to_relative([mid, row as f32], (sw, sh))
+                        };
+                        let (from, to) = (rel(rows.0), rel(rows.1));
                         let (w, h) = snapshot.scene.input.rgb.size();
-                        let px = |q: [f32; 2]| [q[0] * (w.max(2) - 1) as f32, q[1] * (h.max(2) - 1) as f32];
+                        let px = |q: [f32; 2]| crate::geometry::relative_to_pixels(q, (w, h));
                         let fallback = self.target_depth;
                         made = Some(PopUpShape::Tilted {
                             from,

@@ -100,7 +100,7 @@ impl TargetStroke {
     /// pixel); dabs that do not touch the photo are dropped (a stroke wholly outside makes none).
     pub fn dabs(&self, w: usize, h: usize, spacing: f32) -> Vec<DepthTarget> {
         let r = (self.radius * w as f32).max(0.5);
-        let to_px = |p: [f32; 2]| [p[0] * (w.max(2) - 1) as f32, p[1] * (h.max(2) - 1) as f32];
+        let to_px = |p: [f32; 2]| crate::geometry::relative_to_pixels(p, (w, h));
         let step = (spacing * r).max(1.0);
         let mut out = Vec::new();
         let mut push = |q: [f32; 2]| {

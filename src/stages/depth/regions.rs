@@ -490,7 +490,7 @@ pub fn apply_popups(
                 to,
                 to_depth,
             } => {
-                let px = |q: [f32; 2]| [q[0] * (w.max(2) - 1) as f32, q[1] * (h.max(2) - 1) as f32];
+                let px = |q: [f32; 2]| crate::geometry::relative_to_pixels(q, (w, h));
                 let (a, b) = (px(*from), px(*to));
                 let (ia, ib) = (1.0 / from_depth.min(far), 1.0 / to_depth.min(far));
                 let axis = [b[0] - a[0], b[1] - a[1]];
