@@ -61,7 +61,7 @@ fn bench_strokes(image: &makeit4d::raster::RgbRaster, n: usize, runs: usize) -> 
         let (_, all) = apply_target_strokes(image, depth, &strokes, &params, None)?;
         cold.push(all.seconds);
         let (_, first) = apply_target_strokes(image, depth, &strokes[..n - 1], &params, None)?;
-        let start = first.propagated.as_ref().map(|p| &p.correction);
+        let start = first.correction.as_ref();
         let (_, next) = apply_target_strokes(image, depth, &strokes, &params, start)?;
         warm.push(next.seconds);
     }

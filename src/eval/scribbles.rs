@@ -276,7 +276,7 @@ pub fn eval_scribbles(
                 depth: (1.0 / inv) as f32,
                 hidden: false,
             });
-            let (_, applied) = apply_target_strokes(
+            let (depth, applied) = apply_target_strokes(
                 &pair.left,
                 &estimate,
                 &targets,
@@ -284,11 +284,8 @@ pub fn eval_scribbles(
                 warm.as_ref(),
             )?;
             solve_s = applied.seconds;
-            let p = applied
-                .propagated
-                .ok_or_else(|| Error::invalid("eval scribbles: the solver did not run"))?;
-            current = p.depth;
-            warm = Some(p.correction);
+            current = depth;
+            warm = applied.correction;
         }
         if options.strokes.contains(&k) {
             let m = depth_metrics(&current, &known, 0.0)?;

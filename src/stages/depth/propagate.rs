@@ -138,8 +138,9 @@ pub struct TargetsApplied {
     pub warnings: Vec<String>,
     /// Seconds the solve took.
     pub seconds: f64,
-    /// The solve's answer (its correction warm-starts the next solve).
-    pub propagated: Option<Propagated>,
+    /// The solve's correction on its grid (it warm-starts the next solve); `None` when no
+    /// visible stroke made a solve.
+    pub correction: Option<GrayRaster>,
 }
 
 /// Spreads the visible `strokes` over `depth` (the estimate, the photo's size) guided by
@@ -205,9 +206,8 @@ pub fn apply_target_strokes(
     let started = std::time::Instant::now();
     let p = propagate(image, depth, &dabs, params, warm)?;
     applied.seconds = started.elapsed().as_secs_f64();
-    let out = p.depth.clone();
-    applied.propagated = Some(p);
-    Ok((out, applied))
+    applied.correction = Some(p.correction);
+    Ok((p.depth, applied))
 }
 
 /// The solver's settings.
