@@ -358,7 +358,24 @@ fn a_depth_stroke_paints_over_the_cached_estimate() {
     // ... which differs from the bare estimate's (the stroke painted over it, nothing else).
     assert_ne!(stroked.estimate.depth, bare.estimate.depth);
     assert_eq!(stroked.estimate.sky, bare.estimate.sky);
-    assert_eq!(stroked.estimate.confidence, bare.estimate.confidence);
+    // The painted pixels are vouched for; the rest keeps the estimator's confidence.
+    for ((c, c0), (z, z0)) in stroked
+        .estimate
+        .confidence
+        .data()
+        .iter()
+        .zip(bare.estimate.confidence.data())
+        .zip(
+            stroked
+                .estimate
+                .depth
+                .data()
+                .iter()
+                .zip(bare.estimate.depth.data()),
+        )
+    {
+        assert_eq!(*c, if z != z0 { 1.0 } else { *c0 });
+    }
     // Undoing the stroke finds the bare depth cached.
     p.depth.strokes.clear();
     let again = builder.depth_output(&p, &Progress::none()).expect("undo");
@@ -439,6 +456,53 @@ fn presets_are_sized_to_what_the_scene_supports() {
             .expect("sizing")
             .is_none()
     );
+}
+
+/// Relief no cue vouches for counts like synthesised content: the same scene with its depth
+/// unsure everywhere is sized to a smaller orbit than with its depth vouched for, and the report
+/// says why in its one line.
+#[test]
+fn the_sizing_shrinks_a_path_over_relief_nobody_vouches_for() {
+    use makeit4d::raster::GrayRaster;
+    use makeit4d::scene::size_preset;
+    let p = project("evening_glow_320.jpg", PresetKind::Orbit, 12);
+    let scene = SceneBuilder::new()
+        .build(&p, &Progress::none())
+        .expect("build");
+    let with_confidence = |c: f32| {
+        let mut s = scene.clone();
+        let mut depth = (*s.depth).clone();
+        let (w, h) = depth.estimate.depth.size();
+        depth.estimate.confidence = GrayRaster::new(w, h, c);
+        s.depth = std::sync::Arc::new(depth);
+        s
+    };
+    let size = |s: &Scene| {
+        size_preset(&p, s, &Progress::none())
+            .expect("sizing")
+            .expect("an orbit is sized")
+    };
+    let sure = size(&with_confidence(1.0));
+    assert_eq!(
+        (sure.worst_unsure, sure.requested_unsure),
+        (0.0, 0.0),
+        "{sure}"
+    );
+    assert!(sure.fits && sure.amplitude == 1.0, "{sure}");
+    assert!(!sure.to_string().contains("vouches"), "{sure}");
+    let unsure = size(&with_confidence(0.0));
+    assert!(unsure.requested_unsure > 0.0, "{unsure}");
+    assert!(unsure.fits && unsure.amplitude < sure.amplitude, "{unsure}");
+    assert!(
+        unsure.worst_synthesised + unsure.worst_unsure <= makeit4d::scene::SIZING_MARGIN * 0.2,
+        "{unsure}"
+    );
+    let text = unsure.to_string();
+    assert!(
+        text.contains("orbit sized to amplitude") && text.contains("no depth cue vouches for"),
+        "{text}"
+    );
+    assert!(!text.contains('\n'), "{text}");
 }
 
 /// A photo built smaller than it is: every stage runs at the working size, the default output is

@@ -485,7 +485,8 @@ pub(crate) struct EvalNvsArgs {
     /// Inpainting preset: draft, preview or final.
     #[arg(long, default_value = "preview")]
     pub(crate) inpaint_preset: String,
-    /// Layer-based depth on or off (default: off for oracle depth, on for estimated).
+    /// Layer-based depth (paper eq. 4–5) on or off (default: off, as in a project; on
+    /// re-estimates every layer's depth with the classical estimator, replacing the oracle's).
     #[arg(long)]
     pub(crate) layer_depth: Option<bool>,
     /// Also write each row's right view into this folder.

@@ -31,8 +31,8 @@ pub mod timing;
 
 pub use autocruise::{AutocruiseParams, AutocruiseResult, CruiseDirection, autocruise};
 pub use diagnostics::{
-    DiagnosticsParams, DiagnosticsThresholds, PathDiagnostics, path_diagnostics,
-    path_diagnostics_sampled, quick_path_diagnostics,
+    DiagnosticsParams, DiagnosticsThresholds, PathDiagnostics, UnsureDepth, path_diagnostics,
+    path_diagnostics_sampled, path_diagnostics_unsure, quick_path_diagnostics,
 };
 pub use ease::Ease;
 pub use keyframes::{Interpolation, Keyframe, KeyframePath};

@@ -39,7 +39,9 @@ pub use builder::{SceneBuilder, build_scene};
 pub use cache::{CACHE_ENTRIES, CacheBytes, MIN_SPARE_BYTES, spare_budget};
 pub use camera::{OutputCamera, autocruise, scene_scale};
 pub use canvas::canvas_layout;
-pub use sizing::{MIN_SIZED_AMPLITUDE, PresetSizing, SIZING_MARGIN, size_preset};
+pub use sizing::{
+    MIN_SIZED_AMPLITUDE, PresetSizing, SIZING_MARGIN, UNSURE_NOTE_SHARE, size_preset,
+};
 pub use tools::make_inpainter;
 pub use working::{
     BUILD_BYTES_PER_PIXEL, DEFAULT_BUDGET_SHARE, DEFAULT_MAX_MEGAPIXELS, FLOOR_MEGAPIXELS,

@@ -32,6 +32,12 @@ pub struct PresetSizing {
     pub worst_synthesised: f32,
     /// See `worst_synthesised`.
     pub worst_holes: f32,
+    /// The largest share of a frame over unsure depth at the chosen amplitude
+    /// ([`FrameDiagnostics::unsure_fraction`](crate::path::diagnostics::FrameDiagnostics::unsure_fraction)),
+    /// counted with the synthesised share against its threshold.
+    pub worst_unsure: f32,
+    /// The same at the requested amplitude.
+    pub requested_unsure: f32,
     /// The warnings at the requested amplitude (empty when it fits).
     pub requested_warnings: Vec<String>,
     /// The thresholds used.
@@ -59,52 +65,77 @@ impl std::fmt::Display for PresetSizing {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let kind = self.requested.kind;
         let limits = format!(
-            "{:.0} % synthesised, {:.0} % holes",
+            "{:.0} % synthesised or over unsure depth, {:.0} % holes",
             100.0 * self.synth_threshold,
             100.0 * self.hole_threshold
         );
+        let unsure = |share: f32| {
+            if share >= 0.0005 {
+                format!(", {:.1} % over unsure depth", 100.0 * share)
+            } else {
+                String::new()
+            }
+        };
+        let mut requested_warnings = self.requested_warnings.clone();
+        if self.requested_unsure >= UNSURE_NOTE_SHARE {
+            requested_warnings.push(format!(
+                "up to {:.1} % of a frame is relief no depth cue vouches for, shifted more than {} px by the move",
+                100.0 * self.requested_unsure,
+                crate::path::diagnostics::UNSURE_SHIFT_PX
+            ));
+        }
         if !self.fits {
             write!(
                 f,
                 "{kind} kept at amplitude {}: even at {:.0} % of it the scene cannot stay under {limits} ({})",
                 self.requested.amplitude,
                 100.0 * MIN_SIZED_AMPLITUDE,
-                self.requested_warnings.join("; ")
+                requested_warnings.join("; ")
             )
         } else if self.lowered() {
-            let at_requested = if self.requested_warnings.is_empty() {
+            let at_requested = if requested_warnings.is_empty() {
                 format!(
                     "within {:.0} % of a threshold",
                     100.0 * (1.0 - SIZING_MARGIN)
                 )
             } else {
-                self.requested_warnings.join("; ")
+                requested_warnings.join("; ")
             };
             write!(
                 f,
-                "{kind} sized to amplitude {:.2} (of {}), the largest that stays under {limits} (at most {:.1} % synthesised, {:.1} % holes); at {}: {at_requested}",
+                "{kind} sized to amplitude {:.2} (of {}), the largest that stays under {limits} (at most {:.1} % synthesised, {:.1} % holes{}); at {}: {at_requested}",
                 self.amplitude,
                 self.requested.amplitude,
                 100.0 * self.worst_synthesised,
                 100.0 * self.worst_holes,
+                unsure(self.worst_unsure),
                 self.requested.amplitude,
             )
         } else {
             write!(
                 f,
-                "{kind} at amplitude {}: stays under {limits} (at most {:.1} % synthesised, {:.1} % holes)",
+                "{kind} at amplitude {}: stays under {limits} (at most {:.1} % synthesised, {:.1} % holes{})",
                 self.amplitude,
                 100.0 * self.worst_synthesised,
-                100.0 * self.worst_holes
+                100.0 * self.worst_holes,
+                unsure(self.worst_unsure)
             )
         }
     }
 }
 
+/// Share of a frame over unsure depth at the requested amplitude worth naming in the report.
+pub const UNSURE_NOTE_SHARE: f32 = 0.01;
+
 /// Sizes an orbit, swing, pan or fly-out to what `scene` can support: the largest share of the
 /// preset's amplitude (down to [`MIN_SIZED_AMPLITUDE`]) whose quick diagnostics (at most
 /// `SIZING_FRAMES` frames at the quick resolution) keep every frame under [`SIZING_MARGIN`] of
-/// the project's synthesised-share and hole thresholds, found by bisection. The requested amplitude is kept
+/// the project's synthesised-share and hole thresholds, found by bisection. Photographed
+/// content over relief no depth cue vouches for
+/// ([`unsure_relief`](crate::stages::depth::relief::unsure_relief) of the scene's depth and
+/// confidence) that a move would shift by more than
+/// [`UNSURE_SHIFT_PX`](crate::path::diagnostics::UNSURE_SHIFT_PX) counts like synthesised
+/// content: parallax over invented relief is what makes a frame melt. The requested amplitude is kept
 /// when it fits, and when even the smallest does not (the report says why). `None` for a path
 /// that is not one of those presets.
 ///
@@ -126,6 +157,13 @@ pub fn size_preset(
     let (w, h) = camera.size;
     let params = project.camera.diagnostics.params();
     let quick = params.quick();
+    let estimate = &scene.depth.estimate;
+    let relief = crate::stages::depth::relief::unsure_relief(&estimate.depth, &estimate.confidence);
+    let layout = scene.canvas.layout;
+    let unsure = crate::path::UnsureDepth {
+        relief: &relief,
+        origin: [layout.left_pad as f32, layout.top_pad as f32],
+    };
     let steps = (SIZING_STEPS + 2) as f32;
     let mut step = 0usize;
     let mut diagnose = |share: f64| -> Result<crate::path::PathDiagnostics> {
@@ -137,8 +175,9 @@ pub fn size_preset(
         let views = camera.views(&trial, &scene.scale)?;
         let sub = progress.sub(step as f32 / steps, (step + 1) as f32 / steps);
         step += 1;
-        crate::path::path_diagnostics_sampled(
+        crate::path::path_diagnostics_unsure(
             &scene.cloud,
+            Some(unsure),
             &views,
             w,
             h,
@@ -151,24 +190,33 @@ pub fn size_preset(
     // a little from the larger one's.
     let fits = |d: &crate::path::PathDiagnostics| {
         d.frames.iter().all(|f| {
-            f.inpainted_fraction <= SIZING_MARGIN * params.synth_threshold
+            f.inpainted_fraction + f.unsure_fraction <= SIZING_MARGIN * params.synth_threshold
                 && f.hole_fraction <= SIZING_MARGIN * params.hole_threshold
         })
     };
     let worst = |d: &crate::path::PathDiagnostics| {
-        d.frames.iter().fold((0.0f32, 0.0f32), |(s, hl), f| {
-            (s.max(f.inpainted_fraction), hl.max(f.hole_fraction))
-        })
+        d.frames
+            .iter()
+            .fold((0.0f32, 0.0f32, 0.0f32), |(s, hl, u), f| {
+                (
+                    s.max(f.inpainted_fraction),
+                    hl.max(f.hole_fraction),
+                    u.max(f.unsure_fraction),
+                )
+            })
     };
     let full = diagnose(1.0)?;
+    let requested_unsure = worst(&full).2;
     let answer = |share: f64, d: &crate::path::PathDiagnostics, ok: bool, warnings: Vec<String>| {
-        let (worst_synthesised, worst_holes) = worst(d);
+        let (worst_synthesised, worst_holes, worst_unsure) = worst(d);
         PresetSizing {
             requested,
             amplitude: requested.amplitude * share,
             fits: ok,
             worst_synthesised,
             worst_holes,
+            worst_unsure,
+            requested_unsure,
             requested_warnings: warnings,
             synth_threshold: params.synth_threshold,
             hole_threshold: params.hole_threshold,

@@ -92,7 +92,7 @@ pub struct NvsOptions {
     pub preset: InpaintPreset,
     /// Seed of every random choice.
     pub seed: u64,
-    /// Layer-based depth in the scene methods; `None`: off for oracle depth, on for estimated.
+    /// Layer-based depth in the scene methods; `None`: a project's default (off).
     pub layer_depth: Option<bool>,
     /// The rows to run, in order.
     pub methods: Vec<NvsMethod>,

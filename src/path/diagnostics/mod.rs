@@ -58,6 +58,11 @@ pub const DEFAULT_HOLE_THRESHOLD: f32 = 0.02;
 /// Default [`DiagnosticsParams::synth_threshold`].
 pub const DEFAULT_SYNTH_THRESHOLD: f32 = 0.20;
 
+/// Shift, output pixels, past which unsure depth under a photographed pixel counts against a
+/// path ([`path_diagnostics_unsure`]): a couple of pixels of misplacement is where a surface
+/// starts to visibly bend or tear in a moving camera.
+pub const UNSURE_SHIFT_PX: f32 = 2.0;
+
 /// Smallest render width of the diagnostics (unless the output is narrower), pixels.
 const MIN_RENDER_WIDTH: usize = 32;
 

@@ -11,6 +11,10 @@ pub struct FrameDiagnostics {
     pub hole_fraction: f32,
     /// Fraction of pixels that are covered and whose front-most content is synthesised.
     pub inpainted_fraction: f32,
+    /// Fraction of covered, photographed pixels whose depth is unsure enough that the view
+    /// could misplace them by more than [`UNSURE_SHIFT_PX`] output pixels (0 unless measured:
+    /// [`path_diagnostics_unsure`]).
+    pub unsure_fraction: f32,
 }
 
 /// Which measures of a frame are over their thresholds.

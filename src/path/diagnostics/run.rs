@@ -5,6 +5,7 @@ use super::*;
 use crate::error::{Error, Result};
 use crate::geometry::View;
 use crate::progress::Progress;
+use crate::raster::GrayRaster;
 use crate::render::HOLE_COVERAGE;
 use crate::render::cpu::render_cpu;
 use crate::stages::points::PointCloud;
@@ -41,6 +42,40 @@ pub fn path_diagnostics_sampled(
     max_frames: usize,
     progress: &Progress,
 ) -> Result<PathDiagnostics> {
+    path_diagnostics_unsure(
+        cloud, None, views, width, height, params, max_frames, progress,
+    )
+}
+
+/// Where the depth under the cloud is unsure, for [`path_diagnostics_unsure`].
+#[derive(Clone, Copy, Debug)]
+pub struct UnsureDepth<'a> {
+    /// The relative depth error of each photo pixel
+    /// ([`unsure_relief`](crate::stages::depth::relief::unsure_relief)).
+    pub relief: &'a GrayRaster,
+    /// The canvas pixel (the cloud's [`PointCloud::source_pixel`]) of the map's pixel `(0, 0)`:
+    /// the photo's padding on the canvas.
+    pub origin: [f32; 2],
+}
+
+/// [`path_diagnostics_sampled`] that also measures each frame's
+/// [`FrameDiagnostics::unsure_fraction`]: the photographed pixels whose content the view moves
+/// so that its unsure depth error (`unsure`) would misplace it by more than
+/// [`UNSURE_SHIFT_PX`] output pixels. A point at `X` (world = the input camera) whose depth may
+/// be off by the relative error `e` could be at `X·(1 + e)`; the shift is the distance between
+/// the two projections in the view, exact (no linearisation). Pure rotations shift nothing;
+/// the farther the camera moves, the more the error shows. `None` measures nothing there (0).
+#[allow(clippy::too_many_arguments)]
+pub fn path_diagnostics_unsure(
+    cloud: &PointCloud,
+    unsure: Option<UnsureDepth<'_>>,
+    views: &[View],
+    width: usize,
+    height: usize,
+    params: &DiagnosticsParams,
+    max_frames: usize,
+    progress: &Progress,
+) -> Result<PathDiagnostics> {
     params.validate()?;
     if width == 0 || height == 0 {
         return Err(Error::invalid(format!(
@@ -57,6 +92,27 @@ pub fn path_diagnostics_sampled(
     let rh = ((height as f64 * scale).round() as usize).max(1);
     let (sx, sy) = (rw as f32 / width as f32, rh as f32 / height as f32);
     let flagged = flag_cloud(&preview_cloud(cloud, width, rw));
+    // Each thinned point's unsure relative depth error (only those with any).
+    let errors: Vec<(usize, f32)> = unsure
+        .map(|u| {
+            let (mw, mh) = u.relief.size();
+            (0..flagged.len())
+                .filter_map(|i| {
+                    if flagged.inpainted.get(i).copied().unwrap_or(false) {
+                        return None;
+                    }
+                    let [x, y] = flagged.source_pixel[i];
+                    let (mx, my) = ((x - u.origin[0]).round(), (y - u.origin[1]).round());
+                    if !(mx >= 0.0 && my >= 0.0 && (mx as usize) < mw && (my as usize) < mh) {
+                        return None;
+                    }
+                    let e = u.relief.at(mx as usize, my as usize);
+                    (e.is_finite() && e > 0.0).then_some((i, e))
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let shift_limit = UNSURE_SHIFT_PX * sx;
     let measure = |indices: &[usize], progress: &Progress| -> Result<Vec<FrameDiagnostics>> {
         let mut frames = Vec::with_capacity(indices.len());
         for (chunk_index, chunk) in indices.chunks(CHUNK_FRAMES).enumerate() {
@@ -73,20 +129,36 @@ pub fn path_diagnostics_sampled(
                         intrinsics: view.intrinsics.scaled(sx, sy),
                         ..*view
                     };
-                    let frame = render_cpu(&flagged, None, &small, rw, rh, &params.splat)?;
+                    let shifted = unsure_points(&flagged, &errors, &small, shift_limit);
+                    let marked;
+                    let cloud = if shifted.is_empty() {
+                        &flagged
+                    } else {
+                        let mut copy = flagged.clone();
+                        for i in shifted {
+                            copy.colours[i][1] = 1.0;
+                        }
+                        marked = copy;
+                        &marked
+                    };
+                    let frame = render_cpu(cloud, None, &small, rw, rh, &params.splat)?;
                     let pixels = (rw * rh) as f32;
                     let mut holes = 0usize;
                     let mut synthesised = 0usize;
+                    let mut unsure = 0usize;
                     for (a, c) in frame.coverage.data().iter().zip(frame.colour.data()) {
                         if *a < HOLE_COVERAGE {
                             holes += 1;
                         } else if c[0] >= 0.5 {
                             synthesised += 1;
+                        } else if c[1] >= 0.5 {
+                            unsure += 1;
                         }
                     }
                     Ok(FrameDiagnostics {
                         hole_fraction: holes as f32 / pixels,
                         inpainted_fraction: synthesised as f32 / pixels,
+                        unsure_fraction: unsure as f32 / pixels,
                     })
                 })
                 .collect::<Result<Vec<_>>>()?;
@@ -141,6 +213,8 @@ pub fn path_diagnostics_sampled(
                     hole_fraction: a.hole_fraction + t * (b.hole_fraction - a.hole_fraction),
                     inpainted_fraction: a.inpainted_fraction
                         + t * (b.inpainted_fraction - a.inpainted_fraction),
+                    unsure_fraction: a.unsure_fraction
+                        + t * (b.unsure_fraction - a.unsure_fraction),
                 });
             }
         }
@@ -177,6 +251,35 @@ pub fn quick_path_diagnostics(
         QUICK_MAX_FRAMES,
         progress,
     )
+}
+
+/// The points of `cloud` (indices into it, with their relative depth error) that `view` shows
+/// more than `limit` pixels away from where they would be with that error.
+fn unsure_points(
+    cloud: &PointCloud,
+    errors: &[(usize, f32)],
+    view: &View,
+    limit: f32,
+) -> Vec<usize> {
+    if errors.is_empty() {
+        return Vec::new();
+    }
+    let camera = crate::geometry::WorldToCamera::new(&view.world_from_camera);
+    errors
+        .iter()
+        .filter(|&&(i, e)| {
+            let x = cloud.positions[i];
+            let (Some((u, v, _)), Some((u2, v2, _))) = (
+                view.intrinsics.project(camera.apply(x)),
+                view.intrinsics.project(camera.apply(x * (1.0 + e))),
+            ) else {
+                return false;
+            };
+            let shift = ((u2 - u).powi(2) + (v2 - v).powi(2)).sqrt();
+            shift.is_finite() && shift > limit
+        })
+        .map(|&(i, _)| i)
+        .collect()
 }
 
 /// The cloud with each point's colour replaced by its inpainted flag (`[1, 0, 0]` synthesised,

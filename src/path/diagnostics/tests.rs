@@ -231,6 +231,7 @@ fn warning_runs_name_the_measures_over() {
     let frame = |h: f32, s: f32| FrameDiagnostics {
         hole_fraction: h,
         inpainted_fraction: s,
+        unsure_fraction: 0.0,
     };
     let d = PathDiagnostics {
         render_size: (32, 20),
@@ -458,4 +459,61 @@ fn cancel_stops_diagnostics() {
         &progress,
     );
     assert!(matches!(r, Err(Error::Cancelled)));
+}
+
+#[test]
+fn unsure_depth_counts_where_the_move_would_shift_it() {
+    let (cloud, k, _) = landscape(128, 80, 60.0, 30.0, 1.0);
+    let relief = |e: f32| Raster::new(128, 80, e);
+    let unsure = |e: f32, views: &[View]| {
+        let map = relief(e);
+        path_diagnostics_unsure(
+            &cloud,
+            Some(UnsureDepth {
+                relief: &map,
+                origin: [0.0, 0.0],
+            }),
+            views,
+            128,
+            80,
+            &DiagnosticsParams::default(),
+            usize::MAX,
+            &Progress::none(),
+        )
+        .unwrap()
+    };
+    let turned = View {
+        intrinsics: k,
+        world_from_camera: Pose::new(Quat::from_rotation_y(0.1), Vec3::ZERO),
+    };
+    let views = [
+        view(k, Vec3::ZERO),
+        turned,
+        view(k, Vec3::new(0.4, 0.0, 0.0)),
+        view(k, Vec3::new(4.0, 0.0, 0.0)),
+    ];
+    let d = unsure(0.2, &views);
+    // The input view and a pure rotation shift nothing, whatever the error.
+    assert_eq!(d.frames[0].unsure_fraction, 0.0, "{d:?}");
+    assert_eq!(d.frames[1].unsure_fraction, 0.0, "{d:?}");
+    // A move shifts the near ground; a larger move more of what it still covers.
+    let of_covered = |f: &FrameDiagnostics| f.unsure_fraction / (1.0 - f.hole_fraction);
+    assert!(d.frames[2].unsure_fraction > 0.0, "{d:?}");
+    assert!(of_covered(&d.frames[3]) > of_covered(&d.frames[2]), "{d:?}");
+    // Holes and synthesised pixels are not counted again; the three shares fit in the frame.
+    for f in &d.frames {
+        assert!(f.hole_fraction + f.inpainted_fraction + f.unsure_fraction <= 1.0 + 1e-6);
+    }
+    // No error, or none given: nothing unsure; the other measures are the plain diagnostics'.
+    let plain = run(&cloud, &views, (128, 80));
+    for d in [unsure(0.0, &views), plain.clone()] {
+        assert!(d.frames.iter().all(|f| f.unsure_fraction == 0.0), "{d:?}");
+    }
+    for (a, b) in d.frames.iter().zip(&plain.frames) {
+        assert_eq!(a.hole_fraction, b.hole_fraction);
+        assert_eq!(a.inpainted_fraction, b.inpainted_fraction);
+    }
+    // A tiny error shifts less than the limit: nothing counts.
+    let tiny = unsure(1e-5, &views[2..3]);
+    assert_eq!(tiny.frames[0].unsure_fraction, 0.0, "{tiny:?}");
 }

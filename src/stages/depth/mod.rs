@@ -12,6 +12,7 @@ pub mod paint;
 pub mod preview;
 pub mod propagate;
 pub mod regions;
+pub mod relief;
 
 use crate::error::Result;
 use crate::geometry::Intrinsics;
@@ -26,7 +27,7 @@ pub struct DepthEstimate {
     pub depth: GrayRaster,
     /// Soft sky mask in `[0, 1]` (1 = sky).
     pub sky: GrayRaster,
-    /// Confidence in `[0, 1]` (1 = trusted).
+    /// Confidence in `[0, 1]` (1 = trusted; the artist's depth edits are trusted).
     pub confidence: GrayRaster,
 }
 
@@ -280,6 +281,21 @@ pub fn apply_depth_edits(
     }
     if !strokes.is_empty() {
         out.estimate.depth = paint::apply_strokes(&out.estimate.depth, strokes)?;
+    }
+    // What the artist set is vouched for: the sizing must not shrink a move over it.
+    let estimate = &mut out.estimate;
+    if estimate.confidence.size() == estimate.depth.size() {
+        for ((c, z), z0) in estimate
+            .confidence
+            .data_mut()
+            .iter_mut()
+            .zip(estimate.depth.data())
+            .zip(out.unedited.iter().flat_map(|u| u.data()))
+        {
+            if z != z0 {
+                *c = 1.0;
+            }
+        }
     }
     Ok(())
 }
