@@ -21,7 +21,9 @@
 //!   below the horizon), sky-coloured (their colour, or a brightened copy of it as reflections
 //!   are darker, falls into a populated bin of the sky's 16³ colour histogram) and not dark
 //!   (luma at least [`WATER_MIN_LUMA`] of the sky's median: tree lines, mountains and their
-//!   reflections are darker than a lake reflecting the sky), cleaned by a box vote.
+//!   reflections are darker than a lake reflecting the sky) — or, below a mirror line (the
+//!   depth stage's reflection cue), mirror the picture above the line ([`reflection`]: a calm
+//!   lake is water where it reflects a dark tree line too) — cleaned by a box vote.
 //!   Connected parts of at least [`MIN_WATER_PART`] of the canvas are kept; a part that
 //!   reaches up through a *neck* (a row covering less than [`WATER_NECK_FRACTION`] of the
 //!   part's fullest row) is cut below the neck, and, as a level lake has a flat far edge,
@@ -73,6 +75,16 @@ use crate::error::{Error, Result};
 use crate::raster::{
     GrayRaster, MaskRaster, Raster, RgbRaster, box_mean, connected_components, luma, quantile,
 };
+
+/// [`reflection`] works on a copy at most this wide (the depth stage's working width).
+pub const REFLECTION_WORK_WIDTH: usize = 384;
+
+/// Smallest correlation of a window below a mirror line with its flipped counterpart above for
+/// the window to be a reflection ([`reflection`]).
+pub const REFLECTION_MIN_CORRELATION: f32 = 0.5;
+
+/// Luma standard deviation under which a window is flat ([`reflection`]).
+pub const REFLECTION_FLAT: f32 = 0.02;
 
 /// Sky drift speed as a fraction of the canvas width per frame (0.3 px/frame at 1280 px).
 pub const SKY_DRIFT_PER_WIDTH: f32 = 0.3 / 1280.0;
@@ -344,6 +356,103 @@ mod tests {
         assert_eq!(spec.loop_frames, SUGGESTED_LOOP_FRAMES);
         let travel = spec.loop_frames as f32 * max;
         assert!(travel <= 30.0 / 1280.0 * w as f32 * 1.01, "travel {travel}");
+    }
+
+    /// A calm dusk lake that mirrors a dark tree line (the reflection is as dark as the trees,
+    /// neither sky-coloured nor bright): sky, trees with an uneven top, their darker mirror
+    /// image down to a pebble shore. Returns the image and the water's true mask.
+    fn mirror_lake_scene(w: usize, h: usize) -> (RgbRaster, MaskRaster) {
+        let (trees_top, axis, shore) = (0.22, 0.45, 0.9);
+        let fy = |y: usize| y as f32 / h as f32;
+        let treeline = |x: usize| {
+            let t = x as f32 / w as f32;
+            trees_top + 0.06 * (t * 23.0).sin().abs() + 0.04 * (t * 7.0).cos()
+        };
+        // Foliage: noise in 3-pixel cells.
+        let above = |x: usize, y: usize| -> [f32; 3] {
+            let f = fy(y);
+            if f < treeline(x) {
+                [0.55 + 0.2 * f, 0.5 + 0.2 * f, 0.75]
+            } else {
+                let n = noise(x / 3, y / 3);
+                [0.08 + 0.15 * n, 0.12 + 0.2 * n, 0.08 + 0.1 * n]
+            }
+        };
+        let axis_row = (axis * h as f32) as usize;
+        let image = Raster::from_fn(w, h, |x, y| {
+            let f = fy(y);
+            if y <= axis_row {
+                above(x, y)
+            } else if f < shore {
+                // The mirror image about the axis row, a little darker.
+                above(x, (2 * axis_row).saturating_sub(y)).map(|v| 0.8 * v)
+            } else {
+                let n = noise(x, y);
+                [0.35 + 0.5 * n, 0.33 + 0.5 * n, 0.3 + 0.5 * n]
+            }
+        });
+        let water = Raster::from_fn(w, h, |_, y| y > axis_row && fy(y) < shore);
+        (image, water)
+    }
+
+    #[test]
+    fn reflections_are_found_only_below_a_mirror_line() {
+        let (w, h) = (240, 150);
+        let (image, water) = mirror_lake_scene(w, h);
+        let mirrored = reflection(&image);
+        // Nothing above the line; below it, the tree line's mirror image (the rows the
+        // detector found mirrored) is all reflection.
+        for y in 0..h {
+            let count = (0..w).filter(|&x| mirrored.at(x, y)).count();
+            if !water.at(0, y) {
+                assert_eq!(count, 0, "row {y}");
+            }
+        }
+        let first = (0..h).find(|&y| water.at(0, y)).unwrap();
+        for y in first + 1..first + 30 {
+            let count = (0..w).filter(|&x| mirrored.at(x, y)).count();
+            assert!(count >= w * 9 / 10, "row {y}: {count}");
+        }
+        // A picture without a reflection, and degenerate sizes: none.
+        let noisy = Raster::from_fn(w, h, |x, y| [noise(x, y) + 0.5; 3]);
+        assert!(reflection(&noisy).data().iter().all(|&m| !m));
+        for (w, h) in [(0, 0), (1, 1), (3, 40), (40, 3)] {
+            let r = reflection(&RgbRaster::new(w, h, [0.5; 3]));
+            assert_eq!(r.size(), (w, h));
+            assert!(r.data().iter().all(|&m| !m));
+        }
+    }
+
+    #[test]
+    fn a_calm_lake_mirroring_dark_trees_flows() {
+        let (w, h) = (240, 150);
+        let (image, water) = mirror_lake_scene(w, h);
+        let spec = suggest_motion(&image, None, None, None).unwrap();
+        let field = flow_of(&spec, w, h);
+        let moving = |x: usize, y: usize| field.flow.at(x, y) != [0.0, 0.0];
+        let lake = water.data().iter().filter(|&&b| b).count();
+        let moved = (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .filter(|&(x, y)| water.at(x, y) && moving(x, y))
+            .count();
+        let share = moved as f32 / lake as f32;
+        // Trees and the pebble shore stay exactly still; most of the lake moves (the shore
+        // anchors and the stroke rims keep the rest).
+        let mut land_moving = 0;
+        for y in 0..h {
+            for x in 0..w {
+                let f = y as f32 / h as f32;
+                if !water.at(x, y) && f > 0.35 && moving(x, y) {
+                    land_moving += 1;
+                }
+            }
+        }
+        assert_eq!(land_moving, 0, "{spec:?}");
+        assert!(
+            share >= 0.6,
+            "only {:.0} % of the lake moves",
+            100.0 * share
+        );
     }
 
     #[test]

@@ -43,12 +43,12 @@ pub(super) fn estimate_water(
         return empty;
     };
     let smooth_threshold = smooth_threshold.max(0.01);
+    let mirrored = reflection(image);
     let candidate = Raster::from_fn(w, h, |x, y| {
         let c = image.at(x, y);
         below.at(x, y)
-            && texture.at(x, y) <= smooth_threshold
-            && luma(c) >= min_luma
-            && sky_coloured(c)
+            && (mirrored.at(x, y)
+                || (texture.at(x, y) <= smooth_threshold && luma(c) >= min_luma && sky_coloured(c)))
     });
     // Box vote.
     let vote = box_mean(
@@ -133,6 +133,80 @@ pub(super) fn estimate_water(
         return empty;
     }
     kept
+}
+
+/// The pixels below a mirror line ([`find_mirror_line`], the depth stage's reflection cue)
+/// whose neighbourhood mirrors the one above the line: the reflection of what stands on the far
+/// shore, which is water however dark or unlike the sky it is (a calm lake at dusk mirroring a
+/// tree line). Measured on a copy at most [`REFLECTION_WORK_WIDTH`] pixels wide: luma windows of
+/// radius 2 below the line against the flipped windows above it, normalised cross-correlation
+/// at least [`REFLECTION_MIN_CORRELATION`]; two flat windows (standard deviation below
+/// [`REFLECTION_FLAT`]) mirror each other when the one below is at most as bright (a reflection
+/// loses light) and at least half as bright. Empty without a mirror line.
+///
+/// [`find_mirror_line`]: crate::stages::depth::mirror::find_mirror_line
+pub fn reflection(image: &RgbRaster) -> MaskRaster {
+    let (w, h) = image.size();
+    let mut out = MaskRaster::new(w, h, false);
+    if w == 0 || h == 0 {
+        return out;
+    }
+    let sw = w.min(REFLECTION_WORK_WIDTH);
+    let sh = ((h as f32 * sw as f32 / w as f32).round() as usize).max(1);
+    let small = image.map(luma).resized(sw, sh);
+    let Some(line) = crate::stages::depth::mirror::find_mirror_line(&small) else {
+        return out;
+    };
+    let r = 2i64;
+    let (swi, shi) = (sw as i64, sh as i64);
+    let twice = (2.0 * line.axis).round() as i64;
+    let first = twice / 2 + 1;
+    let last = (first + line.extent as i64).min(shi - 1);
+    let mirrored_row = |y: i64| twice - y;
+    let small_mask = Raster::from_fn(sw, sh, |x, y| {
+        let (x, y) = (x as i64, y as i64);
+        if y < first || y > last || mirrored_row(y) < 0 {
+            return false;
+        }
+        let (mut n, mut sa, mut sb, mut saa, mut sbb, mut sab) = (0.0f32, 0.0, 0.0, 0.0, 0.0, 0.0);
+        for j in -r..=r {
+            let (yb, ya) = (y + j, mirrored_row(y) - j);
+            if yb < 0 || ya < 0 || yb >= shi || ya >= shi {
+                continue;
+            }
+            for i in -r..=r {
+                let xi = (x + i).clamp(0, swi - 1) as usize;
+                let (a, b) = (small.at(xi, ya as usize), small.at(xi, yb as usize));
+                n += 1.0;
+                sa += a;
+                sb += b;
+                saa += a * a;
+                sbb += b * b;
+                sab += a * b;
+            }
+        }
+        if n < 2.0 {
+            return false;
+        }
+        let (ma, mb) = (sa / n, sb / n);
+        let va = (saa / n - ma * ma).max(0.0);
+        let vb = (sbb / n - mb * mb).max(0.0);
+        let flat = REFLECTION_FLAT * REFLECTION_FLAT;
+        if va < flat && vb < flat {
+            return mb <= ma * 1.02 && mb >= 0.5 * ma;
+        }
+        let ncc = (sab / n - ma * mb) / (va * vb).sqrt().max(1e-12);
+        ncc >= REFLECTION_MIN_CORRELATION && mb <= ma * 1.02
+    });
+    let (fx, fy) = (sw as f32 / w as f32, sh as f32 / h as f32);
+    for y in 0..h {
+        let sy = (((y as f32 + 0.5) * fy) as usize).min(sh - 1);
+        for x in 0..w {
+            let sx = (((x as f32 + 0.5) * fx) as usize).min(sw - 1);
+            out.set(x, y, small_mask.at(sx, sy));
+        }
+    }
+    out
 }
 
 /// The pixels (indices into a `width`-wide raster) of a connected water part, without the
