@@ -173,14 +173,34 @@ fn path_warnings(
     let views = scene.output_views(project)?;
     let params = project.camera.diagnostics.params();
     let progress = progress.sub(0.1, 0.1);
+    let relief = scene.unsure_relief();
+    let unsure = Some(scene.unsure_depth(&relief));
     if full {
-        let d = crate::path::path_diagnostics(&scene.cloud, &views, w, h, &params, &progress)?;
+        let d = crate::path::path_diagnostics_unsure(
+            &scene.cloud,
+            unsure,
+            &views,
+            w,
+            h,
+            &params,
+            usize::MAX,
+            &progress,
+        )?;
         note(Note::Info(d.to_string()));
-        Ok(Vec::new())
+        Ok(d.unsure_line().into_iter().collect())
     } else {
-        let d =
-            crate::path::quick_path_diagnostics(&scene.cloud, &views, w, h, &params, &progress)?;
+        let d = crate::path::path_diagnostics_unsure(
+            &scene.cloud,
+            unsure,
+            &views,
+            w,
+            h,
+            &params.quick(),
+            crate::path::diagnostics::QUICK_MAX_FRAMES,
+            &progress,
+        )?;
         let mut lines = d.warning_lines();
+        lines.extend(d.unsure_line());
         lines.extend(d.safe_extent_line());
         Ok(lines)
     }

@@ -194,6 +194,23 @@ pub struct Scene {
 pub const SKETCH_STRIDE: usize = crate::stages::layers::MAX_DENSITY_STRIDE;
 
 impl Scene {
+    /// Relief of the photo's depth that no depth cue vouches for
+    /// ([`unsure_relief`](crate::stages::depth::relief::unsure_relief) of the depth and its
+    /// confidence), photo pixels.
+    pub fn unsure_relief(&self) -> GrayRaster {
+        let estimate = &self.depth.estimate;
+        crate::stages::depth::relief::unsure_relief(&estimate.depth, &estimate.confidence)
+    }
+
+    /// `relief` ([`Scene::unsure_relief`]) placed on the canvas, for the diagnostics.
+    pub fn unsure_depth<'a>(&self, relief: &'a GrayRaster) -> crate::path::UnsureDepth<'a> {
+        let layout = self.canvas.layout;
+        crate::path::UnsureDepth {
+            relief,
+            origin: [layout.left_pad as f32, layout.top_pad as f32],
+        }
+    }
+
     /// `project`'s output camera for this scene's photo ([`OutputCamera::of_photo`]: the
     /// default output size is the photo's own, whatever the working size).
     pub fn output_camera(&self, project: &Project) -> OutputCamera {

@@ -157,13 +157,8 @@ pub fn size_preset(
     let (w, h) = camera.size;
     let params = project.camera.diagnostics.params();
     let quick = params.quick();
-    let estimate = &scene.depth.estimate;
-    let relief = crate::stages::depth::relief::unsure_relief(&estimate.depth, &estimate.confidence);
-    let layout = scene.canvas.layout;
-    let unsure = crate::path::UnsureDepth {
-        relief: &relief,
-        origin: [layout.left_pad as f32, layout.top_pad as f32],
-    };
+    let relief = scene.unsure_relief();
+    let unsure = scene.unsure_depth(&relief);
     let steps = (SIZING_STEPS + 2) as f32;
     let mut step = 0usize;
     let mut diagnose = |share: f64| -> Result<crate::path::PathDiagnostics> {

@@ -201,6 +201,37 @@ impl PathDiagnostics {
             .collect()
     }
 
+    /// One line for the frames whose photographed content over unsure depth
+    /// ([`FrameDiagnostics::unsure_fraction`]) takes the synthesised share past its threshold
+    /// although the synthesised share alone stays under it (the frames over it are said by
+    /// [`warning_lines`](Self::warning_lines)): relief no depth cue vouches for counts like
+    /// synthesised content. `None` when there are none.
+    pub fn unsure_line(&self) -> Option<String> {
+        let counted = |f: &FrameDiagnostics| {
+            f.inpainted_fraction <= self.synth_threshold
+                && f.inpainted_fraction + f.unsure_fraction > self.synth_threshold
+        };
+        let frames: Vec<usize> = (0..self.frames.len())
+            .filter(|&i| counted(&self.frames[i]))
+            .collect();
+        let (&first, &last) = (frames.first()?, frames.last()?);
+        let worst = frames
+            .iter()
+            .map(|&i| self.frames[i].unsure_fraction)
+            .fold(0.0f32, f32::max);
+        let which = if first == last {
+            format!("frame {first}")
+        } else {
+            format!("frames {first}–{last} ({} of them)", frames.len())
+        };
+        Some(format!(
+            "{which}: up to {:.1} % of a frame is relief no depth cue vouches for, moved more than {} px by the camera, which with the synthesised share passes {:.0} % (it may bend or tear: paint its depth, or choose a smaller move)",
+            100.0 * worst,
+            UNSURE_SHIFT_PX,
+            100.0 * self.synth_threshold
+        ))
+    }
+
     /// The safe extent in one line (`None` when the whole path is safe or empty).
     pub fn safe_extent_line(&self) -> Option<String> {
         let n = self.frames.len();

@@ -517,3 +517,39 @@ fn unsure_depth_counts_where_the_move_would_shift_it() {
     let tiny = unsure(1e-5, &views[2..3]);
     assert_eq!(tiny.frames[0].unsure_fraction, 0.0, "{tiny:?}");
 }
+
+#[test]
+fn unsure_depth_is_said_where_it_tips_a_frame_over() {
+    let frame = |s: f32, u: f32| FrameDiagnostics {
+        hole_fraction: 0.0,
+        inpainted_fraction: s,
+        unsure_fraction: u,
+    };
+    let mut d = PathDiagnostics {
+        render_size: (32, 20),
+        hole_threshold: 0.02,
+        synth_threshold: 0.2,
+        frames: vec![
+            frame(0.05, 0.1),  // 15 %: under
+            frame(0.15, 0.1),  // 25 %: tipped over by the unsure share
+            frame(0.25, 0.1),  // over on its own: warning_lines says it
+            frame(0.1, 0.125), // 22.5 %: tipped over
+        ],
+    };
+    assert_eq!(
+        d.unsure_line().as_deref(),
+        Some(
+            "frames 1–3 (2 of them): up to 12.5 % of a frame is relief no depth cue vouches for, moved more than 2 px by the camera, which with the synthesised share passes 20 % (it may bend or tear: paint its depth, or choose a smaller move)"
+        )
+    );
+    d.frames.truncate(2);
+    assert!(
+        d.unsure_line()
+            .unwrap()
+            .starts_with("frame 1: up to 10.0 %")
+    );
+    d.frames.truncate(1);
+    assert_eq!(d.unsure_line(), None);
+    d.frames.clear();
+    assert_eq!(d.unsure_line(), None);
+}
