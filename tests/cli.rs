@@ -800,3 +800,42 @@ fn inpaint_fills_from_a_prompt_with_a_diffusion_folder() {
     assert_clean_failure(&done, &["4 channels", "text-to-image"]);
     assert!(!bad.exists());
 }
+
+/// `bench diffusion` on the fixture graphs: the split into fixed and per-step seconds, the
+/// estimates and peak memory; a window that is no multiple of 8 and a single step are refused in
+/// one line.
+#[test]
+fn bench_diffusion_splits_a_window_into_fixed_and_per_step_seconds() {
+    let folder = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/diffusion/optimum");
+    let bench = |extra: &[&str]| {
+        exe()
+            .args(["bench", "diffusion", "--model"])
+            .arg(&folder)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let done = bench(&["--window", "64", "--steps", "3", "--runs", "2", "--json"]);
+    assert!(
+        done.status.success(),
+        "{}",
+        String::from_utf8_lossy(&done.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_slice(&done.stdout).unwrap();
+    assert_eq!(json["window"], 64);
+    assert_eq!(json["steps"], 3);
+    assert_eq!(json["window_seconds"].as_array().unwrap().len(), 2);
+    assert_eq!(json["one_step_seconds"].as_array().unwrap().len(), 2);
+    assert!(!json["device"].as_str().unwrap().is_empty());
+    let done = bench(&["--window", "64", "--steps", "2", "--runs", "1"]);
+    let text = String::from_utf8_lossy(&done.stdout);
+    assert!(
+        text.contains("per step (UNet × 2 + sampler)") && text.contains("a window at 30 steps"),
+        "{text}"
+    );
+    assert_clean_failure(&bench(&["--window", "100"]), &["100", "multiple of 8"]);
+    assert_clean_failure(
+        &bench(&["--window", "64", "--steps", "1"]),
+        &["1 steps", "at least 2"],
+    );
+}

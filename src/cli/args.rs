@@ -553,6 +553,9 @@ pub(crate) enum BenchCommand {
     /// Mutated inputs of every format makeit4d reads (JPEG, PNG, projects and recovery files,
     /// model manifests, ordinal annotations, ONNX files): cases read, refused, panics, slow.
     Fuzz(BenchFuzzArgs),
+    /// A diffusion inpainting model (a folder of four ONNX graphs and a tokenizer): seconds per
+    /// window and per denoising step, the fixed part, estimates at 4/30/50 steps, peak memory.
+    Diffusion(BenchDiffusionArgs),
     /// An edit storm: the real editor, headless, through thousands of random edits, undo/redo
     /// bursts, cancels, saves, reopens, resizes and random input, with its history, saves and
     /// scene checked after every step; peak memory and threads.
@@ -598,6 +601,28 @@ pub(crate) struct BenchFuzzArgs {
     #[arg(long)]
     pub(crate) save_failures: Option<PathBuf>,
     /// Print JSON instead of a markdown table.
+    #[arg(long)]
+    pub(crate) json: bool,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct BenchDiffusionArgs {
+    /// The model folder (text_encoder/, unet/, vae_encoder/, vae_decoder/, tokenizer/).
+    #[arg(long)]
+    pub(crate) model: PathBuf,
+    /// The window's side, pixels (a multiple of 8; the SD inpainting models' native 512).
+    #[arg(long, default_value_t = 512)]
+    pub(crate) window: usize,
+    /// Steps of the long runs (at least 2).
+    #[arg(long, default_value_t = 10)]
+    pub(crate) steps: usize,
+    /// Runs of each length (the median is used).
+    #[arg(long, default_value_t = 3)]
+    pub(crate) runs: usize,
+    /// Sampler: ddim, euler-ancestral, dpm-solver-2m or lcm.
+    #[arg(long, default_value = "ddim")]
+    pub(crate) scheduler: String,
+    /// Print JSON instead of markdown.
     #[arg(long)]
     pub(crate) json: bool,
 }

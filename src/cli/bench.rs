@@ -1,8 +1,8 @@
 //! `makeit4d bench …`: speed (and quality) of the stages, as markdown tables.
 
 use super::args::{
-    BenchDepthArgs, BenchDownloadArgs, BenchEditorArgs, BenchInpaintArgs, BenchMotionArgs,
-    BenchRenderArgs, BenchSceneArgs, BenchSceneCaseArgs,
+    BenchDepthArgs, BenchDiffusionArgs, BenchDownloadArgs, BenchEditorArgs, BenchInpaintArgs,
+    BenchMotionArgs, BenchRenderArgs, BenchSceneArgs, BenchSceneCaseArgs,
 };
 use super::{progress_bar, tempfile_dir};
 use anyhow::{Context, bail};
@@ -170,6 +170,33 @@ pub(crate) fn bench_download(args: BenchDownloadArgs) -> anyhow::Result<()> {
     let bench = makeit4d::models::bench_download(args.mb, args.runs, &scratch);
     let _ = std::fs::remove_dir_all(&scratch);
     print!("{}", bench?.to_markdown());
+    Ok(())
+}
+
+pub(crate) fn bench_diffusion(
+    args: BenchDiffusionArgs,
+    cancel: Arc<AtomicBool>,
+) -> anyhow::Result<()> {
+    use makeit4d::stages::inpaint::diffusion::DiffusionModel;
+    use makeit4d::stages::inpaint::diffusion_bench::bench_diffusion;
+    let sampler = args.scheduler.parse()?;
+    let model = DiffusionModel::open(&args.model)?;
+    let (bar, progress) = progress_bar(cancel);
+    let bench = bench_diffusion(
+        &model,
+        args.window,
+        args.steps,
+        args.runs,
+        sampler,
+        &progress,
+    );
+    bar.finish_and_clear();
+    let bench = bench?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&bench)?);
+    } else {
+        print!("{}", bench.to_markdown());
+    }
     Ok(())
 }
 

@@ -109,6 +109,7 @@ pub fn main() -> ExitCode {
         Command::Bench(BenchCommand::Scene(args)) => bench::bench_scene(args, cancel),
         Command::Bench(BenchCommand::SceneCase(args)) => bench::bench_scene_case(args),
         Command::Bench(BenchCommand::Download(args)) => bench::bench_download(args),
+        Command::Bench(BenchCommand::Diffusion(args)) => bench::bench_diffusion(args, cancel),
         Command::Bench(BenchCommand::Fuzz(args)) => bench::bench_fuzz(args),
         Command::Bench(BenchCommand::Storm(args)) => bench::bench_storm(args),
         Command::Doctor(args) => doctor::doctor(args),

@@ -12,6 +12,7 @@ pub mod bench;
 pub mod command;
 mod common;
 pub mod diffusion;
+pub mod diffusion_bench;
 pub mod distinct;
 pub mod harmonic;
 pub mod onnx;
