@@ -323,6 +323,22 @@ pub fn gaussian_noise(seed: u64, n: usize) -> Vec<f32> {
     out
 }
 
+/// A duration said the way a person reads it: "0.4 s", "12 s", "2 min 05 s", "1 h 03 min".
+pub fn about_seconds(seconds: f64) -> String {
+    if !seconds.is_finite() || seconds < 0.0 {
+        return "an unknown time".into();
+    }
+    if seconds < 10.0 {
+        return format!("{seconds:.1} s");
+    }
+    let s = seconds.round() as u64;
+    match s {
+        0..60 => format!("{s} s"),
+        60..3600 => format!("{} min {:02} s", s / 60, s % 60),
+        _ => format!("{} h {:02} min", s / 3600, (s % 3600) / 60),
+    }
+}
+
 /// Settings of one diffusion fill.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DiffusionParams {
@@ -464,11 +480,24 @@ impl DiffusionModel {
             .collect();
         let unet = &self.sessions[1];
         let steps = sampler.timesteps().len();
+        let started = std::time::Instant::now();
         for i in 0..steps {
             progress.check()?;
+            // After the first step, what the rest will take at its pace.
+            let left = (i > 0).then(|| {
+                let per_step = started.elapsed().as_secs_f64() / i as f64;
+                format!(
+                    ", about {} left",
+                    about_seconds(per_step * (steps - i) as f64)
+                )
+            });
             progress.report(
                 i as f32 / steps as f32,
-                &format!("diffusion step {}/{steps}", i + 1),
+                &format!(
+                    "diffusion step {}/{steps}{}",
+                    i + 1,
+                    left.unwrap_or_default()
+                ),
             );
             let scale = sampler.input_scale(i) as f32;
             let mut sample = Vec::with_capacity(2 * 9 * plane);
@@ -690,6 +719,23 @@ impl DiffusionModel {
             }
         });
         Ok((out, notes))
+    }
+}
+
+#[cfg(test)]
+mod time_tests {
+    use super::about_seconds;
+
+    #[test]
+    fn durations_read_like_a_person_says_them() {
+        assert_eq!(about_seconds(0.42), "0.4 s");
+        assert_eq!(about_seconds(9.96), "10.0 s");
+        assert_eq!(about_seconds(12.4), "12 s");
+        assert_eq!(about_seconds(125.0), "2 min 05 s");
+        assert_eq!(about_seconds(3599.6), "1 h 00 min");
+        assert_eq!(about_seconds(3780.0), "1 h 03 min");
+        assert_eq!(about_seconds(f64::NAN), "an unknown time");
+        assert_eq!(about_seconds(-1.0), "an unknown time");
     }
 }
 
