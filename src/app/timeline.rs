@@ -1,6 +1,7 @@
 //! The timeline under the views: play/pause, scrubbing, loop, keyframe markers (select,
 //! delete, interpolation and ease per key) and a strip coloured by each frame's hole fraction
-//! (upper half) and synthesised share (lower half).
+//! (upper half) and synthesised share, with the relief no depth cue vouches for that the move
+//! shifts (lower half).
 
 pub use super::context::TimelineState;
 
@@ -254,7 +255,10 @@ pub fn strip_colours(
             ramp(
                 Color32::from_rgb(60, 80, 110),
                 SYNTH_COLOUR,
-                scale(frame.inpainted_fraction, thresholds.1),
+                scale(
+                    frame.inpainted_fraction + frame.unsure_fraction,
+                    thresholds.1,
+                ),
             ),
         ));
     }
@@ -266,7 +270,7 @@ pub fn strip_colours(
 }
 
 /// One cell per frame: its upper half by hole fraction, its lower half by synthesised share
-/// (from the path diagnostics; grey: not measured yet). Hovering names the frame's numbers.
+/// plus the share over unsure depth (from the path diagnostics; grey: not measured yet). Hovering names the frame's numbers.
 fn hole_strip_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, frames: usize) {
     let (rect, response) = ui.allocate_exact_size(vec2(ui.available_width(), 14.0), Sense::hover());
     let painter = ui.painter_at(rect);
@@ -310,16 +314,19 @@ fn hole_strip_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, frames: usize) {
                 .strong(),
         );
         ui.label(format!(
-            "lower half: the share showing inpainted or outpainted content (violet at {:.1} %)",
+            "lower half: the share showing inpainted or outpainted content, or relief no depth \
+             cue vouches for moved more than {} px (violet at {:.1} %)",
+            crate::path::diagnostics::UNSURE_SHIFT_PX,
             100.0 * thresholds.1
         ));
         match (hovered, diagnostics) {
             (Some(f), Some(d)) if f < d.frames.len() => {
                 let m = d.frames[f];
                 ui.label(format!(
-                    "frame {f}: {:.1} % holes, {:.1} % synthesised",
+                    "frame {f}: {:.1} % holes, {:.1} % synthesised, {:.1} % over unsure depth",
                     100.0 * m.hole_fraction,
-                    100.0 * m.inpainted_fraction
+                    100.0 * m.inpainted_fraction,
+                    100.0 * m.unsure_fraction
                 ));
             }
             _ => {

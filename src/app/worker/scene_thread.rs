@@ -452,12 +452,16 @@ fn run_diagnostics(
         let (project, scene) = (&snapshot.project, &snapshot.scene);
         let (w, h) = scene.output_camera(project).size;
         let views = scene.output_views(project)?;
-        crate::path::quick_path_diagnostics(
+        // Relief no depth cue vouches for counts like synthesised content (as in the sizing).
+        let relief = scene.unsure_relief();
+        crate::path::path_diagnostics_unsure(
             &scene.cloud,
+            Some(scene.unsure_depth(&relief)),
             &views,
             w,
             h,
-            &project.camera.diagnostics.params(),
+            &project.camera.diagnostics.params().quick(),
+            crate::path::diagnostics::QUICK_MAX_FRAMES,
             progress,
         )
     });
