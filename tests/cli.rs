@@ -706,14 +706,17 @@ fn export_scene_writes_a_whole_ply() {
 #[test]
 fn a_reader_that_goes_away_stops_the_output_without_a_panic() {
     // `makeit4d models list | head -c 0`: the pipe's reader is gone before the first write;
-    // the command stops quietly with 141 (128 + SIGPIPE) as a Unix tool does.
-    let mut child = exe()
+    // the command stops quietly with 141 (128 + SIGPIPE) as a Unix tool does. The reader is
+    // closed before the child starts (closing it after the spawn raced with the child's first
+    // write, which a pipe's buffer then took: exit 0 on a loaded machine).
+    let (reader, writer) = std::io::pipe().expect("a pipe");
+    drop(reader);
+    let child = exe()
         .args(["models", "list"])
-        .stdout(std::process::Stdio::piped())
+        .stdout(writer)
         .stderr(std::process::Stdio::piped())
         .spawn()
         .expect("spawn makeit4d");
-    drop(child.stdout.take());
     let out = child.wait_with_output().expect("wait for makeit4d");
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!stderr.contains("panicked"), "{stderr}");
