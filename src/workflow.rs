@@ -189,14 +189,13 @@ fn path_warnings(
         note(Note::Info(d.to_string()));
         Ok(d.unsure_line().into_iter().collect())
     } else {
-        let d = crate::path::path_diagnostics_unsure(
+        let d = crate::path::quick_path_diagnostics(
             &scene.cloud,
             unsure,
             &views,
             w,
             h,
-            &params.quick(),
-            crate::path::diagnostics::QUICK_MAX_FRAMES,
+            &params,
             &progress,
         )?;
         let mut lines = d.warning_lines();

@@ -413,6 +413,7 @@ fn presets_are_sized_to_what_the_scene_supports() {
     let (w, h) = scene.output_camera(&larger).size;
     let d = makeit4d::path::quick_path_diagnostics(
         &scene.cloud,
+        None,
         &views,
         w,
         h,

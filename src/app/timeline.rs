@@ -255,10 +255,7 @@ pub fn strip_colours(
             ramp(
                 Color32::from_rgb(60, 80, 110),
                 SYNTH_COLOUR,
-                scale(
-                    frame.inpainted_fraction + frame.unsure_fraction,
-                    thresholds.1,
-                ),
+                scale(frame.synthesised_or_unsure(), thresholds.1),
             ),
         ));
     }

@@ -185,7 +185,7 @@ pub fn size_preset(
     // a little from the larger one's.
     let fits = |d: &crate::path::PathDiagnostics| {
         d.frames.iter().all(|f| {
-            f.inpainted_fraction + f.unsure_fraction <= SIZING_MARGIN * params.synth_threshold
+            f.synthesised_or_unsure() <= SIZING_MARGIN * params.synth_threshold
                 && f.hole_fraction <= SIZING_MARGIN * params.hole_threshold
         })
     };

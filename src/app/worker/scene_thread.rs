@@ -454,14 +454,13 @@ fn run_diagnostics(
         let views = scene.output_views(project)?;
         // Relief no depth cue vouches for counts like synthesised content (as in the sizing).
         let relief = scene.unsure_relief();
-        crate::path::path_diagnostics_unsure(
+        crate::path::quick_path_diagnostics(
             &scene.cloud,
             Some(scene.unsure_depth(&relief)),
             &views,
             w,
             h,
-            &project.camera.diagnostics.params().quick(),
-            crate::path::diagnostics::QUICK_MAX_FRAMES,
+            &project.camera.diagnostics.params(),
             progress,
         )
     });

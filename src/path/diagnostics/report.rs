@@ -17,6 +17,15 @@ pub struct FrameDiagnostics {
     pub unsure_fraction: f32,
 }
 
+impl FrameDiagnostics {
+    /// The share that counts against the synthesised threshold where unsure depth is judged
+    /// (the sizing, the editor's timeline, `render`'s unsure line): synthesised content plus
+    /// photographed content over relief no depth cue vouches for.
+    pub fn synthesised_or_unsure(&self) -> f32 {
+        self.inpainted_fraction + self.unsure_fraction
+    }
+}
+
 /// Which measures of a frame are over their thresholds.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Over {
@@ -209,7 +218,7 @@ impl PathDiagnostics {
     pub fn unsure_line(&self) -> Option<String> {
         let counted = |f: &FrameDiagnostics| {
             f.inpainted_fraction <= self.synth_threshold
-                && f.inpainted_fraction + f.unsure_fraction > self.synth_threshold
+                && f.synthesised_or_unsure() > self.synth_threshold
         };
         let frames: Vec<usize> = (0..self.frames.len())
             .filter(|&i| counted(&self.frames[i]))

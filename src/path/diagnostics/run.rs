@@ -233,17 +233,20 @@ pub fn path_diagnostics_unsure(
 /// for 40 frames and 2.8 s for 1000 on two cores, where every frame at 320 pixels takes 5 s and
 /// 114 s. Holes narrower than 8 output pixels (at a 1280-pixel output) are not seen, and a run
 /// over a threshold shorter than the sample spacing can be missed: `render --diagnostics`
-/// renders every frame.
+/// renders every frame. With `unsure`, the share over unsure depth is measured too
+/// ([`path_diagnostics_unsure`]).
 pub fn quick_path_diagnostics(
     cloud: &PointCloud,
+    unsure: Option<UnsureDepth<'_>>,
     views: &[View],
     width: usize,
     height: usize,
     params: &DiagnosticsParams,
     progress: &Progress,
 ) -> Result<PathDiagnostics> {
-    path_diagnostics_sampled(
+    path_diagnostics_unsure(
         cloud,
+        unsure,
         views,
         width,
         height,

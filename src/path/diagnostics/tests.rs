@@ -221,7 +221,7 @@ fn sampled_diagnostics_find_the_same_runs() {
     }
     // The quick diagnostics render at most 160 pixels wide.
     let quick =
-        quick_path_diagnostics(&cloud, &views, 256, 160, &params, &Progress::none()).unwrap();
+        quick_path_diagnostics(&cloud, None, &views, 256, 160, &params, &Progress::none()).unwrap();
     assert_eq!(quick.render_size, (160, 100));
     assert_eq!(quick.frames.len(), 97);
 }

@@ -247,6 +247,7 @@ pub fn apply_depth_edits(
         return Ok(());
     }
     let before = std::sync::Arc::new(out.estimate.depth.clone());
+    let before_edits = before.clone();
     out.unedited = Some(before.clone());
     let estimate = (!settings.popups.is_empty()).then_some(before);
     if !settings.targets.is_empty() {
@@ -284,17 +285,10 @@ pub fn apply_depth_edits(
     }
     // What the artist set is vouched for: the sizing must not shrink a move over it.
     let estimate = &mut out.estimate;
-    if estimate.confidence.size() == estimate.depth.size() {
-        for ((c, z), z0) in estimate
-            .confidence
-            .data_mut()
-            .iter_mut()
-            .zip(estimate.depth.data())
-            .zip(out.unedited.iter().flat_map(|u| u.data()))
-        {
-            if z != z0 {
-                *c = 1.0;
-            }
+    let changed = estimate.depth.data().iter().zip(before_edits.data());
+    for (c, (z, z0)) in estimate.confidence.data_mut().iter_mut().zip(changed) {
+        if z != z0 {
+            *c = 1.0;
         }
     }
     Ok(())

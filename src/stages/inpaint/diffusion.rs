@@ -208,13 +208,14 @@ impl DiffusionModel {
 mod tests {
     use super::*;
 
-    fn fixture(name: &str) -> PathBuf {
+    pub(super) fn fixture(name: &str) -> PathBuf {
         Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("tests/fixtures/diffusion")
             .join(name)
     }
 
-    fn runtime() -> bool {
+    /// Whether ONNX Runtime is here (on CI it must be).
+    pub(super) fn runtime() -> bool {
         if crate::ml::ort_available() {
             return true;
         }
@@ -758,17 +759,15 @@ mod pipeline_tests {
 
     #[test]
     fn a_folder_fills_a_hole_from_a_prompt() {
-        if !crate::ml::ort_available() {
-            assert!(std::env::var_os("CI").is_none(), "CI needs ONNX Runtime");
+        if !super::tests::runtime() {
             return;
         }
-        let folder = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/diffusion");
         let (img, _) = picture(200, 120);
         let hole = Raster::from_fn(200, 120, |x, y| {
             (150..170).contains(&x) && (100..110).contains(&y)
         });
         for family in ["diffusers", "optimum"] {
-            let model = DiffusionModel::open(&folder.join(family)).unwrap();
+            let model = DiffusionModel::open(&super::tests::fixture(family)).unwrap();
             let tok = model.tokenizer().unwrap();
             // "a" ends a word: "a</w>", 256 + its byte symbol's place (64), as in CLIP itself.
             assert_eq!(&tok.encode("a cat").unwrap().ids[..2], &[49406, 320]);
@@ -839,11 +838,9 @@ mod pipeline_tests {
 
     #[test]
     fn the_fixture_pipeline_fills_deterministically_and_keeps_known_pixels() {
-        if !crate::ml::ort_available() {
-            assert!(std::env::var_os("CI").is_none(), "CI needs ONNX Runtime");
+        if !super::tests::runtime() {
             return;
         }
-        let folder = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/diffusion");
         let (img, hole) = picture(64, 32);
         let ids: Vec<u32> = [49406u32, 320, 2368, 49407]
             .into_iter()
@@ -856,7 +853,7 @@ mod pipeline_tests {
             .take(77)
             .collect();
         for family in ["diffusers", "optimum"] {
-            let model = DiffusionModel::open(&folder.join(family)).unwrap();
+            let model = DiffusionModel::open(&super::tests::fixture(family)).unwrap();
             for sampler in [
                 super::super::schedule::SamplerKind::Ddim,
                 super::super::schedule::SamplerKind::EulerAncestral,
@@ -892,7 +889,7 @@ mod pipeline_tests {
                 );
             }
         }
-        let model = DiffusionModel::open(&folder.join("diffusers")).unwrap();
+        let model = DiffusionModel::open(&super::tests::fixture("diffusers")).unwrap();
         // Another seed, another fill; guidance 0 and 100 and a whole-image hole run.
         let p = DiffusionParams {
             steps: 3,
