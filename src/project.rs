@@ -315,6 +315,9 @@ impl Project {
         self.camera.diagnostics.validate()?;
         self.layers.params.validate()?;
         self.working.validate()?;
+        if let Some(d) = &self.inpaint.diffusion {
+            d.validate()?;
+        }
         self.render.validate()
     }
 
@@ -356,6 +359,9 @@ impl Project {
         }
         if let Some(m) = &self.inpaint.model {
             self.inpaint.model = Some(model(m));
+        }
+        if let Some(d) = &mut self.inpaint.diffusion {
+            d.model = model(&d.model);
         }
         if let Some(d) = &self.export.folder {
             self.export.folder = Some(f(d));

@@ -144,6 +144,9 @@ pub fn render_project(
     for line in path_warnings {
         note(Note::Warning(line));
     }
+    if project.inpaint.diffusion.is_some() || project.inpaint.model.is_some() {
+        note(Note::Info(format!("inpainter: {}", scene.inpainter)));
+    }
     note(Note::Info(format!("renderer: {why}")));
     let mut summary = render_sequence(
         &project,

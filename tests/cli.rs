@@ -742,7 +742,7 @@ fn inpaint_fills_from_a_prompt_with_a_diffusion_folder() {
     let mask_path = dir.path().join("mask.png");
     mask.save(&mask_path).unwrap();
     let folder = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/diffusion/diffusers");
-    let fill = |out: &Path, scheduler: &str| {
+    let fill = |out: &Path, scheduler: &str, flag: &str| {
         exe()
             .arg("inpaint")
             .arg(&photo)
@@ -750,7 +750,7 @@ fn inpaint_fills_from_a_prompt_with_a_diffusion_folder() {
             .arg(&mask_path)
             .arg("--out")
             .arg(out)
-            .arg("--diffusion")
+            .arg(flag)
             .arg(&folder)
             .args([
                 "--prompt",
@@ -764,8 +764,9 @@ fn inpaint_fills_from_a_prompt_with_a_diffusion_folder() {
             .unwrap()
     };
     let (a, b) = (dir.path().join("a.png"), dir.path().join("b.png"));
-    for (out, scheduler) in [(&a, "ddim"), (&b, "ddim")] {
-        let done = fill(out, scheduler);
+    // The folder by --diffusion or by --model: the same fill.
+    for (out, flag) in [(&a, "--diffusion"), (&b, "--model")] {
+        let done = fill(out, "ddim", flag);
         assert!(
             done.status.success(),
             "{}",
@@ -784,7 +785,7 @@ fn inpaint_fills_from_a_prompt_with_a_diffusion_folder() {
     );
     // A scheduler that is not one: one line, nothing written.
     let bad = dir.path().join("c.png");
-    let done = fill(&bad, "plms");
+    let done = fill(&bad, "plms", "--diffusion");
     assert_clean_failure(&done, &["plms", "ddim, euler-ancestral"]);
     assert!(!bad.exists());
     // A text-to-image model is refused by its channel count.
@@ -802,6 +803,86 @@ fn inpaint_fills_from_a_prompt_with_a_diffusion_folder() {
         .unwrap();
     assert_clean_failure(&done, &["4 channels", "text-to-image"]);
     assert!(!bad.exists());
+}
+
+/// `render --inpaint-model FOLDER --prompt …`: the canvas margin and the layers filled by the
+/// diffusion fixture window by window, the same frames for the same seed, the settings kept in
+/// the saved project; a prompt without a diffusion model and a project with 0 steps are refused
+/// in one line naming what is wrong.
+#[test]
+fn render_fills_the_canvas_and_layers_from_a_prompt() {
+    if !makeit4d::ml::ort_available() {
+        assert!(std::env::var_os("CI").is_none(), "CI needs ONNX Runtime");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let folder = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/diffusion/optimum");
+    let render = |out: &str, extra: &[&str]| {
+        exe()
+            .arg("render")
+            .arg(data("evening_glow_320.jpg"))
+            .arg("--out")
+            .arg(dir.path().join(out))
+            .args(["--preset", "fly-out", "--frames", "3", "--size", "160x100"])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let project = dir.path().join("p.json");
+    let model = folder.to_str().unwrap();
+    let args = [
+        "--inpaint-model",
+        model,
+        "--prompt",
+        "reeds by the shore",
+        "--canvas-prompt",
+        "more sky",
+        "--steps",
+        "2",
+        "--scheduler",
+        "euler-ancestral",
+        "--save-project",
+        project.to_str().unwrap(),
+    ];
+    for out in ["a", "b"] {
+        let done = render(out, &args);
+        let said = String::from_utf8_lossy(&done.stdout);
+        assert!(
+            done.status.success(),
+            "{}",
+            String::from_utf8_lossy(&done.stderr)
+        );
+        assert!(
+            said.contains("inpainter: diffusion optimum (2 steps of euler-ancestral)"),
+            "{said}"
+        );
+    }
+    let last = |out: &str| std::fs::read(dir.path().join(out).join("frame_0002.png")).unwrap();
+    assert_eq!(last("a"), last("b"), "a seed, the same frames");
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&project).unwrap()).unwrap();
+    let d = &saved["inpaint"]["diffusion"];
+    assert_eq!(d["prompt"], "reeds by the shore");
+    assert_eq!(d["canvas_prompt"], "more sky");
+    assert_eq!(d["steps"], 2);
+    assert_eq!(d["scheduler"], "euler-ancestral");
+    // A prompt with nothing to steer.
+    assert_clean_failure(&render("c", &["--prompt", "a boat"]), &["--inpaint-model"]);
+    // A project whose diffusion settings are out of range names the field.
+    let mut broken = saved.clone();
+    broken["inpaint"]["diffusion"]["steps"] = 0.into();
+    let broken_path = dir.path().join("broken.json");
+    std::fs::write(&broken_path, broken.to_string()).unwrap();
+    let done = exe()
+        .arg("render")
+        .arg("--project")
+        .arg(&broken_path)
+        .arg("--out")
+        .arg(dir.path().join("d"))
+        .output()
+        .unwrap();
+    assert_clean_failure(&done, &["inpaint.diffusion.steps = 0"]);
+    assert!(!dir.path().join("d").exists());
 }
 
 /// `bench diffusion` on the fixture graphs: the split into fixed and per-step seconds, the

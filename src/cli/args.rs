@@ -225,29 +225,71 @@ pub(crate) struct InpaintArgs {
     /// Seed for the random search (same seed, same bytes).
     #[arg(long, default_value_t = 0)]
     pub(crate) seed: u64,
-    /// A learned inpainting model instead of PatchMatch: a catalogue name (`lama`) or a
-    /// manifest file. An error, not a fallback, when it cannot run.
+    /// A learned inpainting model instead of PatchMatch: a catalogue name (`lama`), a manifest
+    /// file, or a Stable Diffusion inpainting folder (then filled from --prompt). An error, not
+    /// a fallback, when it cannot run.
     #[arg(long)]
     pub(crate) model: Option<PathBuf>,
     /// A Stable Diffusion inpainting export (a folder with text_encoder/, unet/, vae_encoder/,
     /// vae_decoder/ and tokenizer/) to fill with, from --prompt.
     #[arg(long, conflicts_with = "model")]
     pub(crate) diffusion: Option<PathBuf>,
-    /// What should appear in the hole (with --diffusion).
-    #[arg(long, default_value = "", requires = "diffusion")]
-    pub(crate) prompt: String,
-    /// What should not (with --diffusion).
-    #[arg(long, default_value = "", requires = "diffusion")]
-    pub(crate) negative_prompt: String,
-    /// Denoising steps (with --diffusion; 1 to 1000).
-    #[arg(long, default_value_t = 30, requires = "diffusion")]
-    pub(crate) steps: usize,
-    /// Classifier-free guidance scale (with --diffusion; 0 to 100).
-    #[arg(long, default_value_t = 7.5, requires = "diffusion")]
-    pub(crate) guidance: f32,
-    /// Sampler (with --diffusion): ddim, euler-ancestral, dpm-solver-2m or lcm.
-    #[arg(long, default_value = "ddim", requires = "diffusion")]
-    pub(crate) scheduler: String,
+    #[command(flatten)]
+    pub(crate) prompt: PromptArgs,
+}
+
+/// What a diffusion model is asked to draw (`inpaint`, `render`).
+#[derive(Args, Debug, Default, Clone)]
+pub(crate) struct PromptArgs {
+    /// What should appear in the fill (a diffusion model; default: nothing in particular).
+    #[arg(long)]
+    pub(crate) prompt: Option<String>,
+    /// What should not.
+    #[arg(long)]
+    pub(crate) negative_prompt: Option<String>,
+    /// Denoising steps of a diffusion fill (1 to 1000; default 30).
+    #[arg(long)]
+    pub(crate) steps: Option<usize>,
+    /// Classifier-free guidance scale of a diffusion fill (0 to 100; default 7.5).
+    #[arg(long)]
+    pub(crate) guidance: Option<f32>,
+    /// Sampler of a diffusion fill: ddim (default), euler-ancestral, dpm-solver-2m or lcm.
+    #[arg(long)]
+    pub(crate) scheduler: Option<String>,
+}
+
+impl PromptArgs {
+    /// Whether any was given.
+    pub(crate) fn any(&self) -> bool {
+        self.prompt.is_some()
+            || self.negative_prompt.is_some()
+            || self.steps.is_some()
+            || self.guidance.is_some()
+            || self.scheduler.is_some()
+    }
+
+    /// `settings` with what was given.
+    pub(crate) fn apply(
+        &self,
+        settings: &mut makeit4d::stages::inpaint::DiffusionSettings,
+    ) -> anyhow::Result<()> {
+        if let Some(p) = &self.prompt {
+            settings.prompt = p.clone();
+        }
+        if let Some(p) = &self.negative_prompt {
+            settings.negative_prompt = p.clone();
+        }
+        if let Some(n) = self.steps {
+            settings.steps = n;
+        }
+        if let Some(g) = self.guidance {
+            settings.guidance = g;
+        }
+        if let Some(s) = &self.scheduler {
+            settings.scheduler = s.parse()?;
+        }
+        Ok(())
+    }
 }
 
 #[derive(Subcommand, Debug)]
@@ -868,9 +910,19 @@ pub(crate) struct RenderArgs {
     /// An ONNX depth model manifest (falls back to the classical estimator, with a warning).
     #[arg(long)]
     pub(crate) depth_model: Option<PathBuf>,
-    /// A LaMa-style ONNX inpainting model manifest (falls back to PatchMatch, with a warning).
+    /// A LaMa-style ONNX inpainting model (a catalogue name or manifest), or a Stable
+    /// Diffusion inpainting model (a catalogue name or folder) filling from --prompt; falls
+    /// back to PatchMatch, with a warning.
     #[arg(long)]
     pub(crate) inpaint_model: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) prompt: PromptArgs,
+    /// The canvas margin's own prompt (a diffusion model), when it differs from --prompt.
+    #[arg(long)]
+    pub(crate) canvas_prompt: Option<String>,
+    /// The layers' hidden regions' own prompt (a diffusion model).
+    #[arg(long)]
+    pub(crate) layers_prompt: Option<String>,
     /// Motion: `auto` applies the automatic sky/water suggestion; `off` removes the project's.
     #[arg(long, value_enum)]
     pub(crate) motion: Option<MotionArg>,

@@ -247,7 +247,32 @@ fn apply_scene_flags(args: &RenderArgs, project: &mut Project) -> anyhow::Result
         project.depth.model = Some(m.clone());
     }
     if let Some(m) = &args.inpaint_model {
-        project.inpaint.model = Some(m.clone());
+        if makeit4d::models::names_diffusion_model(m) {
+            project
+                .inpaint
+                .diffusion
+                .get_or_insert_with(Default::default)
+                .model = m.clone();
+        } else {
+            project.inpaint.model = Some(m.clone());
+        }
+    }
+    if args.prompt.any() || args.canvas_prompt.is_some() || args.layers_prompt.is_some() {
+        let Some(d) = project.inpaint.diffusion.as_mut() else {
+            bail!(
+                "--prompt, --negative-prompt, --steps, --guidance and --scheduler steer a \
+                 diffusion fill: add --inpaint-model FOLDER (a Stable Diffusion inpainting \
+                 export) or use a project that has one"
+            );
+        };
+        args.prompt.apply(d)?;
+        if let Some(p) = &args.canvas_prompt {
+            d.canvas_prompt = Some(p.clone());
+        }
+        if let Some(p) = &args.layers_prompt {
+            d.layers_prompt = Some(p.clone());
+        }
+        d.validate()?;
     }
     if args.motion == Some(MotionArg::Off) {
         project.motion = Default::default();

@@ -47,37 +47,56 @@ pub(crate) fn inpaint(args: InpaintArgs, cancel: Arc<AtomicBool>) -> anyhow::Res
     let preset: InpaintPreset = args.preset.parse()?;
     let image = makeit4d::image_io::load_image(&args.image)?;
     let hole = makeit4d::stages::inpaint::command::read_hole_mask(&args.mask, image.rgb.size())?;
-    if let Some(folder) = &args.diffusion {
-        use makeit4d::stages::inpaint::diffusion::{DiffusionModel, DiffusionParams};
-        let params = DiffusionParams {
-            sampler: args.scheduler.parse()?,
-            steps: args.steps,
-            guidance: args.guidance,
-            seed: args.seed,
-        };
-        let model = DiffusionModel::open(folder)?;
-        let (bar, progress) = progress_bar(cancel);
-        let start = std::time::Instant::now();
-        let filled = model.fill_hole(
-            &image.rgb,
-            &hole,
-            &args.prompt,
-            &args.negative_prompt,
-            &params,
-            &progress,
+    let diffusion = args.diffusion.clone().or_else(|| {
+        args.model
+            .clone()
+            .filter(|m| makeit4d::models::names_diffusion_model(m))
+    });
+    if args.prompt.any() && diffusion.is_none() {
+        anyhow::bail!(
+            "--prompt, --negative-prompt, --steps, --guidance and --scheduler steer a diffusion \
+             fill: add --model FOLDER (a Stable Diffusion inpainting export)"
         );
-        bar.finish_and_clear();
-        let (filled, notes) = filled?;
-        for note in notes {
+    }
+    if let Some(folder) = &diffusion {
+        use makeit4d::stages::inpaint::diffusion_fill::DiffusionInpainter;
+        use makeit4d::stages::inpaint::{DiffusionSettings, InpaintRequest, Inpainter};
+        let mut settings = DiffusionSettings {
+            model: folder.clone(),
+            ..Default::default()
+        };
+        args.prompt.apply(&mut settings)?;
+        settings.validate()?;
+        let model = makeit4d::stages::inpaint::diffusion_fill::shared_model(
+            &makeit4d::models::resolve_diffusion(folder)?,
+        )?;
+        let inpainter = DiffusionInpainter::new(
+            model,
+            &settings.prompts(makeit4d::stages::inpaint::FillRegion::Layers),
+            settings.params(args.seed),
+        )?;
+        for note in inpainter.notes() {
             eprintln!("note: {note}");
         }
-        makeit4d::image_io::save_rgb_png(&args.out, &filled, false)?;
+        let (bar, progress) = progress_bar(cancel);
+        let start = std::time::Instant::now();
+        let request = InpaintRequest {
+            image: &image.rgb,
+            hole: &hole,
+            allowed_source: None,
+            guide: None,
+            seed: 0,
+        };
+        let filled = inpainter.inpaint(&request, &progress);
+        bar.finish_and_clear();
+        let filled = filled?;
+        makeit4d::image_io::save_rgb_png(&args.out, &filled.image, false)?;
         let holes = hole.data().iter().filter(|&&h| h).count();
         println!(
             "filled {holes} pixels with {} ({} steps of {}) in {:.2} s; wrote {}",
             folder.display(),
-            params.steps,
-            params.sampler.name(),
+            settings.steps,
+            settings.scheduler.name(),
             start.elapsed().as_secs_f64(),
             args.out.display()
         );

@@ -88,3 +88,22 @@ pub fn remove(dir: &Path, entry: &CatalogueEntry) -> Result<bool> {
     std::fs::remove_dir_all(&folder).map_err(|e| Error::file(&folder, e))?;
     Ok(true)
 }
+
+/// The folder of a diffusion inpainting model: `name_or_path` itself when it exists or does
+/// not look like a name; else an error that says what the name is not.
+pub fn resolve_diffusion(name_or_path: &Path) -> Result<PathBuf> {
+    if name_or_path.exists() || !looks_like_name(name_or_path) {
+        return Ok(name_or_path.to_path_buf());
+    }
+    Err(Error::invalid(format!(
+        "\"{}\" is not a diffusion model folder (text_encoder/, unet/, vae_encoder/, \
+         vae_decoder/ and tokenizer/)",
+        name_or_path.display()
+    )))
+}
+
+/// Whether `name_or_path` names a diffusion inpainting model rather than a single-file one: a
+/// folder (a Stable Diffusion export is four graphs in one folder).
+pub fn names_diffusion_model(name_or_path: &Path) -> bool {
+    name_or_path.is_dir()
+}

@@ -67,10 +67,13 @@ pub struct SceneBuilder {
     /// Grown canvases by key, newest last; the layer inpainting keeps what it can of the smaller
     /// canvas's layers ([`crate::stages::layers::inpaint_grown_layers`]).
     grown_from: Vec<(u64, GrownCanvas)>,
-    /// The inpainter of the last build with its name, by the settings it was made for (an
-    /// ONNX model's session loads once, not on every build and dry run).
-    inpainter: Option<(
+    /// The inpainters of the last build (the canvas's and the layers') with their names, by
+    /// the settings and region they were made for (a model's session loads once, not on every
+    /// build and dry run).
+    #[allow(clippy::type_complexity)]
+    inpainter: Vec<(
         crate::stages::inpaint::InpaintSettings,
+        crate::stages::inpaint::FillRegion,
         Arc<dyn Inpainter>,
         String,
     )>,
@@ -172,23 +175,40 @@ impl SceneBuilder {
         scene
     }
 
-    /// The inpainter `settings` ask for, made once per settings; a model that falls back to
-    /// PatchMatch adds its warning to `warnings` and is tried again on the next build.
+    /// The inpainter `settings` ask for, for `region`, made once per settings; a model that
+    /// falls back adds its warning to `warnings` and is tried again on the next build.
     fn inpainter_for(
         &mut self,
         settings: &crate::stages::inpaint::InpaintSettings,
+        region: crate::stages::inpaint::FillRegion,
         warnings: &mut Vec<String>,
     ) -> (Arc<dyn Inpainter>, String) {
-        if let Some((_, inpainter, name)) = self.inpainter.as_ref().filter(|c| &c.0 == settings) {
+        if let Some((_, _, inpainter, name)) = self
+            .inpainter
+            .iter()
+            .find(|c| &c.0 == settings && c.1 == region)
+        {
             return (inpainter.clone(), name.clone());
         }
         let mut notes = Vec::new();
-        let (inpainter, name) = make_inpainter(settings, &mut notes);
+        let (inpainter, name) = make_inpainter(settings, region, &mut notes);
         let inpainter: Arc<dyn Inpainter> = Arc::from(inpainter);
-        warnings.extend(notes.iter().cloned());
+        for n in notes {
+            if !warnings.contains(&n) {
+                warnings.push(n);
+            }
+        }
         // A model that could not load is tried again next time (it may have been fixed).
-        let fell_back = settings.model.is_some() && !name.starts_with("onnx ");
-        self.inpainter = (!fell_back).then(|| (settings.clone(), inpainter.clone(), name.clone()));
+        let fell_back = if settings.diffusion.is_some() {
+            !name.starts_with("diffusion ")
+        } else {
+            settings.model.is_some() && !name.starts_with("onnx ")
+        };
+        self.inpainter.retain(|c| &c.0 == settings && c.1 != region);
+        if !fell_back {
+            self.inpainter
+                .push((settings.clone(), region, inpainter.clone(), name.clone()));
+        }
         (inpainter, name)
     }
 
@@ -523,12 +543,18 @@ impl SceneBuilder {
             ))
         })?;
 
-        // The inpainter serves the canvas and the layers.
-        let (inpainter, inpainter_name) = if sketch {
+        // The inpainters of the canvas and the layers (one, unless a diffusion model has a
+        // prompt for each).
+        let (inpainter, layer_inpainter, inpainter_name) = if sketch {
             let fill: Arc<dyn Inpainter> = Arc::new(crate::stages::inpaint::SketchInpainter);
-            (fill, "harmonic sketch".to_string())
+            (fill.clone(), fill, "harmonic sketch".to_string())
         } else {
-            self.inpainter_for(&project.inpaint, &mut warnings)
+            use crate::stages::inpaint::FillRegion;
+            let (canvas, name) =
+                self.inpainter_for(&project.inpaint, FillRegion::Canvas, &mut warnings);
+            let (layers, _) =
+                self.inpainter_for(&project.inpaint, FillRegion::Layers, &mut warnings);
+            (canvas, layers, name)
         };
         let stats = &mut self.stats;
 
@@ -679,14 +705,14 @@ impl SceneBuilder {
                             layers: parent_layers,
                             offset: *offset,
                         },
-                        inpainter.as_ref(),
+                        layer_inpainter.as_ref(),
                         project.inpaint.seed,
                         p,
                     ),
                     None => inpaint_layers(
                         &canvas.image,
                         &plan,
-                        inpainter.as_ref(),
+                        layer_inpainter.as_ref(),
                         project.inpaint.seed,
                         p,
                     ),

@@ -4,13 +4,36 @@ use crate::project::Project;
 use crate::stages::depth::DepthEstimator;
 use crate::stages::inpaint::Inpainter;
 
-/// The inpainter the project asks for: an ONNX model (falling back to PatchMatch with a warning)
-/// or PatchMatch at the project's preset.
+/// The inpainter the project asks for, for `region`'s fill: a diffusion model with that
+/// region's prompt, else an ONNX model, else PatchMatch at the project's preset. A model that
+/// cannot run falls back to the next with a warning.
 pub fn make_inpainter(
     settings: &crate::stages::inpaint::InpaintSettings,
+    region: crate::stages::inpaint::FillRegion,
     warnings: &mut Vec<String>,
 ) -> (Box<dyn Inpainter>, String) {
     use crate::stages::inpaint::patchmatch::PatchMatchInpainter;
+    if let Some(d) = &settings.diffusion {
+        match make_diffusion(d, region, settings.seed) {
+            Ok(fill) => {
+                warnings.extend(fill.notes().iter().cloned());
+                let name = fill.name().to_string();
+                return (Box::new(fill), name);
+            }
+            Err(e) => {
+                let next = if settings.model.is_some() {
+                    "the ONNX inpainter"
+                } else {
+                    "PatchMatch"
+                };
+                if let Some(n) =
+                    crate::ml::fallback_notice("diffusion inpainting", &format!("{e:#}"), next)
+                {
+                    warnings.push(n);
+                }
+            }
+        }
+    }
     if let Some(model) = &settings.model {
         match crate::stages::inpaint::onnx::OnnxInpainter::from_manifest(model) {
             Ok(m) => {
@@ -30,6 +53,20 @@ pub fn make_inpainter(
         Box::new(PatchMatchInpainter::preset(settings.preset)),
         format!("patchmatch {}", settings.preset.name()),
     )
+}
+
+/// The diffusion inpainter of `settings` for `region` (its sessions shared with the other
+/// region's).
+fn make_diffusion(
+    settings: &crate::stages::inpaint::DiffusionSettings,
+    region: crate::stages::inpaint::FillRegion,
+    seed: u64,
+) -> crate::error::Result<crate::stages::inpaint::diffusion_fill::DiffusionInpainter> {
+    use crate::stages::inpaint::diffusion_fill::{DiffusionInpainter, shared_model};
+    settings.validate()?;
+    let folder = crate::models::resolve_diffusion(&settings.model)?;
+    let model = shared_model(&folder)?;
+    DiffusionInpainter::new(model, &settings.prompts(region), settings.params(seed))
 }
 
 /// The estimator for layer-based depth: the project's method (imports and strokes do not apply

@@ -150,9 +150,13 @@ pub(super) fn run_per_frame(
     let settings = crate::stages::inpaint::InpaintSettings {
         preset: options.preset,
         seed: options.seed,
-        model: None,
+        ..Default::default()
     };
-    let (inpainter, _) = make_inpainter(&settings, &mut warnings);
+    let (inpainter, _) = make_inpainter(
+        &settings,
+        crate::stages::inpaint::FillRegion::Layers,
+        &mut warnings,
+    );
     let splat = SplatSettings::default();
     let started = Instant::now();
     let mut image = pair.left.clone();

@@ -582,36 +582,6 @@ impl DiffusionModel {
     }
 }
 
-/// Longest window side one fill takes, pixels (tiled windows are not implemented yet).
-pub const MAX_WINDOW_SIDE: usize = 1024;
-
-/// A one-dimensional window `[a, b)` around `[lo, hi]` in `0..n`: `margin` each side, its
-/// length a multiple of 8 (grown inside the image, else shrunk from the side away from the
-/// hole); `None` when the image is shorter than 8.
-fn window_1d(lo: usize, hi: usize, n: usize, margin: usize) -> Option<(usize, usize)> {
-    if n < 8 {
-        return None;
-    }
-    let mut a = lo.saturating_sub(margin);
-    let mut b = (hi + 1 + margin).min(n);
-    let short = (8 - (b - a) % 8) % 8;
-    // Grow: first past the end, then before the start, as far as the image allows.
-    let grow_b = short.min(n - b);
-    b += grow_b;
-    let grow_a = (short - grow_b).min(a);
-    a -= grow_a;
-    // Still short (the image itself is not a multiple of 8 long): cut from the far side.
-    let extra = (b - a) % 8;
-    if extra != 0 {
-        if b - extra > hi {
-            b -= extra;
-        } else {
-            a += extra;
-        }
-    }
-    Some((a, b))
-}
-
 impl DiffusionModel {
     /// The folder's tokenizer (`tokenizer/vocab.json` + `merges.txt`), padded with id 0 when its
     /// `special_tokens_map.json` pads with "!" (SD 2), else with `<|endoftext|>` (SD 1.x).
@@ -639,88 +609,6 @@ impl DiffusionModel {
             padding,
         )
     }
-
-    /// Fills `hole` (true = to fill) of `image` in one window around it (its bounding box and
-    /// as much context, at least 64 px each side), from `prompt` and `negative`. Returns the
-    /// image (known pixels untouched) and lines worth telling (a prompt cut to 77 tokens).
-    pub fn fill_hole(
-        &self,
-        image: &crate::raster::RgbRaster,
-        hole: &crate::raster::Raster<bool>,
-        prompt: &str,
-        negative: &str,
-        params: &DiffusionParams,
-        progress: &crate::progress::Progress,
-    ) -> Result<(crate::raster::RgbRaster, Vec<String>)> {
-        let (w, h) = image.size();
-        if !hole.same_size(image) {
-            return Err(Error::invalid(
-                "diffusion fill: the hole is not the photo's size",
-            ));
-        }
-        let mut notes = Vec::new();
-        let tokenizer = self.tokenizer()?;
-        let p = tokenizer.encode(prompt)?;
-        if p.truncated {
-            notes.push(format!(
-                "the prompt is {} tokens; the text encoder reads the first 75",
-                p.prompt_tokens
-            ));
-        }
-        let n = tokenizer.encode(negative)?;
-        if n.truncated {
-            notes.push(format!(
-                "the negative prompt is {} tokens; the text encoder reads the first 75",
-                n.prompt_tokens
-            ));
-        }
-        let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
-        for y in 0..h {
-            for x in 0..w {
-                if hole.at(x, y) {
-                    (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
-                }
-            }
-        }
-        if x0 == usize::MAX {
-            return Ok((image.clone(), notes));
-        }
-        let margin = 64.max((x1 - x0).max(y1 - y0) / 2);
-        let too_small = || {
-            Error::invalid(format!(
-                "diffusion fill: a {w}×{h} photo is smaller than 8 pixels"
-            ))
-        };
-        let (ax, bx) = window_1d(x0, x1, w, margin).ok_or_else(too_small)?;
-        let (ay, by) = window_1d(y0, y1, h, margin).ok_or_else(too_small)?;
-        let (ww, wh) = (bx - ax, by - ay);
-        if ww.max(wh) > MAX_WINDOW_SIDE {
-            return Err(Error::invalid(format!(
-                "diffusion fill: the hole needs a {ww}×{wh} window, more than {MAX_WINDOW_SIDE} px \
-                 (tiled windows are not implemented yet)"
-            )));
-        }
-        if ax > x0 || ay > y0 || bx <= x1 || by <= y1 {
-            notes.push(
-                "the photo's side is not a multiple of 8 and the hole spans it: its first rows or \
-                 columns are left as they were"
-                    .into(),
-            );
-        }
-        let crop = crate::raster::Raster::from_fn(ww, wh, |x, y| image.at(ax + x, ay + y));
-        let crop_hole = crate::raster::Raster::from_fn(ww, wh, |x, y| {
-            if hole.at(ax + x, ay + y) { 1.0f32 } else { 0.0 }
-        });
-        let filled = self.inpaint(&crop, &crop_hole, &p.ids, &n.ids, params, progress)?;
-        let out = crate::raster::Raster::from_fn(w, h, |x, y| {
-            if hole.at(x, y) && (ax..bx).contains(&x) && (ay..by).contains(&y) {
-                filled.image.at(x - ax, y - ay)
-            } else {
-                image.at(x, y)
-            }
-        });
-        Ok((out, notes))
-    }
 }
 
 #[cfg(test)]
@@ -747,17 +635,6 @@ mod pipeline_tests {
     use crate::raster::Raster;
 
     #[test]
-    fn windows_are_multiples_of_eight_around_the_hole() {
-        assert_eq!(window_1d(10, 20, 100, 4), Some((6, 30)));
-        assert_eq!(window_1d(0, 3, 100, 64), Some((0, 72)));
-        // At the far side: grown towards the start.
-        assert_eq!(window_1d(95, 99, 100, 4), Some((84, 100)));
-        // A side that is not a multiple of 8, the hole all along it: cut from the start.
-        assert_eq!(window_1d(0, 9, 10, 64), Some((2, 10)));
-        assert_eq!(window_1d(0, 0, 7, 1), None);
-    }
-
-    #[test]
     fn a_folder_fills_a_hole_from_a_prompt() {
         if !super::tests::runtime() {
             return;
@@ -776,11 +653,27 @@ mod pipeline_tests {
                 ..DiffusionParams::default()
             };
             let long = "a boat ".repeat(200);
-            let (out, notes) = model
-                .fill_hole(&img, &hole, &long, "", &p, &Progress::none())
-                .unwrap();
+            let fill = super::super::diffusion_fill::DiffusionInpainter::new(
+                std::sync::Arc::new(model),
+                &super::super::diffusion_fill::Prompts {
+                    prompt: long,
+                    negative: String::new(),
+                },
+                p,
+            )
+            .unwrap();
+            let notes = fill.notes();
             assert_eq!(notes.len(), 1, "{notes:?}");
             assert!(notes[0].contains("reads the first 75"));
+            use super::super::Inpainter;
+            let request = super::super::InpaintRequest {
+                image: &img,
+                hole: &hole,
+                allowed_source: None,
+                guide: None,
+                seed: 0,
+            };
+            let out = fill.inpaint(&request, &Progress::none()).unwrap().image;
             let mut changed = 0;
             for y in 0..120 {
                 for x in 0..200 {
@@ -792,15 +685,6 @@ mod pipeline_tests {
                 }
             }
             assert!(changed > 100, "{changed}");
-            // No hole: the photo back as it was.
-            let none = Raster::new(200, 120, false);
-            assert_eq!(
-                model
-                    .fill_hole(&img, &none, "x", "", &p, &Progress::none())
-                    .unwrap()
-                    .0,
-                img
-            );
         }
     }
 

@@ -13,6 +13,7 @@ pub mod command;
 mod common;
 pub mod diffusion;
 pub mod diffusion_bench;
+pub mod diffusion_fill;
 pub mod distinct;
 pub mod harmonic;
 pub mod onnx;
@@ -84,4 +85,102 @@ pub struct InpaintSettings {
     /// A LaMa-style ONNX inpainting model manifest; relative to the project file. Falls back to
     /// PatchMatch, with a warning, when it cannot run.
     pub model: Option<std::path::PathBuf>,
+    /// A Stable Diffusion inpainting model and its prompts: the final fill of the canvas and
+    /// the layers (before `model`, which is the fallback when it cannot run).
+    pub diffusion: Option<DiffusionSettings>,
+}
+
+/// Which fill a prompt is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FillRegion {
+    /// The outpainted margin of the canvas.
+    Canvas,
+    /// What each layer hides.
+    Layers,
+}
+
+/// A diffusion inpainting model and what it is asked to draw (#45).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DiffusionSettings {
+    /// The model: a catalogue name or a folder (text_encoder/, unet/, vae_encoder/,
+    /// vae_decoder/, tokenizer/); a folder is relative to the project file.
+    pub model: std::path::PathBuf,
+    /// What should appear (every fill unless a region has its own).
+    pub prompt: String,
+    /// What should not.
+    pub negative_prompt: String,
+    /// The canvas margin's own prompt, when it differs.
+    pub canvas_prompt: Option<String>,
+    /// The layers' hidden regions' own prompt, when it differs.
+    pub layers_prompt: Option<String>,
+    /// Denoising steps (1 to 1000).
+    pub steps: usize,
+    /// Classifier-free guidance scale (0 to 100).
+    pub guidance: f32,
+    /// The sampler.
+    pub scheduler: schedule::SamplerKind,
+}
+
+impl Default for DiffusionSettings {
+    fn default() -> Self {
+        let d = diffusion::DiffusionParams::default();
+        Self {
+            model: std::path::PathBuf::new(),
+            prompt: String::new(),
+            negative_prompt: String::new(),
+            canvas_prompt: None,
+            layers_prompt: None,
+            steps: d.steps,
+            guidance: d.guidance,
+            scheduler: d.sampler,
+        }
+    }
+}
+
+impl DiffusionSettings {
+    /// The prompts of `region`'s fill.
+    pub fn prompts(&self, region: FillRegion) -> diffusion_fill::Prompts {
+        let own = match region {
+            FillRegion::Canvas => &self.canvas_prompt,
+            FillRegion::Layers => &self.layers_prompt,
+        };
+        diffusion_fill::Prompts {
+            prompt: own.clone().unwrap_or_else(|| self.prompt.clone()),
+            negative: self.negative_prompt.clone(),
+        }
+    }
+
+    /// The fill's settings with `seed`.
+    pub fn params(&self, seed: u64) -> diffusion::DiffusionParams {
+        diffusion::DiffusionParams {
+            sampler: self.scheduler,
+            steps: self.steps,
+            guidance: self.guidance,
+            seed,
+        }
+    }
+
+    /// Checks the numbers; the error names the field.
+    pub fn validate(&self) -> Result<()> {
+        if !(1..=schedule::MAX_STEPS).contains(&self.steps) {
+            return Err(crate::error::Error::invalid(format!(
+                "inpaint.diffusion.steps = {} is outside 1..={}",
+                self.steps,
+                schedule::MAX_STEPS
+            )));
+        }
+        if !(self.guidance.is_finite() && (0.0..=100.0).contains(&self.guidance)) {
+            return Err(crate::error::Error::invalid(format!(
+                "inpaint.diffusion.guidance = {} is outside [0, 100]",
+                self.guidance
+            )));
+        }
+        if self.model.as_os_str().is_empty() {
+            return Err(crate::error::Error::invalid(
+                "inpaint.diffusion.model is empty: name a catalogue model or a model folder",
+            ));
+        }
+        Ok(())
+    }
 }
