@@ -866,6 +866,46 @@ fn render_fills_the_canvas_and_layers_from_a_prompt() {
     assert_eq!(d["canvas_prompt"], "more sky");
     assert_eq!(d["steps"], 2);
     assert_eq!(d["scheduler"], "euler-ancestral");
+    // By its catalogue name, once installed (here: the fixture's files where an install puts
+    // them); the project keeps the name.
+    let models = dir.path().join("models");
+    for f in makeit4d::models::find_diffusion("sd2-inpainting")
+        .unwrap()
+        .files
+    {
+        let to = models.join("sd2-inpainting").join(f.path);
+        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+        std::fs::copy(folder.join(f.path), to).unwrap();
+    }
+    let named = dir.path().join("named.json");
+    let done = exe()
+        .env("MAKEIT4D_MODELS_DIR", &models)
+        .arg("render")
+        .arg(data("evening_glow_320.jpg"))
+        .arg("--out")
+        .arg(dir.path().join("e"))
+        .args(["--preset", "fly-out", "--frames", "2", "--size", "160x100"])
+        .args([
+            "--inpaint-model",
+            "sd2-inpainting",
+            "--steps",
+            "2",
+            "--save-project",
+        ])
+        .arg(&named)
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&done.stdout);
+    assert!(
+        said.contains("inpainter: diffusion sd2-inpainting (2 steps of ddim)"),
+        "{said}"
+    );
+    let saved_named: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&named).unwrap()).unwrap();
+    assert_eq!(
+        saved_named["inpaint"]["diffusion"]["model"],
+        "sd2-inpainting"
+    );
     // A prompt with nothing to steer.
     assert_clean_failure(&render("c", &["--prompt", "a boat"]), &["--inpaint-model"]);
     // A project whose diffusion settings are out of range names the field.

@@ -160,7 +160,8 @@ pub(crate) struct ModelsInstallArgs {
     /// downloading.
     #[arg(long)]
     pub(crate) file: Option<PathBuf>,
-    /// Download from this address instead of the catalogue's (a mirror).
+    /// Download from this address instead of the catalogue's (a mirror; for a diffusion model,
+    /// the address its files' paths are appended to).
     #[arg(long)]
     pub(crate) url: Option<String>,
     /// Accept bytes that differ from the catalogue's size and SHA-256 (another revision of

@@ -100,6 +100,81 @@ pub(crate) fn check_model_graph(manifest: &makeit4d::ml::ModelManifest) -> makei
     makeit4d::stages::check_model_graph(manifest)
 }
 
+/// `models install` of a diffusion model: its files one after another, each with a bar.
+fn install_diffusion(
+    entry: &'static makeit4d::models::DiffusionEntry,
+    dir: &std::path::Path,
+    args: &super::args::ModelsInstallArgs,
+    cancel: &AtomicBool,
+) -> anyhow::Result<()> {
+    use makeit4d::models;
+    if args.file.is_some() {
+        anyhow::bail!(
+            "{} is a folder of {} files, not one file: download them into a folder and use the \
+             folder itself (`--inpaint-model FOLDER`)",
+            entry.name,
+            entry.files.len()
+        );
+    }
+    eprintln!(
+        "note: {} is licensed {}: {}",
+        entry.name, entry.licence, entry.restrictions
+    );
+    eprintln!(
+        "installing {} ({}, {} files) from {}",
+        entry.name,
+        entry.published_size,
+        entry.files.len(),
+        args.url.as_deref().unwrap_or(entry.base_url)
+    );
+    let bytes = if args.skip_checksum {
+        models::ByteCheck::Skip
+    } else {
+        models::ByteCheck::Catalogue
+    };
+    let bar = download_bar(entry.name);
+    let shown = std::cell::Cell::new(usize::MAX);
+    let progress = |i: usize, n: usize, path: &str, done: u64, total: Option<u64>| {
+        if shown.replace(i) != i {
+            bar.set_message(format!("{} {}/{n}: {path}", entry.name, i + 1));
+            bar.set_length(0);
+        }
+        if let Some(t) = total {
+            bar.set_length(t);
+        }
+        bar.set_position(done);
+    };
+    let check = |folder: &std::path::Path| -> makeit4d::Result<()> {
+        if !makeit4d::ml::ort_available() {
+            eprintln!(
+                "note: ONNX Runtime is not installed, so the graphs are checked on first use ({})",
+                makeit4d::ml::ort_status()
+            );
+            return Ok(());
+        }
+        makeit4d::stages::inpaint::diffusion::DiffusionModel::open(folder).map(|_| ())
+    };
+    let result = models::install_diffusion(
+        dir,
+        entry,
+        args.url.as_deref(),
+        &progress,
+        cancel,
+        bytes,
+        &check,
+    );
+    bar.finish_and_clear();
+    let folder = result?;
+    let size = models::diffusion_installed(dir, entry).map_or(0, |(_, b)| b);
+    println!(
+        "installed {} ({:.2} GB) in {}",
+        entry.name,
+        size as f64 / 1e9,
+        folder.display()
+    );
+    Ok(())
+}
+
 pub(crate) fn models(command: ModelsCommand, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
     use makeit4d::models::{self, CATALOGUE};
     match command {
@@ -123,9 +198,20 @@ pub(crate) fn models(command: ModelsCommand, cancel: Arc<AtomicBool>) -> anyhow:
                     e.name, e.kind, e.published_size, e.description
                 );
             }
+            for e in models::DIFFUSION_CATALOGUE {
+                let installed = match models::diffusion_installed(&dir, e) {
+                    Some((_, bytes)) => format!("yes, {:.2} GB", bytes as f64 / 1e9),
+                    None => "no".into(),
+                };
+                println!(
+                    "| {} | diffusion | {} | {} (use restrictions) | {installed} | {} |",
+                    e.name, e.published_size, e.licence, e.description
+                );
+            }
             println!(
                 "\ninstall one with `makeit4d models install NAME`, then use it by name: \
-                      `render photo.jpg --depth-model depth-anything-v2-small`"
+                      `render photo.jpg --depth-model depth-anything-v2-small`, \
+                      `render photo.jpg --inpaint-model sd2-inpainting --prompt \"…\"`"
             );
             Ok(())
         }
@@ -135,8 +221,16 @@ pub(crate) fn models(command: ModelsCommand, cancel: Arc<AtomicBool>) -> anyhow:
             Ok(())
         }
         ModelsCommand::Remove(args) => {
-            let entry = catalogue_entry(&args.name)?;
             let dir = models_dir(&args.dir)?;
+            if let Some(entry) = models::find_diffusion(&args.name) {
+                if models::remove_diffusion(&dir, entry)? {
+                    println!("removed {} from {}", entry.name, dir.display());
+                } else {
+                    println!("{} is not installed in {}", entry.name, dir.display());
+                }
+                return Ok(());
+            }
+            let entry = catalogue_entry(&args.name)?;
             if models::remove(&dir, entry)? {
                 println!("removed {} from {}", entry.name, dir.display());
             } else {
@@ -160,7 +254,11 @@ pub(crate) fn models(command: ModelsCommand, cancel: Arc<AtomicBool>) -> anyhow:
             install_runtime(args.file.as_deref(), args.url.as_deref(), bytes, &cancel)
         }
         ModelsCommand::Install(args) => {
-            let entry = catalogue_entry(&args.name)?;
+            let diffusion = models::find_diffusion(&args.name);
+            let entry = match diffusion {
+                Some(_) => None,
+                None => Some(catalogue_entry(&args.name)?),
+            };
             let dir = models_dir(&args.dir)?;
             if !args.no_runtime && !makeit4d::ml::ort_available() {
                 // The model is of no use without the runtime: it comes first, so that the graph
@@ -172,6 +270,10 @@ pub(crate) fn models(command: ModelsCommand, cancel: Arc<AtomicBool>) -> anyhow:
                 };
                 install_runtime(None, args.runtime_url.as_deref(), bytes, &cancel)?;
             }
+            if let Some(entry) = diffusion {
+                return install_diffusion(entry, &dir, &args, &cancel);
+            }
+            let entry = entry.expect("a single-file entry when not a diffusion one");
             if entry.non_commercial {
                 eprintln!(
                     "note: {} is licensed {}: not for commercial use",

@@ -90,20 +90,38 @@ pub fn remove(dir: &Path, entry: &CatalogueEntry) -> Result<bool> {
 }
 
 /// The folder of a diffusion inpainting model: `name_or_path` itself when it exists or does
-/// not look like a name; else an error that says what the name is not.
+/// not look like a name; the installed folder of the diffusion catalogue's model of that name;
+/// else an error that says how to install it.
 pub fn resolve_diffusion(name_or_path: &Path) -> Result<PathBuf> {
     if name_or_path.exists() || !looks_like_name(name_or_path) {
         return Ok(name_or_path.to_path_buf());
     }
-    Err(Error::invalid(format!(
-        "\"{}\" is not a diffusion model folder (text_encoder/, unet/, vae_encoder/, \
-         vae_decoder/ and tokenizer/)",
-        name_or_path.display()
-    )))
+    let name = name_or_path.to_string_lossy();
+    let Some(entry) = find_diffusion(&name) else {
+        let known: Vec<&str> = DIFFUSION_CATALOGUE.iter().map(|e| e.name).collect();
+        return Err(Error::invalid(format!(
+            "\"{name}\" is neither a diffusion model folder (text_encoder/, unet/, \
+             vae_encoder/, vae_decoder/ and tokenizer/) nor a catalogue diffusion model ({})",
+            known.join(", ")
+        )));
+    };
+    let dir = models_dir()
+        .ok_or_else(|| Error::invalid("no models folder: set MAKEIT4D_MODELS_DIR or HOME"))?;
+    match diffusion_installed(&dir, entry) {
+        Some((folder, _)) => Ok(folder),
+        None => Err(Error::invalid(format!(
+            "model {name} is not installed in {}: run `makeit4d models install {name}`",
+            dir.display()
+        ))),
+    }
 }
 
 /// Whether `name_or_path` names a diffusion inpainting model rather than a single-file one: a
-/// folder (a Stable Diffusion export is four graphs in one folder).
+/// folder (a Stable Diffusion export is four graphs in one folder) or a diffusion catalogue
+/// name.
 pub fn names_diffusion_model(name_or_path: &Path) -> bool {
     name_or_path.is_dir()
+        || (!name_or_path.exists()
+            && looks_like_name(name_or_path)
+            && find_diffusion(&name_or_path.to_string_lossy()).is_some())
 }

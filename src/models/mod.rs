@@ -16,10 +16,12 @@
 //! The folder: `catalogue.rs` (the entries and their manifests), `folder.rs` (where models
 //! live, what is installed, names to paths), `install.rs` (download, resume, checks, install,
 //! remove), `runtime.rs` (ONNX Runtime itself: the pinned wheel, its checks and install),
-//! `bench.rs` (the download benchmark).
+//! `bench.rs` (the download benchmark), `diffusion.rs` (the diffusion models: folders of
+//! several files, installed file by file).
 
 mod bench;
 mod catalogue;
+mod diffusion;
 mod folder;
 mod install;
 mod runtime;
@@ -28,6 +30,7 @@ mod tests;
 
 pub use bench::*;
 pub use catalogue::*;
+pub use diffusion::*;
 pub use folder::*;
 pub use install::*;
 pub use runtime::*;

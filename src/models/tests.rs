@@ -735,3 +735,258 @@ fn one_click_installs_a_model_with_progress_and_checks_its_graph() {
         files_in(other.path())
     );
 }
+
+/// The optimum fixture's files as a diffusion entry served from `base`.
+static FIXTURE_FILES: &[RemoteFile] = &[
+    RemoteFile {
+        path: "text_encoder/model.onnx",
+        published_size: "",
+        bytes: None,
+        sha256: None,
+    },
+    RemoteFile {
+        path: "unet/model.onnx",
+        published_size: "",
+        bytes: Some(726),
+        sha256: None,
+    },
+    RemoteFile {
+        path: "tokenizer/vocab.json",
+        published_size: "6.48 kB",
+        bytes: None,
+        sha256: None,
+    },
+    RemoteFile {
+        path: "tokenizer/merges.txt",
+        published_size: "",
+        bytes: None,
+        sha256: None,
+    },
+    RemoteFile {
+        path: "tokenizer/special_tokens_map.json",
+        published_size: "",
+        bytes: None,
+        sha256: None,
+    },
+    RemoteFile {
+        path: "vae_encoder/model.onnx",
+        published_size: "",
+        bytes: None,
+        sha256: None,
+    },
+    RemoteFile {
+        path: "vae_decoder/model.onnx",
+        published_size: "",
+        bytes: None,
+        sha256: None,
+    },
+];
+
+static DIFFUSION_TEST_ENTRY: DiffusionEntry = DiffusionEntry {
+    name: "test-diffusion",
+    description: "a test",
+    base_url: "http://127.0.0.1:9/unused/",
+    files: FIXTURE_FILES,
+    published_size: "about 10 kB",
+    licence: "none",
+    restrictions: "none",
+};
+
+fn fixture_file(path: &str) -> Vec<u8> {
+    std::fs::read(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/fixtures/diffusion/optimum")
+            .join(path),
+    )
+    .unwrap()
+}
+
+/// Opens the installed folder as a diffusion model where ONNX Runtime is available.
+fn open_folder(folder: &Path) -> Result<()> {
+    if crate::ml::ort_available() {
+        crate::stages::inpaint::diffusion::DiffusionModel::open(folder)?;
+    }
+    Ok(())
+}
+
+fn install_test_diffusion(
+    dir: &Path,
+    url: &str,
+    cancel: &std::sync::atomic::AtomicBool,
+    seen: &std::sync::Mutex<Vec<String>>,
+) -> Result<PathBuf> {
+    install_diffusion(
+        dir,
+        &DIFFUSION_TEST_ENTRY,
+        Some(url),
+        &|i, n, path, _, _| {
+            let line = format!("{}/{n} {path}", i + 1);
+            let mut seen = seen.lock().unwrap();
+            if seen.last() != Some(&line) {
+                seen.push(line);
+            }
+        },
+        cancel,
+        ByteCheck::Catalogue,
+        &open_folder,
+    )
+}
+
+/// A multi-file model installs file by file with progress for each; a download cut halfway
+/// keeps the files that arrived and resumes the one it broke in; the installed folder holds
+/// the served bytes and opens as a diffusion model.
+#[test]
+fn a_diffusion_folder_installs_file_by_file_and_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    let bodies: Vec<Vec<u8>> = FIXTURE_FILES.iter().map(|f| fixture_file(f.path)).collect();
+    // First attempt: two files, then the vocabulary breaks off after 3000 of its bytes.
+    let cut = bodies[2].clone();
+    let mut replies: Vec<Reply> = vec![ranged(bodies[0].clone()), ranged(bodies[1].clone())];
+    replies.push(Box::new(move |_: &str| {
+        let mut r = format!(
+            "HTTP/1.1 200 OK\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+            cut.len()
+        )
+        .into_bytes();
+        r.extend_from_slice(&cut[..3000]);
+        r
+    }));
+    let (url, server) = serve(replies);
+    let seen = std::sync::Mutex::new(Vec::new());
+    let cancel = std::sync::atomic::AtomicBool::new(false);
+    let e = install_test_diffusion(dir.path(), &url, &cancel, &seen)
+        .unwrap_err()
+        .to_string();
+    server.join().unwrap();
+    assert!(e.contains("broke off") && e.contains("resume"), "{e}");
+    assert!(diffusion_installed(dir.path(), &DIFFUSION_TEST_ENTRY).is_none());
+    let staging = dir.path().join("test-diffusion.partial");
+    assert_eq!(
+        std::fs::metadata(staging.join("tokenizer/vocab.json.part"))
+            .unwrap()
+            .len(),
+        3000
+    );
+    // Second attempt: the rest, the vocabulary from byte 3000 (the server honours Range).
+    let range_seen = std::sync::Arc::new(std::sync::Mutex::new(String::new()));
+    let log = range_seen.clone();
+    let vocab = bodies[2].clone();
+    let mut replies: Vec<Reply> = vec![Box::new(move |req: &str| {
+        *log.lock().unwrap() = req.to_string();
+        ranged(vocab.clone())(req)
+    })];
+    replies.extend(bodies[3..].iter().map(|b| ranged(b.clone())));
+    let (url, server) = serve(replies);
+    let folder = install_test_diffusion(dir.path(), &url, &cancel, &seen).unwrap();
+    server.join().unwrap();
+    assert!(
+        range_seen
+            .lock()
+            .unwrap()
+            .to_ascii_lowercase()
+            .contains("range: bytes=3000-")
+    );
+    for (f, body) in FIXTURE_FILES.iter().zip(&bodies) {
+        assert_eq!(
+            &std::fs::read(folder.join(f.path)).unwrap(),
+            body,
+            "{}",
+            f.path
+        );
+    }
+    assert!(!staging.exists());
+    assert!(diffusion_installed(dir.path(), &DIFFUSION_TEST_ENTRY).is_some());
+    let seen = seen.lock().unwrap();
+    assert_eq!(
+        seen.first().map(String::as_str),
+        Some("1/7 text_encoder/model.onnx")
+    );
+    assert!(
+        seen.contains(&"7/7 vae_decoder/model.onnx".to_string()),
+        "{seen:?}"
+    );
+    // Removed with its partial folder.
+    assert!(remove_diffusion(dir.path(), &DIFFUSION_TEST_ENTRY).unwrap());
+    assert!(files_in(dir.path()).is_empty());
+}
+
+/// A file that is not what the entry says is refused by name and removed; a cancel keeps the
+/// part; a server that refuses is said with its status; nothing is installed.
+#[test]
+fn a_bad_diffusion_file_is_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let seen = std::sync::Mutex::new(Vec::new());
+    let cancel = std::sync::atomic::AtomicBool::new(false);
+    // Random bytes of the UNet's exact size: the size passes, the graph check does not.
+    let random: Vec<u8> = (0..726u32).map(|i| (i * 97 % 251) as u8).collect();
+    let (url, server) = serve(vec![
+        ranged(fixture_file("text_encoder/model.onnx")),
+        ranged(random),
+    ]);
+    let e = install_test_diffusion(dir.path(), &url, &cancel, &seen)
+        .unwrap_err()
+        .to_string();
+    server.join().unwrap();
+    assert!(e.contains("unet/model.onnx") && e.contains("ONNX"), "{e}");
+    let staging = dir.path().join("test-diffusion.partial");
+    assert!(!staging.join("unet/model.onnx.part").exists());
+    assert!(!staging.join("unet/model.onnx").exists());
+    // The wrong size, by name.
+    let (url, server) = serve(vec![ranged(vec![0u8; 100])]);
+    let e = install_test_diffusion(dir.path(), &url, &cancel, &seen)
+        .unwrap_err()
+        .to_string();
+    server.join().unwrap();
+    assert!(e.contains("unet/model.onnx is 100 bytes, not 726"), "{e}");
+    // Refused by the server.
+    let (url, server) = serve(vec![Box::new(|_: &str| {
+        b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\nConnection: close\r\n\r\n".to_vec()
+    })]);
+    let e = install_test_diffusion(dir.path(), &url, &cancel, &seen)
+        .unwrap_err()
+        .to_string();
+    server.join().unwrap();
+    assert!(e.contains("HTTP 404"), "{e}");
+    // (The text encoder from the first attempt is still there for the next.)
+    assert!(staging.join("text_encoder/model.onnx").is_file());
+    // Cancelled: an error that says so, nothing installed.
+    cancel.store(true, std::sync::atomic::Ordering::Relaxed);
+    let (url, server) = serve(vec![ranged(fixture_file("unet/model.onnx"))]);
+    let e = install_test_diffusion(dir.path(), &url, &cancel, &seen).unwrap_err();
+    drop(server);
+    assert!(matches!(e, crate::error::Error::Cancelled), "{e}");
+    assert!(diffusion_installed(dir.path(), &DIFFUSION_TEST_ENTRY).is_none());
+    // A first attempt that gets nothing leaves nothing.
+    let empty = tempfile::tempdir().unwrap();
+    cancel.store(false, std::sync::atomic::Ordering::Relaxed);
+    let closed = TcpListener::bind("127.0.0.1:0").unwrap();
+    let url = format!("http://{}", closed.local_addr().unwrap());
+    drop(closed);
+    assert!(install_test_diffusion(empty.path(), &url, &cancel, &seen).is_err());
+    assert!(files_in(empty.path()).is_empty());
+}
+
+#[test]
+fn published_sizes_of_files_read_as_bytes() {
+    let f = |s: &'static str| RemoteFile {
+        path: "x",
+        published_size: s,
+        bytes: None,
+        sha256: None,
+    };
+    assert_eq!(f("1.73 GB").published_bytes(), Some(1_730_000_000));
+    assert_eq!(f("99.1 MB").published_bytes(), Some(99_100_000));
+    assert_eq!(f("525 kB").published_bytes(), Some(525_000));
+    assert_eq!(f("").published_bytes(), None);
+    assert_eq!(f("about 2 GB").published_bytes(), None);
+    for e in DIFFUSION_CATALOGUE {
+        assert!(e.base_url.ends_with('/') && e.base_url.starts_with("https://"));
+        let graphs = e
+            .files
+            .iter()
+            .filter(|f| f.path.ends_with("model.onnx"))
+            .count();
+        assert_eq!(graphs, 4, "{}", e.name);
+        assert!(e.files.iter().any(|f| f.path == "tokenizer/vocab.json"));
+    }
+}
