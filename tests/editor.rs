@@ -1303,3 +1303,63 @@ fn a_region_pops_up_as_a_card() {
     wait_idle(&mut h, limit);
     assert!(h.state().project().unwrap().depth.popups.is_empty());
 }
+
+/// The Input tab's generative fill: a project with the diffusion fixture builds with it (the
+/// inspector names it), a typed prompt is one edit kept in the project and undone in one step,
+/// and "none" turns it off.
+#[test]
+fn the_input_tab_sets_the_diffusion_fill_and_its_prompt() {
+    if !makeit4d::ml::ort_available() {
+        assert!(std::env::var_os("CI").is_none(), "CI needs ONNX Runtime");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let file = fast_project(dir.path());
+    let mut p = Project::load(&file).unwrap();
+    p.inpaint.diffusion = Some(makeit4d::stages::inpaint::DiffusionSettings {
+        model: Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/diffusion/optimum"),
+        steps: 2,
+        ..Default::default()
+    });
+    p.save(&file).unwrap();
+    let Some(mut h) = harness(file) else {
+        return;
+    };
+    let limit = Duration::from_secs(600);
+    wait_idle(&mut h, limit);
+    h.get_by_label("1 Input").click();
+    h.step();
+    h.step();
+    assert!(
+        h.query_by_label_contains("inpainter: diffusion optimum (2 steps of ddim)")
+            .is_some(),
+        "the scene was filled by the diffusion model"
+    );
+    h.get_by_label("prompt").scroll_to_me();
+    h.step();
+    h.get_by_label("prompt").click();
+    h.step();
+    h.get_by_label("prompt").type_text("a jetty");
+    h.step();
+    // Focus elsewhere commits the text as one edit.
+    h.get_by_label("seed").click();
+    h.step();
+    h.step();
+    let prompt = |h: &Harness<'_, EditorApp>| {
+        h.state()
+            .project()
+            .unwrap()
+            .inpaint
+            .diffusion
+            .as_ref()
+            .map(|d| d.prompt.clone())
+    };
+    assert_eq!(prompt(&h).as_deref(), Some("a jetty"));
+    h.state_mut().undo();
+    h.step();
+    assert_eq!(prompt(&h).as_deref(), Some(""));
+    h.state_mut().redo();
+    h.step();
+    assert_eq!(prompt(&h).as_deref(), Some("a jetty"));
+    wait_idle(&mut h, limit);
+}

@@ -69,6 +69,36 @@ impl StagePanel for CanvasPanel {
         {
             cx.edit("Outpainting", |p| p.canvas.enabled = enabled);
         }
+        if let Some(d) = cx.project.inpaint.diffusion.clone() {
+            // The margin's own prompt (the diffusion model and the shared prompt are set in
+            // the Input tab).
+            let mut own = d.canvas_prompt.is_some();
+            if ui
+                .checkbox(&mut own, "the margin has its own prompt")
+                .changed()
+            {
+                cx.edit("Margin prompt", |p| {
+                    if let Some(d) = &mut p.inpaint.diffusion {
+                        d.canvas_prompt = own.then(|| d.prompt.clone());
+                    }
+                });
+            }
+            if let Some(cp) = d.canvas_prompt
+                && let Some(v) = committed(ui, "canvas-prompt", cp, |ui, v| {
+                    super::labelled(
+                        ui,
+                        "margin prompt",
+                        egui::TextEdit::multiline(v).desired_rows(2),
+                    )
+                })
+            {
+                cx.edit("Margin prompt", |p| {
+                    if let Some(d) = &mut p.inpaint.diffusion {
+                        d.canvas_prompt = Some(v);
+                    }
+                });
+            }
+        }
         let from_path = matches!(cx.project.canvas.sizing, CanvasSizing::FromPath(_));
         let mut choice = from_path;
         ui.horizontal(|ui| {

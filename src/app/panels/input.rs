@@ -117,6 +117,8 @@ impl StagePanel for InputPanel {
         }) {
             cx.edit("Inpaint seed", |p| p.inpaint.seed = v);
         }
+        ui.separator();
+        diffusion_ui(ui, cx);
         if let Some(s) = cx.snapshot {
             ui.separator();
             ui.label(format!("depth: {}", s.scene.depth_estimator));
@@ -126,4 +128,187 @@ impl StagePanel for InputPanel {
             }
         }
     }
+}
+
+/// The diffusion fill's model, prompts and sampler (#45): each change one undo step.
+fn diffusion_ui(ui: &mut Ui, cx: &mut PanelContext<'_>) {
+    use crate::stages::inpaint::DiffusionSettings;
+    use crate::stages::inpaint::schedule::SamplerKind;
+    ui.heading("Generative fill");
+    let installed: Vec<&'static str> = crate::models::models_dir()
+        .map(|dir| {
+            crate::models::DIFFUSION_CATALOGUE
+                .iter()
+                .filter(|e| crate::models::diffusion_installed(&dir, e).is_some())
+                .map(|e| e.name)
+                .collect()
+        })
+        .unwrap_or_default();
+    let current = cx
+        .project
+        .inpaint
+        .diffusion
+        .as_ref()
+        .map(|d| d.model.display().to_string());
+    let mut choice: Option<Option<String>> = None;
+    ui.horizontal(|ui| {
+        let name = ui.label("diffusion model");
+        egui::ComboBox::from_id_salt("diffusion-model")
+            .selected_text(current.as_deref().unwrap_or("none"))
+            .show_ui(ui, |ui| {
+                if ui.selectable_label(current.is_none(), "none").clicked() {
+                    choice = Some(None);
+                }
+                for n in &installed {
+                    if ui
+                        .selectable_label(current.as_deref() == Some(*n), *n)
+                        .clicked()
+                    {
+                        choice = Some(Some(n.to_string()));
+                    }
+                }
+                if let Some(c) = current.as_deref().filter(|c| !installed.contains(c)) {
+                    let _ = ui.selectable_label(true, c);
+                }
+            })
+            .response
+            .on_hover_text(
+                "A Stable Diffusion inpainting model fills the outpainted margin and what each \
+                 layer hides from a prompt; the quick fill shows first",
+            )
+            .labelled_by(name.id);
+    });
+    if let Some(text) = committed(
+        ui,
+        "diffusion-folder",
+        current.clone().unwrap_or_default(),
+        |ui, v| {
+            labelled(
+                ui,
+                "diffusion model folder",
+                egui::TextEdit::singleline(v).hint_text("a folder or a catalogue name"),
+            )
+        },
+    ) {
+        choice = Some((!text.trim().is_empty()).then(|| text.trim().to_string()));
+    }
+    if let Some(choice) = choice.filter(|c| *c != current) {
+        let old = cx.project.inpaint.diffusion.clone();
+        cx.edit("Diffusion model", |p| {
+            p.inpaint.diffusion = choice.map(|m| DiffusionSettings {
+                model: m.into(),
+                ..old.unwrap_or_default()
+            });
+        });
+    }
+    if installed.is_empty() {
+        ui.weak(
+            "none installed: run `makeit4d models install sd2-inpainting` (about 2.6 GB), or \
+             name a model folder",
+        );
+    }
+    let Some(d) = cx.project.inpaint.diffusion.clone() else {
+        return;
+    };
+    let text_field = |ui: &mut Ui, salt: &str, label: &str, value: String| {
+        committed(ui, salt, value, |ui, v| {
+            labelled(ui, label, egui::TextEdit::multiline(v).desired_rows(2))
+        })
+    };
+    if let Some(v) = text_field(ui, "diffusion-prompt", "prompt", d.prompt.clone()) {
+        cx.edit("Fill prompt", |p| {
+            if let Some(d) = &mut p.inpaint.diffusion {
+                d.prompt = v;
+            }
+        });
+    }
+    if let Some(v) = text_field(
+        ui,
+        "diffusion-negative",
+        "negative prompt",
+        d.negative_prompt.clone(),
+    ) {
+        cx.edit("Fill negative prompt", |p| {
+            if let Some(d) = &mut p.inpaint.diffusion {
+                d.negative_prompt = v;
+            }
+        });
+    }
+    let mut own = d.layers_prompt.is_some();
+    if ui
+        .checkbox(&mut own, "hidden regions have their own prompt")
+        .changed()
+    {
+        let prompt = d.prompt.clone();
+        cx.edit("Layers' prompt", |p| {
+            if let Some(d) = &mut p.inpaint.diffusion {
+                d.layers_prompt = own.then_some(prompt);
+            }
+        });
+    }
+    if let Some(lp) = d.layers_prompt.clone()
+        && let Some(v) = text_field(ui, "diffusion-layers-prompt", "hidden regions' prompt", lp)
+    {
+        cx.edit("Layers' prompt", |p| {
+            if let Some(d) = &mut p.inpaint.diffusion {
+                d.layers_prompt = Some(v);
+            }
+        });
+    }
+    if let Some(v) = committed(ui, "diffusion-steps", d.steps, |ui, v| {
+        labelled(
+            ui,
+            "steps",
+            egui::DragValue::new(v).range(1..=crate::stages::inpaint::schedule::MAX_STEPS),
+        )
+    }) {
+        cx.edit("Fill steps", |p| {
+            if let Some(d) = &mut p.inpaint.diffusion {
+                d.steps = v;
+            }
+        });
+    }
+    if let Some(v) = committed(ui, "diffusion-guidance", d.guidance, |ui, v| {
+        labelled(
+            ui,
+            "guidance",
+            egui::DragValue::new(v).range(0.0..=100.0).speed(0.1),
+        )
+    }) {
+        cx.edit("Fill guidance", |p| {
+            if let Some(d) = &mut p.inpaint.diffusion {
+                d.guidance = v;
+            }
+        });
+    }
+    let mut sampler = d.scheduler;
+    ui.horizontal(|ui| {
+        let name = ui.label("sampler");
+        egui::ComboBox::from_id_salt("diffusion-sampler")
+            .selected_text(sampler.name())
+            .show_ui(ui, |ui| {
+                for k in [
+                    SamplerKind::Ddim,
+                    SamplerKind::EulerAncestral,
+                    SamplerKind::DpmSolver2m,
+                    SamplerKind::Lcm,
+                ] {
+                    ui.selectable_value(&mut sampler, k, k.name());
+                }
+            })
+            .response
+            .labelled_by(name.id);
+    });
+    if sampler != d.scheduler {
+        cx.edit("Fill sampler", |p| {
+            if let Some(d) = &mut p.inpaint.diffusion {
+                d.scheduler = sampler;
+            }
+        });
+    }
+    ui.weak(
+        "The quick fill shows first; the diffusion fill follows in the background (the status \
+         bar counts windows and steps; Cancel stops it). On a CPU a 512-pixel window takes \
+         minutes: about 5 s a step.",
+    );
 }
