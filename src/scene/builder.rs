@@ -720,6 +720,17 @@ impl SceneBuilder {
             }
         ));
 
+        // A fill that fell back says so once.
+        for n in inpainter
+            .take_notes()
+            .into_iter()
+            .chain(layer_inpainter.take_notes())
+        {
+            if !warnings.contains(&n) {
+                warnings.push(n);
+            }
+        }
+
         // 6. Layer-based depth.
         let p = step(Stage::LayerDepth);
         let key = key_of(key, &project.layers.layer_depth);

@@ -12,13 +12,14 @@ pub fn make_inpainter(
     region: crate::stages::inpaint::FillRegion,
     warnings: &mut Vec<String>,
 ) -> (Box<dyn Inpainter>, String) {
-    use crate::stages::inpaint::patchmatch::PatchMatchInpainter;
     if let Some(d) = &settings.diffusion {
         match make_diffusion(d, region, settings.seed) {
             Ok(fill) => {
                 warnings.extend(fill.notes().iter().cloned());
                 let name = fill.name().to_string();
-                return (Box::new(fill), name);
+                // What takes over when a fill fails (a graph's NaN): the next inpainter.
+                let (fallback, fallback_name) = single_inpainter(settings, &mut Vec::new());
+                return (Box::new(fill.with_fallback(fallback, fallback_name)), name);
             }
             Err(e) => {
                 let next = if settings.model.is_some() {
@@ -34,6 +35,16 @@ pub fn make_inpainter(
             }
         }
     }
+    single_inpainter(settings, warnings)
+}
+
+/// The ONNX model `settings` ask for (falling back to PatchMatch with a warning), or PatchMatch
+/// at the project's preset.
+fn single_inpainter(
+    settings: &crate::stages::inpaint::InpaintSettings,
+    warnings: &mut Vec<String>,
+) -> (Box<dyn Inpainter>, String) {
+    use crate::stages::inpaint::patchmatch::PatchMatchInpainter;
     if let Some(model) = &settings.model {
         match crate::stages::inpaint::onnx::OnnxInpainter::from_manifest(model) {
             Ok(m) => {

@@ -47,6 +47,18 @@ pub struct DiffusionModel {
     pub timestep: (TensorKind, usize),
     /// The four sessions, in [`GRAPHS`] order.
     pub sessions: [OnnxSession; 4],
+    /// Seconds a denoising step took per latent cell in the last fill (what the next fill's
+    /// estimate is made from, before it starts).
+    pub pace: std::sync::Mutex<Option<f64>>,
+}
+
+impl DiffusionModel {
+    /// About how long `steps` denoising steps over `cells` latent cells will take, from the
+    /// last fill's pace; `None` before the first fill.
+    pub fn estimate_seconds(&self, steps: usize, cells: usize) -> Option<f64> {
+        let pace = *self.pace.lock().unwrap_or_else(|e| e.into_inner());
+        pace.map(|p| p * steps as f64 * cells as f64)
+    }
 }
 
 /// The graph file of `name` in `folder`.
@@ -200,6 +212,7 @@ impl DiffusionModel {
             ids: ids_kind,
             timestep: timestep_kind,
             sessions,
+            pace: std::sync::Mutex::new(None),
         })
     }
 }
@@ -550,6 +563,10 @@ impl DiffusionModel {
             sampler.step(i, &eps, &mut latents, noise.as_deref())?;
         }
         progress.check()?;
+        if steps > 0 {
+            let per_cell = started.elapsed().as_secs_f64() / (steps * plane) as f64;
+            *self.pace.lock().unwrap_or_else(|e| e.into_inner()) = Some(per_cell);
+        }
         let scaled: Vec<f32> = latents.iter().map(|v| v / LATENT_SCALE).collect();
         let decoded = self.sessions[3].run(
             &[InputTensor {

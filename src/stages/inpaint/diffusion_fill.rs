@@ -202,6 +202,21 @@ pub fn fill_tiled(
     // 0: the photo's; 1: still to fill; 2: filled by a window.
     let mut state: Raster<u8> = hole.map(u8::from);
     let n = plan.len();
+    // Before the first window: how much there is, and how long it will take at the last
+    // fill's pace.
+    let cells: usize = plan.iter().map(|w| (w.w / 8) * (w.h / 8)).sum();
+    let about = model
+        .estimate_seconds(params.steps, cells)
+        .map(|s| format!(", about {}", super::diffusion::about_seconds(s)))
+        .unwrap_or_default();
+    progress.report(
+        0.0,
+        &format!(
+            "diffusion fill: {n} window{} × {} steps{about}",
+            if n == 1 { "" } else { "s" },
+            params.steps
+        ),
+    );
     for (k, win) in plan.iter().enumerate() {
         let label = format!("window {}/{n}", k + 1);
         let parent = progress.sub(k as f32 / n as f32, (k + 1) as f32 / n as f32);
@@ -265,7 +280,8 @@ pub struct Prompts {
     pub negative: String,
 }
 
-/// A diffusion model behind the [`Inpainter`] trait, with its prompts and settings.
+/// A diffusion model behind the [`Inpainter`] trait, with its prompts and settings, and the
+/// inpainter that takes over when a fill fails (a graph's NaN, an image narrower than a latent).
 pub struct DiffusionInpainter {
     model: Arc<DiffusionModel>,
     tokens: (Vec<u32>, Vec<u32>),
@@ -273,6 +289,8 @@ pub struct DiffusionInpainter {
     native: usize,
     name: String,
     notes: Vec<String>,
+    fallback: Option<(Box<dyn Inpainter>, String)>,
+    said: Mutex<Vec<String>>,
 }
 
 impl DiffusionInpainter {
@@ -322,7 +340,16 @@ impl DiffusionInpainter {
             params,
             name,
             notes,
+            fallback: None,
+            said: Mutex::new(Vec::new()),
         })
+    }
+
+    /// Falls back to `fallback` (called `name` in what it says) when a fill fails; a cancel
+    /// is not a failure.
+    pub fn with_fallback(mut self, fallback: Box<dyn Inpainter>, name: String) -> Self {
+        self.fallback = Some((fallback, name));
+        self
     }
 
     /// Lines worth telling once (a prompt cut to what the text encoder reads).
@@ -351,7 +378,7 @@ impl Inpainter for DiffusionInpainter {
             seed: self.params.seed ^ request.seed,
             ..self.params.clone()
         };
-        let image = fill_tiled(
+        let filled = fill_tiled(
             &self.model,
             request.image,
             hole,
@@ -359,8 +386,25 @@ impl Inpainter for DiffusionInpainter {
             &params,
             self.native,
             progress,
-        )?;
-        Ok(InpaintResult { image, guide })
+        );
+        match (filled, &self.fallback) {
+            (Ok(image), _) => Ok(InpaintResult { image, guide }),
+            (Err(Error::Cancelled), _) => Err(Error::Cancelled),
+            (Err(e), Some((fallback, name))) => {
+                let note = format!("the diffusion fill failed ({e}); {name} filled it instead");
+                let mut said = self.said.lock().unwrap_or_else(|e| e.into_inner());
+                if !said.contains(&note) {
+                    said.push(note);
+                }
+                drop(said);
+                fallback.inpaint(request, progress)
+            }
+            (Err(e), None) => Err(e),
+        }
+    }
+
+    fn take_notes(&self) -> Vec<String> {
+        std::mem::take(&mut *self.said.lock().unwrap_or_else(|e| e.into_inner()))
     }
 }
 
@@ -579,6 +623,29 @@ mod fixture_tests {
             )
             .unwrap();
         assert_eq!(same.image.data(), image.data());
+        // A fill that cannot run (an image narrower than one latent) falls back and says so
+        // once; without a fallback it is an error.
+        let narrow = Raster::from_fn(40, 4, |x, _| [x as f32 / 40.0; 3]);
+        let narrow_hole = Raster::from_fn(40, 4, |x, _| x == 20);
+        let narrow_request = InpaintRequest {
+            image: &narrow,
+            hole: &narrow_hole,
+            allowed_source: None,
+            guide: None,
+            seed: 0,
+        };
+        assert!(fill.inpaint(&narrow_request, &Progress::none()).is_err());
+        let fill = fill.with_fallback(
+            Box::new(crate::stages::inpaint::HarmonicInpainter),
+            "the harmonic fill".into(),
+        );
+        let out = fill.inpaint(&narrow_request, &Progress::none()).unwrap();
+        assert!(out.image.at(20, 1)[0] > 0.4 && out.image.at(20, 1)[0] < 0.6);
+        fill.inpaint(&narrow_request, &Progress::none()).unwrap();
+        let notes = fill.take_notes();
+        assert_eq!(notes.len(), 1, "{notes:?}");
+        assert!(notes[0].contains("40×4") && notes[0].contains("the harmonic fill filled it"));
+        assert!(fill.take_notes().is_empty());
         // Bad settings are refused in words.
         let bad = DiffusionParams {
             steps: 0,

@@ -72,6 +72,12 @@ pub trait Inpainter: Send + Sync {
     fn runs_several_at_once(&self) -> bool {
         false
     }
+
+    /// What happened since the last call that the user should hear once (a fill that fell
+    /// back to another inpainter, and why).
+    fn take_notes(&self) -> Vec<String> {
+        Vec::new()
+    }
 }
 
 /// The project's inpainting settings (canvas and layers share one inpainter).
