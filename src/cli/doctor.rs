@@ -34,7 +34,7 @@ pub(crate) fn doctor(args: DoctorArgs) -> anyhow::Result<()> {
     }
     match makeit4d::models::models_dir() {
         Some(dir) => {
-            let installed: Vec<String> = makeit4d::models::CATALOGUE
+            let mut installed: Vec<String> = makeit4d::models::CATALOGUE
                 .iter()
                 .filter_map(|e| makeit4d::models::installed(&dir, e))
                 .map(|m| {
@@ -62,6 +62,23 @@ pub(crate) fn doctor(args: DoctorArgs) -> anyhow::Result<()> {
                     }
                 })
                 .collect();
+            // A diffusion model's graphs are gigabytes: its files are counted here, its graphs
+            // were opened when it was installed and are again on first use.
+            installed.extend(
+                makeit4d::models::DIFFUSION_CATALOGUE
+                    .iter()
+                    .filter_map(|e| {
+                        makeit4d::models::diffusion_installed(&dir, e).map(|(_, bytes)| {
+                    format!(
+                        "{} ({:.2} GB, all {} files present; graphs not checked here: they are \
+                         opened on first use)",
+                        e.name,
+                        bytes as f64 / 1e9,
+                        e.files.len()
+                    )
+                })
+                    }),
+            );
             if installed.is_empty() {
                 println!(
                     "installed models: none in {} (`makeit4d models list` shows the catalogue)",
