@@ -478,6 +478,27 @@ mod tests {
         );
     }
 
+    /// A canvas 8000 px wide around a small photo: every column covered, the windows in
+    /// rings that never come closer again, each run once.
+    #[test]
+    fn an_8000_pixel_canvas_plans_in_rings() {
+        let (w, h) = (8000, 600);
+        let hole = Raster::from_fn(w, h, |x, y| {
+            !((3800..4200).contains(&x) && (200..400).contains(&y))
+        });
+        let plan = plan_windows(&hole, 512).unwrap();
+        let xs = starts(w, 512);
+        assert_eq!(plan.len(), xs.len() * starts(h, 512).len());
+        // The distance of each window's centre column from the photo's never falls by more
+        // than a window's stride from one window to the next: the fill grows outward.
+        let centre = |win: &Window| (win.x + win.w / 2) as i64;
+        let off = |win: &Window| (centre(win) - 4000).abs();
+        for pair in plan.windows(2) {
+            assert!(off(&pair[1]) + 384 >= off(&pair[0]), "{pair:?}");
+        }
+        assert!(off(&plan[0]) < 512 && off(plan.last().unwrap()) > 3000);
+    }
+
     /// A hole in one corner needs one window; an empty hole none; an image smaller than a
     /// latent is refused in words.
     #[test]
