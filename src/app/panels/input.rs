@@ -144,12 +144,14 @@ fn diffusion_ui(ui: &mut Ui, cx: &mut PanelContext<'_>) {
                 .collect()
         })
         .unwrap_or_default();
-    let current = cx
-        .project
-        .inpaint
-        .diffusion
-        .as_ref()
-        .map(|d| d.model.display().to_string());
+    // A folder as the file system names it (a project's relative path is joined to the
+    // project's folder when loaded); a catalogue name as it is.
+    let current = cx.project.inpaint.diffusion.as_ref().map(|d| {
+        std::fs::canonicalize(&d.model)
+            .unwrap_or_else(|_| d.model.clone())
+            .display()
+            .to_string()
+    });
     let mut choice: Option<Option<String>> = None;
     ui.horizontal(|ui| {
         let name = ui.label("diffusion model");
