@@ -650,7 +650,8 @@ pub(crate) struct BenchFuzzArgs {
 
 #[derive(Args, Debug)]
 pub(crate) struct BenchDiffusionArgs {
-    /// The model folder (text_encoder/, unet/, vae_encoder/, vae_decoder/, tokenizer/).
+    /// The model: a catalogue name (`sd2-inpainting`) or a folder (text_encoder/, unet/,
+    /// vae_encoder/, vae_decoder/, tokenizer/).
     #[arg(long)]
     pub(crate) model: PathBuf,
     /// The window's side, pixels (a multiple of 8; the SD inpainting models' native 512).

@@ -180,7 +180,7 @@ pub(crate) fn bench_diffusion(
     use makeit4d::stages::inpaint::diffusion::DiffusionModel;
     use makeit4d::stages::inpaint::diffusion_bench::bench_diffusion;
     let sampler = args.scheduler.parse()?;
-    let model = DiffusionModel::open(&args.model)?;
+    let model = DiffusionModel::open(&makeit4d::models::resolve_diffusion(&args.model)?)?;
     let (bar, progress) = progress_bar(cancel);
     let bench = bench_diffusion(
         &model,
