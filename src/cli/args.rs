@@ -1083,7 +1083,10 @@ mod tests {
                 continue;
             };
             let mut argv = vec!["makeit4d".to_string()];
-            argv.extend(args.split_whitespace().map(str::to_string));
+            argv.extend(
+                shlex::split(args)
+                    .unwrap_or_else(|| panic!("README: `{line}` is not a shell command line")),
+            );
             commands.push(argv);
         }
         commands
