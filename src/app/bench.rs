@@ -303,6 +303,34 @@ pub fn run(
         a.apply_edit("Depth stroke", stroked.clone())
     })?;
     measure(&mut d, "undo", Answer::Scene, &mut |a| a.undo())?;
+    // A depth target: a stroke saying "this is nearer", spread by the edge-aware solver.
+    let here = d
+        .app
+        .snapshot()
+        .map(|s| {
+            let depth = &s.scene.depth.estimate.depth;
+            let (dw, dh) = depth.size();
+            depth.at(
+                ((dw - 1) as f32 * 0.45) as usize,
+                ((dh - 1) as f32 * 0.7) as usize,
+            )
+        })
+        .filter(|z| z.is_finite() && *z > 0.0)
+        .unwrap_or(1.0);
+    let mut targeted = project(&d)?;
+    targeted
+        .depth
+        .targets
+        .push(crate::stages::depth::propagate::TargetStroke {
+            points: (0..8).map(|i| [0.3 + 0.05 * i as f32, 0.7]).collect(),
+            radius: 0.02,
+            depth: here * 0.7,
+            hidden: false,
+        });
+    measure(&mut d, "depth target", Answer::Depth, &mut |a| {
+        a.apply_edit("Depth target", targeted.clone())
+    })?;
+    measure(&mut d, "undo", Answer::Scene, &mut |a| a.undo())?;
 
     // Playback.
     d.app.seek(0);
