@@ -1363,3 +1363,87 @@ fn the_input_tab_sets_the_diffusion_fill_and_its_prompt() {
     assert_eq!(prompt(&h).as_deref(), Some("a jetty"));
     wait_idle(&mut h, limit);
 }
+
+/// A tilted pop-up's handles in the Depth view (region tool): a drag moves the foot handle, a
+/// Shift+drag up makes the top farther; each release is one undo step.
+#[test]
+fn a_tilted_plane_is_dragged_by_its_handles() {
+    use makeit4d::stages::depth::regions::{PopUp, PopUpShape};
+    let dir = tempfile::tempdir().unwrap();
+    let file = fast_project(dir.path());
+    let mut p = Project::load(&file).unwrap();
+    p.depth.popups.push(PopUp {
+        seeds: vec![[0.5, 0.85]],
+        shape: PopUpShape::Tilted {
+            from: [0.5, 0.6],
+            from_depth: 10.0,
+            to: [0.5, 0.95],
+            to_depth: 5.0,
+        },
+        hidden: false,
+    });
+    p.save(&file).unwrap();
+    let Some(mut h) = harness(file) else {
+        return;
+    };
+    let limit = Duration::from_secs(600);
+    wait_idle(&mut h, limit);
+    h.get_by_label("3 Depth").click();
+    h.step();
+    h.step();
+    h.key_press(egui::Key::R);
+    h.step();
+    h.step();
+    let view = h.state().probe().view.expect("the depth view");
+    let shape =
+        |h: &Harness<'_, EditorApp>| h.state().project().unwrap().depth.popups[0].shape.clone();
+    // The foot handle dragged to the right.
+    let foot = view.rect.lerp_inside(egui::vec2(0.5, 0.95));
+    let there = view.rect.lerp_inside(egui::vec2(0.7, 0.95));
+    drag(&mut h, foot, there);
+    let PopUpShape::Tilted { to, to_depth, .. } = shape(&h) else {
+        panic!("still tilted")
+    };
+    assert!(
+        (to[0] - 0.7).abs() < 0.03 && (to[1] - 0.95).abs() < 0.03,
+        "{to:?}"
+    );
+    assert_eq!(to_depth, 5.0);
+    assert!(
+        h.state().project().unwrap().depth.popups.len() == 1,
+        "no region was chosen or made by the drag"
+    );
+    // Shift+drag on the top handle, up by 100 px: its depth × e, its place kept.
+    let top = view.rect.lerp_inside(egui::vec2(0.5, 0.6));
+    h.event(egui::Event::ModifiersChanged(egui::Modifiers::SHIFT));
+    h.step();
+    drag(&mut h, top, top - egui::vec2(0.0, 100.0));
+    h.event(egui::Event::ModifiersChanged(egui::Modifiers::NONE));
+    h.step();
+    let PopUpShape::Tilted {
+        from, from_depth, ..
+    } = shape(&h)
+    else {
+        panic!("still tilted")
+    };
+    assert!((from[1] - 0.6).abs() < 1e-6, "{from:?}");
+    assert!(
+        (from_depth / (10.0 * std::f32::consts::E) - 1.0).abs() < 0.05,
+        "{from_depth}"
+    );
+    // One undo step each.
+    h.state_mut().undo();
+    h.step();
+    let PopUpShape::Tilted { from_depth, to, .. } = shape(&h) else {
+        panic!("still tilted")
+    };
+    assert_eq!(from_depth, 10.0);
+    assert!((to[0] - 0.7).abs() < 0.03);
+    h.state_mut().undo();
+    h.step();
+    let PopUpShape::Tilted { to, .. } = shape(&h) else {
+        panic!("still tilted")
+    };
+    assert_eq!(to, [0.5, 0.95]);
+    wait_idle(&mut h, limit);
+}

@@ -41,6 +41,19 @@ pub struct DepthPanel {
     selection: Vec<[f32; 2]>,
     /// The photo's regions, for the scene generation they were found for.
     regions: Option<(u64, std::sync::Arc<Regions>)>,
+    /// A tilted pop-up's handle being dragged: the pop-up, which end (`true`: the foot), and
+    /// where it is and its depth so far.
+    handle_drag: Option<HandleDrag>,
+}
+
+/// A tilted pop-up's handle on the move (the region tool): a drag moves it, Shift+drag
+/// changes its depth (up: farther).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct HandleDrag {
+    popup: usize,
+    foot: bool,
+    at: [f32; 2],
+    depth: f32,
 }
 
 impl Default for DepthPanel {
@@ -59,6 +72,7 @@ impl Default for DepthPanel {
             target_depth: 5.0,
             selection: Vec::new(),
             regions: None,
+            handle_drag: None,
         }
     }
 }
@@ -240,6 +254,10 @@ impl StagePanel for DepthPanel {
                 let regions = self.regions_of(snapshot);
                 let (w, h) = snapshot.scene.input.rgb.size();
                 let rel = |q: [f32; 2]| crate::geometry::pixels_to_relative(q, (w, h));
+                // The tilted pop-ups' handles come first: a press on one drags it.
+                if self.handles_ui(ui, cx, &response, &view, &painter, (w, h)) {
+                    return;
+                }
                 ui.ctx().set_cursor_icon(egui::CursorIcon::PointingHand);
                 if let Some(p) = response.hover_pos()
                     && let Some(label) = regions.at(rel(view.to_image(p)))
@@ -715,6 +733,145 @@ impl DepthPanel {
         found
     }
 
+    /// Draws the visible tilted pop-ups' handles (each end's depth beside it) and drags them:
+    /// a drag moves a handle, Shift+drag changes its depth (up: farther, × e per 100 px); the
+    /// release is one undo step. True while a handle is pressed or dragged (the region tool's
+    /// clicks then do nothing).
+    fn handles_ui(
+        &mut self,
+        ui: &Ui,
+        cx: &mut PanelContext<'_>,
+        response: &egui::Response,
+        view: &crate::app::viewport::ImageView,
+        painter: &egui::Painter,
+        size: (usize, usize),
+    ) -> bool {
+        let mut handles = Vec::new();
+        for (i, p) in cx.project.depth.popups.iter().enumerate() {
+            if let (
+                false,
+                &PopUpShape::Tilted {
+                    from,
+                    from_depth,
+                    to,
+                    to_depth,
+                },
+            ) = (p.hidden, &p.shape)
+            {
+                handles.push((i, false, from, from_depth));
+                handles.push((i, true, to, to_depth));
+            }
+        }
+        if handles.is_empty() {
+            self.handle_drag = None;
+            return false;
+        }
+        let screen = |q: [f32; 2]| view.to_screen(crate::geometry::relative_to_pixels(q, size));
+        let near = |p: egui::Pos2| {
+            handles
+                .iter()
+                .copied()
+                .filter(|h| screen(h.2).distance(p) < 12.0)
+                .min_by(|a, b| screen(a.2).distance(p).total_cmp(&screen(b.2).distance(p)))
+        };
+        if response.drag_started_by(egui::PointerButton::Primary)
+            && let Some(origin) = ui.input(|i| i.pointer.press_origin())
+            && let Some((popup, foot, at, depth)) = near(origin)
+        {
+            self.handle_drag = Some(HandleDrag {
+                popup,
+                foot,
+                at,
+                depth,
+            });
+        }
+        if let Some(drag) = &mut self.handle_drag
+            && response.dragged_by(egui::PointerButton::Primary)
+        {
+            if ui.input(|i| i.modifiers.shift) {
+                let dy = response.drag_delta().y;
+                drag.depth = (drag.depth * (-dy / 100.0).exp()).clamp(1e-3, 1e6);
+            } else if let Some(p) = response.interact_pointer_pos() {
+                let q = crate::geometry::pixels_to_relative(view.to_image(p), size);
+                drag.at = [q[0].clamp(0.0, 1.0), q[1].clamp(0.0, 1.0)];
+            }
+        }
+        if response.drag_stopped()
+            && let Some(drag) = self.handle_drag.take()
+        {
+            cx.edit("Move tilt handle", |p| {
+                if let Some(PopUp {
+                    shape:
+                        PopUpShape::Tilted {
+                            from,
+                            from_depth,
+                            to,
+                            to_depth,
+                        },
+                    ..
+                }) = p.depth.popups.get_mut(drag.popup)
+                {
+                    if drag.foot {
+                        (*to, *to_depth) = (drag.at, drag.depth);
+                    } else {
+                        (*from, *from_depth) = (drag.at, drag.depth);
+                    }
+                }
+            });
+        }
+        // Drawn where they are, the one on the move where it goes.
+        let font = egui::FontId::proportional(12.0);
+        for (i, foot, at, depth) in &handles {
+            let (at, depth, moving) = match self.handle_drag {
+                Some(d) if d.popup == *i && d.foot == *foot => (d.at, d.depth, true),
+                _ => (*at, *depth, false),
+            };
+            let centre = screen(at);
+            let colour = if moving {
+                Color32::from_rgb(255, 220, 0)
+            } else {
+                Color32::WHITE
+            };
+            painter.circle_filled(centre, 6.0, Color32::from_black_alpha(160));
+            painter.circle_stroke(centre, 6.0, Stroke::new(2.0, colour));
+            painter.text(
+                centre + egui::vec2(9.0, -9.0),
+                egui::Align2::LEFT_BOTTOM,
+                format!(
+                    "#{} {} Z {}",
+                    i + 1,
+                    if *foot { "foot" } else { "top" },
+                    three_figures(depth)
+                ),
+                font.clone(),
+                colour,
+            );
+        }
+        // The two ends of each tilt joined.
+        for pair in handles.chunks(2) {
+            if let [a, b] = pair {
+                let end = |h: &(usize, bool, [f32; 2], f32)| match self.handle_drag {
+                    Some(d) if d.popup == h.0 && d.foot == h.1 => screen(d.at),
+                    _ => screen(h.2),
+                };
+                painter.line_segment(
+                    [end(a), end(b)],
+                    Stroke::new(1.5, Color32::from_white_alpha(160)),
+                );
+            }
+        }
+        let hovering = response.hover_pos().and_then(near).is_some();
+        if hovering || self.handle_drag.is_some() {
+            ui.ctx().set_cursor_icon(egui::CursorIcon::Grab);
+        }
+        let pressed_on_one = ui
+            .input(|i| i.pointer.press_origin())
+            .and_then(near)
+            .is_some()
+            && ui.input(|i| i.pointer.primary_down());
+        self.handle_drag.is_some() || pressed_on_one || (hovering && response.clicked())
+    }
+
     /// The chosen regions' buttons (card facing the camera, on the ground, tilted) and the
     /// list of pop-ups, each of which can be edited, hidden or deleted (one undo step each).
     fn popups_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>) {
@@ -747,7 +904,7 @@ impl DepthPanel {
                 }
                 if ui
                     .button("Tilted plane")
-                    .on_hover_text("From the region's top to its foot, each end at the depth the map has there; edit the two depths below")
+                    .on_hover_text("From the region's top to its foot, each end at the depth the map has there; drag its handles in the view (Shift+drag: the depth), or edit the two depths below")
                     .clicked()
                     && let Some(snapshot) = cx.snapshot
                 {
