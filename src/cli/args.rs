@@ -269,11 +269,21 @@ impl PromptArgs {
             || self.scheduler.is_some()
     }
 
-    /// `settings` with what was given.
+    /// `settings` with what was given; a number out of range is refused naming its flag.
     pub(crate) fn apply(
         &self,
         settings: &mut makeit4d::stages::inpaint::DiffusionSettings,
     ) -> anyhow::Result<()> {
+        let most = makeit4d::stages::inpaint::schedule::MAX_STEPS;
+        if let Some(n) = self.steps.filter(|n| !(1..=most).contains(n)) {
+            anyhow::bail!("--steps {n} is outside 1..={most}");
+        }
+        if let Some(g) = self
+            .guidance
+            .filter(|g| !(g.is_finite() && (0.0..=100.0).contains(g)))
+        {
+            anyhow::bail!("--guidance {g} is outside [0, 100]");
+        }
         if let Some(p) = &self.prompt {
             settings.prompt = p.clone();
         }

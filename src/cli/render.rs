@@ -259,6 +259,14 @@ fn apply_scene_flags(args: &RenderArgs, project: &mut Project) -> anyhow::Result
     }
     if args.prompt.any() || args.canvas_prompt.is_some() || args.layers_prompt.is_some() {
         let Some(d) = project.inpaint.diffusion.as_mut() else {
+            if let Some(m) = &args.inpaint_model {
+                bail!(
+                    "--inpaint-model {} is not a diffusion model (a folder with text_encoder/, \
+                     unet/, vae_encoder/, vae_decoder/ and tokenizer/, or a name such as \
+                     sd2-inpainting), and --prompt steers only a diffusion fill",
+                    m.display()
+                );
+            }
             bail!(
                 "--prompt, --negative-prompt, --steps, --guidance and --scheduler steer a \
                  diffusion fill: add --inpaint-model FOLDER (a Stable Diffusion inpainting \
