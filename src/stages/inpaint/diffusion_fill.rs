@@ -218,7 +218,16 @@ pub fn fill_tiled(
         ),
     );
     for (k, win) in plan.iter().enumerate() {
-        let label = format!("window {}/{n}", k + 1);
+        // From the second window on, the whole rest at the pace the windows so far took.
+        let rest: usize = plan[k..].iter().map(|w| (w.w / 8) * (w.h / 8)).sum();
+        let label = match model.estimate_seconds(params.steps, rest).filter(|_| k > 0) {
+            Some(s) => format!(
+                "window {}/{n} (about {} left in all)",
+                k + 1,
+                super::diffusion::about_seconds(s)
+            ),
+            None => format!("window {}/{n}", k + 1),
+        };
         let parent = progress.sub(k as f32 / n as f32, (k + 1) as f32 / n as f32);
         let sub = Progress::new(move |f, s| parent.report(f, &format!("{label}, {s}")))
             .with_cancel_flag(progress.cancel_flag());
