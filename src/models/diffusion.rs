@@ -30,6 +30,16 @@ pub struct RemoteFile {
     pub sha256: Option<&'static str>,
 }
 
+/// A file whose size is known only as published (or not at all) and whose SHA-256 is not.
+pub const fn file(path: &'static str, published_size: &'static str) -> RemoteFile {
+    RemoteFile {
+        path,
+        published_size,
+        bytes: None,
+        sha256: None,
+    }
+}
+
 impl RemoteFile {
     /// The published size in bytes, when it is a number of kB, MB or GB.
     pub fn published_bytes(&self) -> Option<u64> {
@@ -79,48 +89,13 @@ pub const DIFFUSION_CATALOGUE: &[DiffusionEntry] = &[
         // upload.
         base_url: "https://huggingface.co/jdp8/sd-2-inpainting-fp16/resolve/c196c91cd44dc639020136d6d85290738dbcb5d8/",
         files: &[
-            RemoteFile {
-                path: "unet/model.onnx",
-                published_size: "1.73 GB",
-                bytes: None,
-                sha256: None,
-            },
-            RemoteFile {
-                path: "text_encoder/model.onnx",
-                published_size: "",
-                bytes: None,
-                sha256: None,
-            },
-            RemoteFile {
-                path: "vae_encoder/model.onnx",
-                published_size: "",
-                bytes: None,
-                sha256: None,
-            },
-            RemoteFile {
-                path: "vae_decoder/model.onnx",
-                published_size: "99.1 MB",
-                bytes: None,
-                sha256: None,
-            },
-            RemoteFile {
-                path: "tokenizer/vocab.json",
-                published_size: "1.06 MB",
-                bytes: None,
-                sha256: None,
-            },
-            RemoteFile {
-                path: "tokenizer/merges.txt",
-                published_size: "",
-                bytes: None,
-                sha256: None,
-            },
-            RemoteFile {
-                path: "tokenizer/special_tokens_map.json",
-                published_size: "",
-                bytes: None,
-                sha256: None,
-            },
+            file("unet/model.onnx", "1.73 GB"),
+            file("text_encoder/model.onnx", ""),
+            file("vae_encoder/model.onnx", ""),
+            file("vae_decoder/model.onnx", "99.1 MB"),
+            file("tokenizer/vocab.json", "1.06 MB"),
+            file("tokenizer/merges.txt", ""),
+            file("tokenizer/special_tokens_map.json", ""),
         ],
         published_size: "about 2.6 GB",
         licence: "CreativeML Open RAIL++-M",
@@ -134,48 +109,13 @@ pub const DIFFUSION_CATALOGUE: &[DiffusionEntry] = &[
         // revision's full hash was not published where it could be read).
         base_url: "https://huggingface.co/jdp8/sd-1-5-inpainting-fp16/resolve/main/",
         files: &[
-            RemoteFile {
-                path: "unet/model.onnx",
-                published_size: "",
-                bytes: None,
-                sha256: None,
-            },
-            RemoteFile {
-                path: "text_encoder/model.onnx",
-                published_size: "",
-                bytes: None,
-                sha256: None,
-            },
-            RemoteFile {
-                path: "vae_encoder/model.onnx",
-                published_size: "",
-                bytes: None,
-                sha256: None,
-            },
-            RemoteFile {
-                path: "vae_decoder/model.onnx",
-                published_size: "",
-                bytes: None,
-                sha256: None,
-            },
-            RemoteFile {
-                path: "tokenizer/vocab.json",
-                published_size: "",
-                bytes: None,
-                sha256: None,
-            },
-            RemoteFile {
-                path: "tokenizer/merges.txt",
-                published_size: "525 kB",
-                bytes: None,
-                sha256: None,
-            },
-            RemoteFile {
-                path: "tokenizer/special_tokens_map.json",
-                published_size: "",
-                bytes: None,
-                sha256: None,
-            },
+            file("unet/model.onnx", ""),
+            file("text_encoder/model.onnx", ""),
+            file("vae_encoder/model.onnx", ""),
+            file("vae_decoder/model.onnx", ""),
+            file("tokenizer/vocab.json", ""),
+            file("tokenizer/merges.txt", "525 kB"),
+            file("tokenizer/special_tokens_map.json", ""),
         ],
         published_size: "about 2.1 GB",
         licence: "CreativeML OpenRAIL-M",

@@ -738,48 +738,18 @@ fn one_click_installs_a_model_with_progress_and_checks_its_graph() {
 
 /// The optimum fixture's files as a diffusion entry served from `base`.
 static FIXTURE_FILES: &[RemoteFile] = &[
-    RemoteFile {
-        path: "text_encoder/model.onnx",
-        published_size: "",
-        bytes: None,
-        sha256: None,
-    },
+    file("text_encoder/model.onnx", ""),
     RemoteFile {
         path: "unet/model.onnx",
         published_size: "",
         bytes: Some(726),
         sha256: None,
     },
-    RemoteFile {
-        path: "tokenizer/vocab.json",
-        published_size: "6.48 kB",
-        bytes: None,
-        sha256: None,
-    },
-    RemoteFile {
-        path: "tokenizer/merges.txt",
-        published_size: "",
-        bytes: None,
-        sha256: None,
-    },
-    RemoteFile {
-        path: "tokenizer/special_tokens_map.json",
-        published_size: "",
-        bytes: None,
-        sha256: None,
-    },
-    RemoteFile {
-        path: "vae_encoder/model.onnx",
-        published_size: "",
-        bytes: None,
-        sha256: None,
-    },
-    RemoteFile {
-        path: "vae_decoder/model.onnx",
-        published_size: "",
-        bytes: None,
-        sha256: None,
-    },
+    file("tokenizer/vocab.json", "6.48 kB"),
+    file("tokenizer/merges.txt", ""),
+    file("tokenizer/special_tokens_map.json", ""),
+    file("vae_encoder/model.onnx", ""),
+    file("vae_decoder/model.onnx", ""),
 ];
 
 static DIFFUSION_TEST_ENTRY: DiffusionEntry = DiffusionEntry {
