@@ -642,6 +642,30 @@ mod fixture_tests {
             g.data().iter().all(|v| (2.0..=9.0).contains(v)),
             "between the known depths"
         );
+        // A hole over the whole image (nothing known, every window in the same ring) and a
+        // one-pixel hole both fill.
+        for hole in [
+            Raster::from_fn(40, 24, |_, _| true),
+            Raster::from_fn(40, 24, |x, y| x == 39 && y == 23),
+        ] {
+            let out = fill
+                .inpaint(
+                    &InpaintRequest {
+                        hole: &hole,
+                        guide: None,
+                        ..request
+                    },
+                    &Progress::none(),
+                )
+                .unwrap();
+            assert!(
+                out.image
+                    .data()
+                    .iter()
+                    .flatten()
+                    .all(|v| (0.0..=1.0).contains(v))
+            );
+        }
         let none = Raster::from_fn(40, 24, |_, _| false);
         let same = fill
             .inpaint(
