@@ -1447,3 +1447,52 @@ fn a_tilted_plane_is_dragged_by_its_handles() {
     assert_eq!(to, [0.5, 0.95]);
     wait_idle(&mut h, limit);
 }
+
+/// "Same as a point": a click sets the point, the next target stroke carries it, the list says
+/// so, and the built depth under the stroke is the depth at the point.
+#[test]
+fn a_target_stroke_takes_the_depth_of_a_point() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(mut h) = harness(fast_project(dir.path())) else {
+        return;
+    };
+    let limit = Duration::from_secs(600);
+    wait_idle(&mut h, limit);
+    h.get_by_label("3 Depth").click();
+    h.step();
+    h.step();
+    h.get_by_label("same as a point (L)").click();
+    h.step();
+    let view = h.state().probe().view.expect("the depth view");
+    let point = view.rect.lerp_inside(egui::vec2(0.5, 0.45));
+    h.hover_at(point);
+    h.step();
+    h.drag_at(point);
+    h.step();
+    h.drop_at(point);
+    h.step();
+    h.step();
+    let a = view.rect.lerp_inside(egui::vec2(0.3, 0.85));
+    let b = view.rect.lerp_inside(egui::vec2(0.5, 0.85));
+    drag(&mut h, a, b);
+    let targets = h.state().project().unwrap().depth.targets.clone();
+    assert_eq!(targets.len(), 1);
+    let p = targets[0].same_as.expect("linked");
+    assert!(
+        (p[0] - 0.5).abs() < 0.02 && (p[1] - 0.45).abs() < 0.02,
+        "{p:?}"
+    );
+    assert!(h.query_by_label_contains("#1 same as (0.5").is_some());
+    wait_idle(&mut h, limit);
+    let snapshot = h.state().snapshot().unwrap();
+    let depth = &snapshot.scene.depth.estimate.depth;
+    let (w, hgt) = depth.size();
+    let at = |x: f32, y: f32| {
+        depth.at(
+            (x * (w - 1) as f32) as usize,
+            (y * (hgt - 1) as f32) as usize,
+        )
+    };
+    let (under, there) = (at(0.4, 0.85), at(0.5, 0.45));
+    assert!((under / there - 1.0).abs() < 0.05, "{under} vs {there}");
+}

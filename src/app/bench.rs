@@ -326,6 +326,7 @@ pub fn run(
             radius: 0.02,
             depth: here * 0.7,
             hidden: false,
+            same_as: None,
         });
     measure(&mut d, "depth target", Answer::Depth, &mut |a| {
         a.apply_edit("Depth target", targeted.clone())

@@ -47,6 +47,7 @@ fn bench_strokes(image: &makeit4d::raster::RgbRaster, n: usize, runs: usize) -> 
                 radius: 0.01,
                 depth: z * if k % 2 == 0 { 0.7 } else { 1.4 },
                 hidden: false,
+                same_as: None,
             }
         })
         .collect();

@@ -275,6 +275,7 @@ pub fn eval_scribbles(
                 radius: r / w as f32,
                 depth: (1.0 / inv) as f32,
                 hidden: false,
+                same_as: None,
             });
             let (depth, applied) = apply_target_strokes(
                 &pair.left,

@@ -44,6 +44,10 @@ pub struct DepthPanel {
     /// A tilted pop-up's handle being dragged: the pop-up, which end (`true`: the foot), and
     /// where it is and its depth so far.
     handle_drag: Option<HandleDrag>,
+    /// "Same as" a point: new target strokes take the depth there (image-relative).
+    link: Option<[f32; 2]>,
+    /// The next click in the view sets [`DepthPanel::link`].
+    linking: bool,
 }
 
 /// A tilted pop-up's handle on the move (the region tool): a drag moves it, Shift+drag
@@ -73,6 +77,8 @@ impl Default for DepthPanel {
             selection: Vec::new(),
             regions: None,
             handle_drag: None,
+            link: None,
+            linking: false,
         }
     }
 }
@@ -320,18 +326,47 @@ impl StagePanel for DepthPanel {
                 }
             }
             DepthTool::Target => {
-                if let Some(points) = view.track_stroke(ui, &response, &mut self.stroke) {
-                    let (w, h) = snapshot.scene.input.rgb.size();
+                let (w, h) = snapshot.scene.input.rgb.size();
+                if self.linking {
+                    // The click that says which point new strokes take their depth from.
+                    ui.ctx().set_cursor_icon(egui::CursorIcon::Crosshair);
+                    if response.clicked()
+                        && let Some(p) = response.interact_pointer_pos()
+                    {
+                        let q = crate::geometry::pixels_to_relative(view.to_image(p), (w, h));
+                        self.link = Some([q[0].clamp(0.0, 1.0), q[1].clamp(0.0, 1.0)]);
+                        self.linking = false;
+                    }
+                } else if let Some(points) = view.track_stroke(ui, &response, &mut self.stroke) {
                     let stroke = TargetStroke {
                         points: points
                             .iter()
                             .map(|q| crate::geometry::pixels_to_relative(*q, (w, h)))
                             .collect(),
                         radius: self.radius_px / w.max(1) as f32,
-                        depth: self.target_depth,
+                        depth: self
+                            .link
+                            .and_then(|l| {
+                                depth_at(snapshot, crate::geometry::relative_to_pixels(l, (w, h)))
+                            })
+                            .unwrap_or(self.target_depth),
                         hidden: false,
+                        same_as: self.link,
                     };
                     cx.edit("Depth target", |p| p.depth.targets.push(stroke));
+                }
+                if let Some(l) = self.link {
+                    let at = view.to_screen(crate::geometry::relative_to_pixels(l, (w, h)));
+                    let gold = Color32::from_rgb(255, 220, 0);
+                    painter.circle_stroke(at, 7.0, Stroke::new(2.0, gold));
+                    painter.circle_filled(at, 2.5, gold);
+                    painter.text(
+                        at + egui::vec2(10.0, -8.0),
+                        egui::Align2::LEFT_BOTTOM,
+                        "same as",
+                        egui::FontId::proportional(12.0),
+                        gold,
+                    );
                 }
                 let r = self.radius_px * view.scale();
                 let colour = depth_colour(shown.depth_range, self.target_depth);
@@ -1068,6 +1103,37 @@ impl DepthPanel {
             )
             .labelled_by(label.id);
         });
+        ui.horizontal(|ui| {
+            if ui
+                .selectable_label(self.linking, "same as a point (L)")
+                .on_hover_text(
+                    "Click a point: new target strokes take the depth the other strokes leave \
+                     there (this region as deep as that one), whatever it becomes",
+                )
+                .clicked()
+            {
+                self.linking = !self.linking;
+                self.tool = DepthTool::Target;
+            }
+            if self.link.is_some() && ui.small_button("Unlink").clicked() {
+                self.link = None;
+                self.linking = false;
+            }
+        });
+        if ui.input(|i| i.key_pressed(egui::Key::L) && i.modifiers.is_none())
+            && !ui.ctx().egui_wants_keyboard_input()
+        {
+            self.linking = !self.linking;
+            self.tool = DepthTool::Target;
+        }
+        if let Some(l) = self.link {
+            ui.weak(format!(
+                "new strokes take the depth at ({:.2}, {:.2}) of the photo",
+                l[0], l[1]
+            ));
+        } else if self.linking {
+            ui.weak("click the point whose depth new strokes take");
+        }
         let targets = cx.project.depth.targets.clone();
         if targets.is_empty() {
             ui.weak("none: pick a depth (E), then paint it (T) where the map is wrong");
@@ -1085,11 +1151,12 @@ impl DepthPanel {
                         ui.painter()
                             .rect_filled(rect, 2.0, depth_colour(range, t.depth));
                         let mut shown = !t.hidden;
+                        let what = match t.same_as {
+                            Some(p) => format!("#{} same as ({:.2}, {:.2})", i + 1, p[0], p[1]),
+                            None => format!("#{} Z {}", i + 1, three_figures(t.depth)),
+                        };
                         if ui
-                            .checkbox(
-                                &mut shown,
-                                format!("#{} Z {}", i + 1, three_figures(t.depth)),
-                            )
+                            .checkbox(&mut shown, what)
                             .on_hover_text("Hide or show this target (kept in the project)")
                             .changed()
                         {

@@ -392,6 +392,7 @@ mod tests {
             radius: 0.03,
             depth: 2.5,
             hidden: false,
+            same_as: None,
         });
         settings.popups.push(PopUp {
             seeds: vec![[45.0 / 95.0, 44.0 / 63.0]],

@@ -56,6 +56,11 @@ pub struct TargetStroke {
     /// Kept in the project but not applied.
     #[serde(default)]
     pub hidden: bool,
+    /// "Same as" this point (`[x / width, y / height]`): the stroke takes the depth the other
+    /// strokes leave there instead of `depth` (which then only says what it was when drawn),
+    /// and the point keeps it (a dab of the stroke's radius holds it there).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub same_as: Option<[f32; 2]>,
 }
 
 /// Most dabs the strokes of one solve are turned into; beyond it, strokes are merged by
@@ -91,6 +96,16 @@ impl TargetStroke {
                 "{}: {} must be a finite depth > 0",
                 field("depth"),
                 self.depth
+            )));
+        }
+        if let Some(p) = self.same_as
+            && !p.iter().all(|v| v.is_finite() && (0.0..=1.0).contains(v))
+        {
+            return Err(Error::invalid(format!(
+                "{}: [{}, {}] must be a point of the photo (each in [0, 1])",
+                field("same_as"),
+                p[0],
+                p[1]
             )));
         }
         Ok(())
@@ -155,10 +170,79 @@ pub fn apply_target_strokes(
     params: &PropagateParams,
     warm: Option<&GrayRaster>,
 ) -> Result<(GrayRaster, TargetsApplied)> {
-    let mut applied = TargetsApplied::default();
     for (i, s) in strokes.iter().enumerate() {
         s.validate(i)?;
     }
+    if !strokes.iter().any(|s| !s.hidden && s.same_as.is_some()) {
+        return apply_resolved(image, depth, strokes, params, warm);
+    }
+    // "Same as" strokes: the depth the other strokes leave at their point (the median of
+    // its 5 × 5 pixels), then one solve of them all.
+    let fixed: Vec<TargetStroke> = strokes
+        .iter()
+        .filter(|s| s.same_as.is_none())
+        .cloned()
+        .collect();
+    let (first, mut applied) = apply_resolved(image, depth, &fixed, params, warm)?;
+    let (w, h) = first.size();
+    let mut anchors = Vec::new();
+    let mut resolved: Vec<TargetStroke> = strokes
+        .iter()
+        .map(|s| match s.same_as {
+            Some(p) if !s.hidden => {
+                let [x, y] = crate::geometry::relative_to_pixels(p, (w, h));
+                let (x, y) = (x.round() as isize, y.round() as isize);
+                let mut near: Vec<f32> = (-2..=2)
+                    .flat_map(|dy| (-2..=2).map(move |dx| (x + dx, y + dy)))
+                    .filter(|&(x, y)| x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h)
+                    .map(|(x, y)| first.at(x as usize, y as usize))
+                    .filter(|z| z.is_finite() && *z > 0.0)
+                    .collect();
+                near.sort_by(f32::total_cmp);
+                let depth = near.get(near.len() / 2).copied().unwrap_or(s.depth);
+                // The point keeps that depth too: the stroke's correction must not move it.
+                anchors.push(TargetStroke {
+                    points: vec![p],
+                    depth,
+                    same_as: None,
+                    ..s.clone()
+                });
+                TargetStroke {
+                    depth,
+                    same_as: None,
+                    ..s.clone()
+                }
+            }
+            _ => s.clone(),
+        })
+        .collect();
+    resolved.extend(anchors);
+    let seconds = applied.seconds;
+    let (depth, mut second) = apply_resolved(
+        image,
+        depth,
+        &resolved,
+        params,
+        applied.correction.as_ref().or(warm),
+    )?;
+    second.seconds += seconds;
+    for w in applied.warnings.drain(..) {
+        if !second.warnings.contains(&w) {
+            second.warnings.push(w);
+        }
+    }
+    Ok((depth, second))
+}
+
+/// [`apply_target_strokes`] of strokes whose depths are all known.
+fn apply_resolved(
+    image: &RgbRaster,
+    depth: &GrayRaster,
+    strokes: &[TargetStroke],
+    params: &PropagateParams,
+    warm: Option<&GrayRaster>,
+) -> Result<(GrayRaster, TargetsApplied)> {
+    let mut applied = TargetsApplied::default();
     let visible: Vec<&TargetStroke> = strokes.iter().filter(|s| !s.hidden).collect();
     if visible.is_empty() {
         return Ok((depth.clone(), applied));
@@ -912,7 +996,71 @@ mod tests {
             radius,
             depth,
             hidden: false,
+            same_as: None,
         }
+    }
+
+    /// A stroke on the right region "same as" a point of the left one takes the depth the left
+    /// stroke gives there; a point outside the photo is refused naming the field.
+    #[test]
+    fn a_same_as_stroke_takes_the_depth_at_its_point() {
+        let (w, h) = (160, 100);
+        let (image, estimate) = two_regions(w, h);
+        let rel = |x: f32, y: f32| [x / (w - 1) as f32, y / (h - 1) as f32];
+        let left = stroke(vec![rel(20.0, 50.0), rel(50.0, 50.0)], 0.03, 2.0);
+        let right = TargetStroke {
+            same_as: Some(rel(40.0, 30.0)),
+            ..stroke(vec![rel(110.0, 50.0), rel(140.0, 50.0)], 0.03, 9.0)
+        };
+        let params = PropagateParams::default();
+        let (depth, _) = apply_target_strokes(
+            &image,
+            &estimate,
+            &[left.clone(), right.clone()],
+            &params,
+            None,
+        )
+        .unwrap();
+        let (z_left, z_right) = (depth.at(40, 30), depth.at(125, 50));
+        assert!((z_left / 2.0 - 1.0).abs() < 0.02, "{z_left}");
+        assert!(
+            (z_right / z_left - 1.0).abs() < 0.02,
+            "{z_right} vs {z_left}"
+        );
+        // Hidden, it is as if it were not there; alone, it takes the estimate at its point.
+        let hidden = TargetStroke {
+            hidden: true,
+            ..right.clone()
+        };
+        let (only_left, _) = apply_target_strokes(
+            &image,
+            &estimate,
+            std::slice::from_ref(&left),
+            &params,
+            None,
+        )
+        .unwrap();
+        let (with_hidden, _) =
+            apply_target_strokes(&image, &estimate, &[left, hidden], &params, None).unwrap();
+        assert_eq!(only_left.data(), with_hidden.data());
+        let (alone, _) = apply_target_strokes(
+            &image,
+            &estimate,
+            std::slice::from_ref(&right),
+            &params,
+            None,
+        )
+        .unwrap();
+        let z = alone.at(125, 50);
+        assert!((z / estimate.at(40, 30) - 1.0).abs() < 0.02, "{z}");
+        let outside = TargetStroke {
+            same_as: Some([1.5, 0.2]),
+            ..right
+        };
+        let e = apply_target_strokes(&image, &estimate, &[outside], &params, None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("depth.targets[0].same_as"), "{e}");
     }
 
     #[test]
