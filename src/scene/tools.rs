@@ -17,9 +17,12 @@ pub fn make_inpainter(
             Ok(fill) => {
                 warnings.extend(fill.notes().iter().cloned());
                 let name = fill.name().to_string();
-                // What takes over when a fill fails (a graph's NaN): the next inpainter.
-                let (fallback, fallback_name) = single_inpainter(settings, &mut Vec::new());
-                return (Box::new(fill.with_fallback(fallback, fallback_name)), name);
+                // What takes over when a fill fails (a graph's NaN): the next inpainter, made
+                // only then.
+                let next = settings.clone();
+                let fill =
+                    fill.with_fallback(Box::new(move || single_inpainter(&next, &mut Vec::new())));
+                return (Box::new(fill), name);
             }
             Err(e) => {
                 let next = if settings.model.is_some() {

@@ -217,14 +217,10 @@ pub fn apply_target_strokes(
         })
         .collect();
     resolved.extend(anchors);
+    // Solved as any set of strokes is (from the caller's start, not from the first pass's
+    // answer), so that the same strokes always give the same depth.
     let seconds = applied.seconds;
-    let (depth, mut second) = apply_resolved(
-        image,
-        depth,
-        &resolved,
-        params,
-        applied.correction.as_ref().or(warm),
-    )?;
+    let (depth, mut second) = apply_resolved(image, depth, &resolved, params, warm)?;
     second.seconds += seconds;
     for w in applied.warnings.drain(..) {
         if !second.warnings.contains(&w) {

@@ -289,6 +289,13 @@ pub struct Prompts {
     pub negative: String,
 }
 
+/// Makes the inpainter that takes over from a failed diffusion fill, with its name: called on
+/// the first failure only (an ONNX model's session costs memory the fill may never need).
+pub type MakeFallback = Box<dyn Fn() -> Named + Send + Sync>;
+
+/// An inpainter and the name it is told by.
+pub type Named = (Box<dyn Inpainter>, String);
+
 /// A diffusion model behind the [`Inpainter`] trait, with its prompts and settings, and the
 /// inpainter that takes over when a fill fails (a graph's NaN, an image narrower than a latent).
 pub struct DiffusionInpainter {
@@ -298,7 +305,7 @@ pub struct DiffusionInpainter {
     native: usize,
     name: String,
     notes: Vec<String>,
-    fallback: Option<(Box<dyn Inpainter>, String)>,
+    fallback: Option<(MakeFallback, std::sync::OnceLock<Named>)>,
     said: Mutex<Vec<String>>,
 }
 
@@ -354,10 +361,10 @@ impl DiffusionInpainter {
         })
     }
 
-    /// Falls back to `fallback` (called `name` in what it says) when a fill fails; a cancel
-    /// is not a failure.
-    pub fn with_fallback(mut self, fallback: Box<dyn Inpainter>, name: String) -> Self {
-        self.fallback = Some((fallback, name));
+    /// Falls back to the inpainter `make` makes (on the first failure) when a fill fails; a
+    /// cancel is not a failure.
+    pub fn with_fallback(mut self, make: MakeFallback) -> Self {
+        self.fallback = Some((make, std::sync::OnceLock::new()));
         self
     }
 
@@ -399,7 +406,8 @@ impl Inpainter for DiffusionInpainter {
         match (filled, &self.fallback) {
             (Ok(image), _) => Ok(InpaintResult { image, guide }),
             (Err(Error::Cancelled), _) => Err(Error::Cancelled),
-            (Err(e), Some((fallback, name))) => {
+            (Err(e), Some((make, made))) => {
+                let (fallback, name) = made.get_or_init(make);
                 let note = format!("the diffusion fill failed ({e}); {name} filled it instead");
                 let mut said = self.said.lock().unwrap_or_else(|e| e.into_inner());
                 if !said.contains(&note) {
@@ -689,10 +697,10 @@ mod fixture_tests {
             seed: 0,
         };
         assert!(fill.inpaint(&narrow_request, &Progress::none()).is_err());
-        let fill = fill.with_fallback(
-            Box::new(crate::stages::inpaint::HarmonicInpainter),
-            "the harmonic fill".into(),
-        );
+        let fill = fill.with_fallback(Box::new(|| {
+            let harmonic: Box<dyn Inpainter> = Box::new(crate::stages::inpaint::HarmonicInpainter);
+            (harmonic, "the harmonic fill".into())
+        }));
         let out = fill.inpaint(&narrow_request, &Progress::none()).unwrap();
         assert!(out.image.at(20, 1)[0] > 0.4 && out.image.at(20, 1)[0] < 0.6);
         fill.inpaint(&narrow_request, &Progress::none()).unwrap();
