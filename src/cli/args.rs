@@ -378,6 +378,17 @@ pub(crate) struct EvalScribblesArgs {
     /// The feature-space interpolation instead of the affinity Laplacian.
     #[arg(long)]
     pub(crate) bilateral: bool,
+    /// The solver: laplacian, geodesic or bilateral (default: the editor's).
+    #[arg(long)]
+    pub(crate) solver: Option<String>,
+    /// Geodesic solver: the edge strength (in σ units) behind which a stroke's say fades
+    /// (default: the solver's own).
+    #[arg(long)]
+    pub(crate) geodesic_fade: Option<f32>,
+    /// Geodesic solver: the cost of crossing an edge of one σ, grid cells (default: the
+    /// solver's own).
+    #[arg(long)]
+    pub(crate) edge_cost: Option<f32>,
     /// Feature-space solver: spatial scale, a fraction of the diagonal.
     #[arg(long)]
     pub(crate) sigma_space: Option<f32>,
@@ -783,8 +794,8 @@ pub(crate) struct BenchDepthArgs {
     #[arg(long, default_value_t = 5)]
     pub(crate) runs: usize,
     /// Also time the solve of depth targets: N strokes (spread over the photo, depths the
-    /// estimate's × 0.7 or × 1.4), the N-th warm-started from the first N − 1, as the editor's
-    /// next stroke is.
+    /// estimate's × 0.7 or × 1.4) by the geodesic solver (the default) and the affinity
+    /// Laplacian (also its N-th stroke warm-started from the first N − 1).
     #[arg(long)]
     pub(crate) strokes: Option<usize>,
 }

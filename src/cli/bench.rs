@@ -23,10 +23,13 @@ pub(crate) fn bench_depth(args: BenchDepthArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `bench depth --strokes N`: the median seconds of a cold solve of N target strokes and of
-/// the N-th stroke warm-started from the solve of the first N − 1.
+/// `bench depth --strokes N`: the median seconds of a solve of N target strokes by each
+/// solver, and for the affinity Laplacian of the N-th stroke warm-started from the solve of the
+/// first N − 1 (the geodesic solver answers directly).
 fn bench_strokes(image: &makeit4d::raster::RgbRaster, n: usize, runs: usize) -> anyhow::Result<()> {
-    use makeit4d::stages::depth::propagate::{PropagateParams, TargetStroke, apply_target_strokes};
+    use makeit4d::stages::depth::propagate::{
+        PropagateMode, PropagateParams, TargetStroke, apply_target_strokes,
+    };
     let (w, h) = image.size();
     let intrinsics = makeit4d::geometry::Intrinsics::from_hfov(w, h, 60.0);
     let out = makeit4d::stages::depth::run_depth_stage(
@@ -51,26 +54,37 @@ fn bench_strokes(image: &makeit4d::raster::RgbRaster, n: usize, runs: usize) -> 
             }
         })
         .collect();
-    let params = PropagateParams::default();
     let median = |mut v: Vec<f64>| {
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]
     };
-    let mut cold = Vec::new();
-    let mut warm = Vec::new();
-    for _ in 0..runs {
-        let (_, all) = apply_target_strokes(image, depth, &strokes, &params, None)?;
-        cold.push(all.seconds);
-        let (_, first) = apply_target_strokes(image, depth, &strokes[..n - 1], &params, None)?;
-        let start = first.correction.as_ref();
-        let (_, next) = apply_target_strokes(image, depth, &strokes, &params, start)?;
-        warm.push(next.seconds);
-    }
     println!(
-        "\n| strokes | photo | cold solve (s, median of {runs}) | next stroke warm-started (s) |\n|---:|---|---:|---:|\n| {n} | {w}×{h} | {:.3} | {:.3} |",
-        median(cold),
-        median(warm)
+        "\n| solver | strokes | photo | cold solve (s, median of {runs}) | next stroke warm-started (s) |\n|---|---:|---|---:|---:|"
     );
+    for mode in [PropagateMode::Geodesic, PropagateMode::Laplacian] {
+        let params = PropagateParams {
+            mode,
+            ..PropagateParams::default()
+        };
+        let mut cold = Vec::new();
+        let mut warm = Vec::new();
+        for _ in 0..runs {
+            let (_, all) = apply_target_strokes(image, depth, &strokes, &params, None)?;
+            cold.push(all.seconds);
+            if mode == PropagateMode::Laplacian {
+                let (_, first) =
+                    apply_target_strokes(image, depth, &strokes[..n - 1], &params, None)?;
+                let start = first.correction.as_ref();
+                let (_, next) = apply_target_strokes(image, depth, &strokes, &params, start)?;
+                warm.push(next.seconds);
+            }
+        }
+        let (name, warm) = match mode {
+            PropagateMode::Geodesic => ("geodesic (default)", "– (direct)".to_string()),
+            _ => ("affinity Laplacian", format!("{:.3}", median(warm))),
+        };
+        println!("| {name} | {n} | {w}×{h} | {:.3} | {warm} |", median(cold));
+    }
     Ok(())
 }
 

@@ -195,6 +195,23 @@ pub(crate) fn eval_scribbles(
     if args.bilateral {
         options.params.mode = makeit4d::stages::depth::propagate::PropagateMode::Bilateral;
     }
+    if let Some(name) = &args.solver {
+        use makeit4d::stages::depth::propagate::PropagateMode;
+        options.params.mode = match name.as_str() {
+            "laplacian" => PropagateMode::Laplacian,
+            "geodesic" => PropagateMode::Geodesic,
+            "bilateral" => PropagateMode::Bilateral,
+            other => {
+                anyhow::bail!("--solver {other}: not a solver (laplacian, geodesic or bilateral)")
+            }
+        };
+    }
+    if let Some(v) = args.geodesic_fade {
+        options.params.geodesic_fade = v;
+    }
+    if let Some(v) = args.edge_cost {
+        options.params.geodesic_edge_cost = v;
+    }
     if let Some(v) = args.sigma_space {
         options.params.sigma_space = v;
     }

@@ -21,6 +21,14 @@
 //! Jacobi-preconditioned conjugate gradients, warm-started from a previous solution (a new
 //! stroke starts from the last answer); the correction is brought to full size by joint
 //! bilateral upsampling guided by the photo (Kopf et al., SIGGRAPH 2007), so it keeps its edges.
+//!
+//! The default solver ([`PropagateMode::Geodesic`], [`geodesic_correction`]) spreads the same
+//! correction by geodesic distance instead: a point-like stroke in a harmonic (Laplacian)
+//! problem only moves its neighbourhood, where the artist meant its region, and the iterative
+//! solve stops short on the badly conditioned system; the geodesic answer is direct. On Aloe's
+//! simulated artist (`eval scribbles`, full size) it reaches δ<1.25 0.851 / 0.862 after 10 /
+//! 30 strokes against the Laplacian's 0.811 / 0.841, and the novel view 18.77 / 18.90 dB
+//! against 18.51 / 18.88.
 
 use crate::error::{Error, Result};
 use crate::raster::{GrayRaster, Raster, RgbRaster};
@@ -325,6 +333,24 @@ pub struct PropagateParams {
     /// estimate's depth; strokes of two depths still make a step at an edge.
     #[serde(default)]
     pub affinity_floor: f32,
+    /// Geodesic mode: the edge strength `τ` (in `σ_c` / `σ_z` units) at which a stroke's say
+    /// behind the edge has fallen to `e^(−1/2)`: `exp(−E²/2τ²)` of the strongest edge `E` on
+    /// the path to it.
+    #[serde(default = "default_geodesic_fade")]
+    pub geodesic_fade: f32,
+    /// Geodesic mode: the cost of crossing a colour change of `σ_c` (or a log-depth change of
+    /// `σ_z`), in solve-grid cells; the cost grows with the square of the change, so texture
+    /// costs little and a strong edge a lot.
+    #[serde(default = "default_geodesic_edge_cost")]
+    pub geodesic_edge_cost: f32,
+}
+
+fn default_geodesic_fade() -> f32 {
+    3.0
+}
+
+fn default_geodesic_edge_cost() -> f32 {
+    1.0
 }
 
 /// 1e-3: on Aloe's simulated artist (full size, `--no-nvs`, 0/5/10/30 strokes) δ<1.25
@@ -346,11 +372,18 @@ fn default_kappa() -> f32 {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum PropagateMode {
-    /// The affinity Laplacian over 4-neighbours (Levin et al.), coarse to fine. The default:
-    /// on Aloe's simulated artist it reached δ<1.25 0.831 / 0.878 after 10 / 30 strokes
-    /// against the feature-space interpolation's 0.744 / 0.766 (half-size pair).
-    #[default]
+    /// The affinity Laplacian over 4-neighbours (Levin et al.), coarse to fine: on Aloe's
+    /// simulated artist it reached δ<1.25 0.831 / 0.878 after 10 / 30 strokes against the
+    /// feature-space interpolation's 0.744 / 0.766 (half-size pair); at full size 0.811 /
+    /// 0.841 against the geodesic mode's 0.851 / 0.862.
     Laplacian,
+    /// Each pixel takes the corrections of the strokes it is joined to, weighted by its
+    /// geodesic distance to each over the photo (a step costs its length plus the colour and
+    /// estimated log-depth change it crosses), fading to no correction where no stroke is near
+    /// ([`geodesic_correction`]). A direct answer (no iterations, no warm start: the same
+    /// strokes always give the same depth). The default.
+    #[default]
+    Geodesic,
     /// Each pixel takes the strokes' corrections weighted by its similarity to each stroke in
     /// position, colour and estimated log depth (a Gaussian in that feature space, as the
     /// bilateral solver's bilateral space), fading to no correction where none is similar.
@@ -371,6 +404,8 @@ impl Default for PropagateParams {
             sigma_space: default_sigma_space(),
             kappa: default_kappa(),
             affinity_floor: 0.0,
+            geodesic_fade: default_geodesic_fade(),
+            geodesic_edge_cost: default_geodesic_edge_cost(),
         }
     }
 }
@@ -470,42 +505,14 @@ pub fn propagate(
             iterations: 0,
         });
     }
-    // Coarse to fine: each level starts from the one below it (conjugate gradients move
-    // information about one cell per iteration, so the coarse levels carry it far cheaply).
-    let mut sizes = vec![(gw, gh)];
-    while sizes.last().is_some_and(|&(a, b)| a.max(b) > 48) {
-        let (a, b) = *sizes.last().unwrap_or(&(gw, gh));
-        sizes.push(((a / 2).max(1), (b / 2).max(1)));
-    }
-    sizes.reverse();
-    // A warm start of the finest grid needs no coarse levels.
-    if warm.is_some_and(|wc| wc.size() == (gw, gh)) {
-        sizes = vec![(gw, gh)];
-    }
-    let mut c: Option<(Vec<f64>, usize, usize)> = None;
-    let mut iterations = 0;
-    let mut finest = None;
-    for (level, &(lw, lh)) in sizes.iter().enumerate() {
-        let colour_grid = image.resized(lw, lh);
-        let log_grid = log_e.resized(lw, lh);
-        let (weight, rhs) = data_term(targets, (w, h), (lw, lh), &log_grid);
-        let init = match (&c, level + 1 == sizes.len(), warm) {
-            (_, true, Some(wc))
-                if wc.size() == (lw, lh) && wc.data().iter().all(|v| v.is_finite()) =>
-            {
-                wc.data().iter().map(|&v| v as f64).collect()
-            }
-            (Some((prev, pw, ph)), _, _) => upsample_nearest(prev, *pw, *ph, lw, lh),
-            _ => vec![0.0; lw * lh],
-        };
-        let (solved, its) = solve_level(&colour_grid, &log_grid, &weight, &rhs, init, params);
-        iterations += its;
-        c = Some((solved, lw, lh));
-        finest = Some((colour_grid, log_grid));
-    }
-    let (c, _, _) = c.unwrap_or((vec![0.0; gw * gh], gw, gh));
-    let (colour_grid, log_grid) =
-        finest.unwrap_or_else(|| (image.resized(gw, gh), log_e.resized(gw, gh)));
+    let (c, iterations, colour_grid, log_grid) = if params.mode == PropagateMode::Geodesic {
+        let colour_grid = image.resized(gw, gh);
+        let log_grid = log_e.resized(gw, gh);
+        let c = geodesic_correction(&colour_grid, &log_grid, targets, (w, h), params);
+        (c, 0, colour_grid, log_grid)
+    } else {
+        laplacian_correction(image, &log_e, targets, params, warm, (w, h), (gw, gh))
+    };
     let (sx, sy) = (gw as f32 / w as f32, gh as f32 / h as f32);
     let two_sc = 2.0 * params.sigma_colour.max(1e-4).powi(2);
     let two_sz = 2.0 * params.sigma_log_depth.max(1e-4).powi(2);
@@ -568,6 +575,56 @@ pub fn propagate(
         correction,
         iterations,
     })
+}
+
+/// The affinity Laplacian's correction on the `gw × gh` solve grid, coarse to fine: each level
+/// starts from the one below it (conjugate gradients move information about one cell per
+/// iteration, so the coarse levels carry it far cheaply). Returns the correction, the
+/// iterations run and the finest grid's colour and log depth.
+fn laplacian_correction(
+    image: &RgbRaster,
+    log_e: &GrayRaster,
+    targets: &[DepthTarget],
+    params: &PropagateParams,
+    warm: Option<&GrayRaster>,
+    (w, h): (usize, usize),
+    (gw, gh): (usize, usize),
+) -> (Vec<f64>, usize, RgbRaster, GrayRaster) {
+    let mut sizes = vec![(gw, gh)];
+    while sizes.last().is_some_and(|&(a, b)| a.max(b) > 48) {
+        let (a, b) = *sizes.last().unwrap_or(&(gw, gh));
+        sizes.push(((a / 2).max(1), (b / 2).max(1)));
+    }
+    sizes.reverse();
+    // A warm start of the finest grid needs no coarse levels.
+    if warm.is_some_and(|wc| wc.size() == (gw, gh)) {
+        sizes = vec![(gw, gh)];
+    }
+    let mut c: Option<(Vec<f64>, usize, usize)> = None;
+    let mut iterations = 0;
+    let mut finest = None;
+    for (level, &(lw, lh)) in sizes.iter().enumerate() {
+        let colour_grid = image.resized(lw, lh);
+        let log_grid = log_e.resized(lw, lh);
+        let (weight, rhs) = data_term(targets, (w, h), (lw, lh), &log_grid);
+        let init = match (&c, level + 1 == sizes.len(), warm) {
+            (_, true, Some(wc))
+                if wc.size() == (lw, lh) && wc.data().iter().all(|v| v.is_finite()) =>
+            {
+                wc.data().iter().map(|&v| v as f64).collect()
+            }
+            (Some((prev, pw, ph)), _, _) => upsample_nearest(prev, *pw, *ph, lw, lh),
+            _ => vec![0.0; lw * lh],
+        };
+        let (solved, its) = solve_level(&colour_grid, &log_grid, &weight, &rhs, init, params);
+        iterations += its;
+        c = Some((solved, lw, lh));
+        finest = Some((colour_grid, log_grid));
+    }
+    let (c, _, _) = c.unwrap_or((vec![0.0; gw * gh], gw, gh));
+    let (colour_grid, log_grid) =
+        finest.unwrap_or_else(|| (image.resized(gw, gh), log_e.resized(gw, gh)));
+    (c, iterations, colour_grid, log_grid)
 }
 
 /// Nearest-cell upsampling of a `pw × ph` grid to `w × h`.
@@ -746,6 +803,288 @@ fn solve_level(
     (c, iterations)
 }
 
+/// Half-size of the box (a fraction of the diagonal) in which the geodesic mode judges whether
+/// an unreached patch is enclosed by reached ones: patches up to about half its size follow.
+const ENCLOSURE_REACH: f32 = 0.05;
+
+/// Most groups of targets the geodesic mode measures distances from; beyond it, targets are
+/// grouped by the rank of their depth (each group one distance transform).
+pub const MAX_GEODESIC_GROUPS: usize = 64;
+
+/// The geodesic correction on a solve grid (`colour`, `log_grid`: the photo and the estimate's
+/// log depth at the grid's size) of a `w × h` photo. The targets are grouped by their depth (a
+/// stroke's dabs share one; at most [`MAX_GEODESIC_GROUPS`]); from each group's cells
+/// (correction `ln T − e` there) a geodesic distance transform (8-neighbour raster scans to
+/// convergence) gives every cell its distance `D_k` to the group, the correction `c_k` of its
+/// nearest cell and the strongest edge `E_k` on the way, where a step between neighbours has
+/// the strength `s = √(‖ΔI‖²/σ_c² + Δe²/σ_z²)` and costs its length plus `γ·s²` cells. Then
+///
+/// ```text
+/// c = (Σ_k w_k c_k / Σ_k w_k) · max_k f_k,   w_k = f_k / (D_k² + 1),   f_k = exp(−E_k²/2τ²)
+/// ```
+///
+/// A stroke decides its own pixels and their neighbourhood (inverse-square weights, as in
+/// inverse-distance interpolation), two strokes in one region blend by distance, a region
+/// joined to a stroke without a strong edge takes its correction whatever its size, and behind
+/// an edge stronger than `τ` (`geodesic_fade`) the correction fades to 0: the estimate keeps
+/// its relief where no stroke speaks.
+pub fn geodesic_correction(
+    colour: &RgbRaster,
+    log_grid: &GrayRaster,
+    targets: &[DepthTarget],
+    (w, h): (usize, usize),
+    params: &PropagateParams,
+) -> Vec<f64> {
+    use rayon::prelude::*;
+    let (gw, gh) = colour.size();
+    let n = gw * gh;
+    if n == 0 || targets.is_empty() {
+        return vec![0.0; n];
+    }
+    // Groups: the distinct target depths, or their rank quantiles when there are too many.
+    let mut distinct: Vec<f32> = targets.iter().map(|t| t.depth).collect();
+    distinct.sort_by(f32::total_cmp);
+    distinct.dedup();
+    let groups = distinct.len().min(MAX_GEODESIC_GROUPS);
+    let group_of = |depth: f32| -> usize {
+        let rank = distinct.partition_point(|&d| d < depth);
+        (rank * groups / distinct.len()).min(groups - 1)
+    };
+    // Each group's source cells and their corrections (cells a group's dabs share average).
+    let mut sources: Vec<Vec<(usize, f32)>> = vec![Vec::new(); groups];
+    let (sx, sy) = (gw as f32 / w as f32, gh as f32 / h as f32);
+    for t in targets {
+        let (cx, cy) = ((t.x + 0.5) * sx - 0.5, (t.y + 0.5) * sy - 0.5);
+        let r = (t.radius_px * sx.max(sy)).max(0.5);
+        let (x0, x1) = (
+            (cx - r).floor().max(0.0),
+            (cx + r).ceil().min(gw as f32 - 1.0),
+        );
+        let (y0, y1) = (
+            (cy - r).floor().max(0.0),
+            (cy + r).ceil().min(gh as f32 - 1.0),
+        );
+        if x0 > x1 || y0 > y1 {
+            continue; // Entirely outside the photo.
+        }
+        let lt = t.depth.ln();
+        let list = &mut sources[group_of(t.depth)];
+        let before = list.len();
+        for y in y0 as usize..=y1 as usize {
+            for x in x0 as usize..=x1 as usize {
+                if (x as f32 - cx).powi(2) + (y as f32 - cy).powi(2) <= r * r {
+                    list.push((y * gw + x, lt - log_grid.at(x, y)));
+                }
+            }
+        }
+        if list.len() == before {
+            let (x, y) = (
+                cx.round().clamp(0.0, gw as f32 - 1.0) as usize,
+                cy.round().clamp(0.0, gh as f32 - 1.0) as usize,
+            );
+            list.push((y * gw + x, lt - log_grid.at(x, y)));
+        }
+    }
+    // Step costs to the four forward neighbours (right, down-left, down, down-right).
+    let gamma = params.geodesic_edge_cost.max(0.0);
+    let inv_sc = 1.0 / params.sigma_colour.max(1e-4).powi(2);
+    let inv_sz = 1.0 / params.sigma_log_depth.max(1e-4).powi(2);
+    let step = |a: usize, b: usize, len: f32| -> (f32, f32) {
+        let (p, q) = (colour.data()[a], colour.data()[b]);
+        let dc = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2);
+        let dz = (log_grid.data()[a] - log_grid.data()[b]).powi(2);
+        let e2 = dc * inv_sc + dz * inv_sz;
+        (len + gamma * e2, e2.sqrt())
+    };
+    const OFFSETS: [(i64, i64, f32); 4] = [
+        (1, 0, 1.0),
+        (-1, 1, std::f32::consts::SQRT_2),
+        (0, 1, 1.0),
+        (1, 1, std::f32::consts::SQRT_2),
+    ];
+    let mut cost = vec![[(f32::INFINITY, 0.0f32); 4]; n];
+    for y in 0..gh {
+        for x in 0..gw {
+            for (k, &(dx, dy, len)) in OFFSETS.iter().enumerate() {
+                let (qx, qy) = (x as i64 + dx, y as i64 + dy);
+                if qx >= 0 && qx < gw as i64 && qy < gh as i64 {
+                    cost[y * gw + x][k] = step(y * gw + x, qy as usize * gw + qx as usize, len);
+                }
+            }
+        }
+    }
+    let two_tau2 = 2.0 * (params.geodesic_fade.max(1e-3) as f64).powi(2);
+    let (num, den, reach) = sources
+        .par_iter()
+        .filter(|s| !s.is_empty())
+        .map(|list| {
+            let (dist, label, edge) = geodesic_transform(list, &cost, gw, gh);
+            let mut num = vec![0.0f64; n];
+            let mut den = vec![0.0f64; n];
+            let mut reach = vec![0.0f64; n];
+            for i in 0..n {
+                let d2 = (dist[i] * dist[i]) as f64;
+                let f = (-((edge[i] as f64).powi(2)) / two_tau2).exp();
+                let wk = f / (d2 + 1.0);
+                num[i] = wk * label[i] as f64;
+                den[i] = wk;
+                reach[i] = f;
+            }
+            (num, den, reach)
+        })
+        .reduce(
+            || (vec![0.0; n], vec![0.0; n], vec![0.0; n]),
+            |(mut a, mut b, mut r), (c, d, q)| {
+                for i in 0..n {
+                    a[i] += c[i];
+                    b[i] += d[i];
+                    r[i] = r[i].max(q[i]);
+                }
+                (a, b, r)
+            },
+        );
+    let blend: Vec<f64> = (0..n)
+        .map(|i| if den[i] > 0.0 { num[i] / den[i] } else { 0.0 })
+        .collect();
+    // A patch that no stroke reaches but that is mostly enclosed by what the strokes moved (an
+    // eye in a face, a window in a wall) follows its surroundings instead of keeping the
+    // estimate's depth and tearing out of them: the share of reached cells within a box of
+    // half-size `ENCLOSURE_REACH` × the diagonal decides (0.6 → 0.9), and the patch takes their
+    // mean correction. Along the straight edge of a large region that share is about a half,
+    // so such a region keeps the estimate.
+    let radius = ((ENCLOSURE_REACH * ((gw * gw + gh * gh) as f32).sqrt()).round() as usize).max(1);
+    let reach_r = Raster::from_vec(gw, gh, reach.iter().map(|&v| v as f32).collect())
+        .unwrap_or_else(|| Raster::new(gw, gh, 0.0));
+    let moved = Raster::from_vec(
+        gw,
+        gh,
+        (0..n).map(|i| (reach[i] * blend[i]) as f32).collect(),
+    )
+    .unwrap_or_else(|| Raster::new(gw, gh, 0.0));
+    let around = crate::raster::box_mean(&reach_r, radius);
+    let moved_around = crate::raster::box_mean(&moved, radius);
+    (0..n)
+        .map(|i| {
+            let share = around.data()[i] as f64;
+            let t = ((share - 0.6) / 0.3).clamp(0.0, 1.0);
+            let enclosed = t * t * (3.0 - 2.0 * t);
+            let follow = if share > 1e-6 {
+                moved_around.data()[i] as f64 / share
+            } else {
+                0.0
+            };
+            reach[i] * blend[i] + (1.0 - reach[i]) * enclosed * follow
+        })
+        .collect()
+}
+
+/// Geodesic distance from `sources` (cell, correction) over a `gw × gh` grid whose cells have
+/// the steps `cost[cell] = [right, down-left, down, down-right]` (cost, edge strength), with
+/// each cell's nearest source's correction and the strongest edge on the path to it: forward and backward raster scans until nothing changes (at most 16
+/// round trips; paths that wind more than that are rare on photos and only come out longer).
+fn geodesic_transform(
+    sources: &[(usize, f32)],
+    cost: &[[(f32, f32); 4]],
+    gw: usize,
+    gh: usize,
+) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+    let n = gw * gh;
+    let mut dist = vec![f32::INFINITY; n];
+    let mut label = vec![0.0f32; n];
+    let mut edge = vec![0.0f32; n];
+    let mut sum = vec![0.0f32; n];
+    let mut count = vec![0u32; n];
+    for &(i, c) in sources {
+        sum[i] += c;
+        count[i] += 1;
+    }
+    for i in 0..n {
+        if count[i] > 0 {
+            dist[i] = 0.0;
+            label[i] = sum[i] / count[i] as f32;
+        }
+    }
+    for _ in 0..16 {
+        let mut changed = false;
+        // Forward: from the left, up-right, up and up-left neighbours.
+        for y in 0..gh {
+            for x in 0..gw {
+                let i = y * gw + x;
+                let mut best = dist[i];
+                let mut from = usize::MAX;
+                let mut crossed = 0.0f32;
+                let mut relax = |j: usize, (c, e): (f32, f32)| {
+                    let d = dist[j] + c;
+                    if d < best {
+                        best = d;
+                        from = j;
+                        crossed = e;
+                    }
+                };
+                if x > 0 {
+                    relax(i - 1, cost[i - 1][0]);
+                }
+                if y > 0 {
+                    let up = i - gw;
+                    relax(up, cost[up][2]);
+                    if x + 1 < gw {
+                        relax(up + 1, cost[up + 1][1]);
+                    }
+                    if x > 0 {
+                        relax(up - 1, cost[up - 1][3]);
+                    }
+                }
+                if from != usize::MAX {
+                    dist[i] = best;
+                    label[i] = label[from];
+                    edge[i] = edge[from].max(crossed);
+                    changed = true;
+                }
+            }
+        }
+        // Backward: from the right, down-left, down and down-right neighbours.
+        for y in (0..gh).rev() {
+            for x in (0..gw).rev() {
+                let i = y * gw + x;
+                let mut best = dist[i];
+                let mut from = usize::MAX;
+                let mut crossed = 0.0f32;
+                let mut relax = |j: usize, (c, e): (f32, f32)| {
+                    let d = dist[j] + c;
+                    if d < best {
+                        best = d;
+                        from = j;
+                        crossed = e;
+                    }
+                };
+                if x + 1 < gw {
+                    relax(i + 1, cost[i][0]);
+                }
+                if y + 1 < gh {
+                    let down = i + gw;
+                    relax(down, cost[i][2]);
+                    if x > 0 {
+                        relax(down - 1, cost[i][1]);
+                    }
+                    if x + 1 < gw {
+                        relax(down + 1, cost[i][3]);
+                    }
+                }
+                if from != usize::MAX {
+                    dist[i] = best;
+                    label[i] = label[from];
+                    edge[i] = edge[from].max(crossed);
+                    changed = true;
+                }
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    (dist, label, edge)
+}
+
 /// The feature-space correction: stroke `k` (its dab's mean colour `I_k`, mean log estimate
 /// `e_k`, centre `p_k`, correction `c_k = ln T_k − e_k`) weighs on pixel `x` by
 /// `K_k(x) = exp(−‖x − p_k‖²/2σ_s² − ‖I(x) − I_k‖²/2σ_c² − (e(x) − e_k)²/2σ_z²)`, and
@@ -875,17 +1214,20 @@ mod tests {
 
     #[test]
     fn each_region_takes_its_strokes_depth_and_keeps_its_relief() {
+        for mode in [PropagateMode::Geodesic, PropagateMode::Laplacian] {
+            each_region_takes_its_strokes_depth(mode);
+        }
+    }
+
+    fn each_region_takes_its_strokes_depth(mode: PropagateMode) {
         let (w, h) = (160, 100);
         let (image, estimate) = two_regions(w, h);
         let targets = one_per_region();
-        let p = propagate(
-            &image,
-            &estimate,
-            &targets,
-            &PropagateParams::default(),
-            None,
-        )
-        .unwrap();
+        let params = PropagateParams {
+            mode,
+            ..PropagateParams::default()
+        };
+        let p = propagate(&image, &estimate, &targets, &params, None).unwrap();
         // Each region takes its stroke's depth within 1 % at the stroke's row, everywhere in
         // the region (away from the edge's two pixels).
         for x in (0..w).step_by(7) {
@@ -905,15 +1247,9 @@ mod tests {
                 "x {x}: {ratio} vs {want}"
             );
         }
-        // A warm start from the answer converges at once to the same depth.
-        let again = propagate(
-            &image,
-            &estimate,
-            &targets,
-            &PropagateParams::default(),
-            Some(&p.correction),
-        )
-        .unwrap();
+        // A warm start from the answer converges at once to the same depth (the geodesic
+        // mode answers directly: no iterations either way).
+        let again = propagate(&image, &estimate, &targets, &params, Some(&p.correction)).unwrap();
         assert!(
             again.iterations < p.iterations / 4 + 2,
             "{} vs {}",
@@ -921,6 +1257,145 @@ mod tests {
             p.iterations
         );
         assert!((again.depth.at(10, 10) / p.depth.at(10, 10) - 1.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn the_geodesic_transform_counts_steps_and_edges() {
+        // One row of 10 cells: a step costs 1, and 1 + γ·4 where the colour changes by 2 σ_c
+        // (between cells 4 and 5, strength 2); the source's correction travels with it.
+        let gamma = 1.5f32;
+        let cost: Vec<[(f32, f32); 4]> = (0..10)
+            .map(|x| {
+                let right = if x == 9 {
+                    (f32::INFINITY, 0.0)
+                } else if x == 4 {
+                    (1.0 + gamma * 4.0, 2.0)
+                } else {
+                    (1.0, 0.0)
+                };
+                [
+                    right,
+                    (f32::INFINITY, 0.0),
+                    (f32::INFINITY, 0.0),
+                    (f32::INFINITY, 0.0),
+                ]
+            })
+            .collect();
+        let (dist, label, edge) = geodesic_transform(&[(1, 0.25)], &cost, 10, 1);
+        let want_dist = [1.0, 0.0, 1.0, 2.0, 3.0, 10.0, 11.0, 12.0, 13.0, 14.0];
+        for x in 0..10 {
+            assert!((dist[x] - want_dist[x]).abs() < 1e-5, "x {x}: {}", dist[x]);
+            assert_eq!(label[x], 0.25);
+            assert_eq!(edge[x], if x >= 5 { 2.0 } else { 0.0 }, "x {x}");
+        }
+    }
+
+    #[test]
+    fn geodesic_strokes_blend_in_a_region_and_stop_at_strong_edges() {
+        // Three vertical bands: dark, dark, bright (a strong edge at x = 100). Two strokes in the
+        // dark part (depth 2 at x = 20, 8 at x = 80), none in the bright band.
+        let (w, h) = (150, 60);
+        let image = Raster::from_fn(w, h, |x, _| if x < 100 { [0.2; 3] } else { [0.9; 3] });
+        let estimate = Raster::new(w, h, 4.0f32);
+        let at = |x: f32, depth: f32| DepthTarget {
+            x,
+            y: 30.0,
+            radius_px: 2.0,
+            depth,
+        };
+        let params = PropagateParams {
+            mode: PropagateMode::Geodesic,
+            ..PropagateParams::default()
+        };
+        let p = propagate(
+            &image,
+            &estimate,
+            &[at(20.0, 2.0), at(80.0, 8.0)],
+            &params,
+            None,
+        )
+        .unwrap();
+        // Each stroke decides its own pixels.
+        assert!(
+            (p.depth.at(20, 30) / 2.0 - 1.0).abs() < 0.02,
+            "{}",
+            p.depth.at(20, 30)
+        );
+        assert!(
+            (p.depth.at(80, 30) / 8.0 - 1.0).abs() < 0.02,
+            "{}",
+            p.depth.at(80, 30)
+        );
+        // Halfway between them the two weigh the same: the mean log depth, √(2·8) = 4.
+        assert!(
+            (p.depth.at(50, 30) / 4.0 - 1.0).abs() < 0.05,
+            "{}",
+            p.depth.at(50, 30)
+        );
+        // Far from both along the same region, the nearer one decides (inverse-square weights).
+        assert!(p.depth.at(2, 5) < 2.6, "{}", p.depth.at(2, 5));
+        // Behind the strong edge, no stroke speaks: the estimate stays.
+        for x in [110usize, 130, 149] {
+            assert!(
+                (p.depth.at(x, 30) / 4.0 - 1.0).abs() < 0.01,
+                "x {x}: {}",
+                p.depth.at(x, 30)
+            );
+        }
+        // The same strokes always give the same depth.
+        let again = propagate(
+            &image,
+            &estimate,
+            &[at(20.0, 2.0), at(80.0, 8.0)],
+            &params,
+            None,
+        )
+        .unwrap();
+        assert_eq!(again.depth, p.depth);
+    }
+
+    #[test]
+    fn a_geodesic_strokes_enclosed_patch_follows_it() {
+        // A face (uniform) with a dark 6 × 6 eye at (60, 30) behind a strong edge, and a wall
+        // beyond a strong edge at x = 100; one stroke on the face moves it from 4 to 2.
+        let (w, h) = (150, 60);
+        let image = Raster::from_fn(w, h, |x, y| {
+            if x >= 100 {
+                [0.9; 3]
+            } else if (57..63).contains(&x) && (27..33).contains(&y) {
+                [0.0; 3]
+            } else {
+                [0.5; 3]
+            }
+        });
+        let estimate = Raster::new(w, h, 4.0f32);
+        let stroke = DepthTarget {
+            x: 20.0,
+            y: 30.0,
+            radius_px: 2.0,
+            depth: 2.0,
+        };
+        let params = PropagateParams {
+            mode: PropagateMode::Geodesic,
+            ..PropagateParams::default()
+        };
+        let p = propagate(&image, &estimate, &[stroke], &params, None).unwrap();
+        // The eye goes with the face (no step around it); the wall keeps the estimate.
+        assert!(
+            (p.depth.at(60, 30) / 2.0 - 1.0).abs() < 0.03,
+            "{}",
+            p.depth.at(60, 30)
+        );
+        assert!(
+            (p.depth.at(80, 30) / 2.0 - 1.0).abs() < 0.01,
+            "{}",
+            p.depth.at(80, 30)
+        );
+        assert!(
+            (p.depth.at(125, 30) / 4.0 - 1.0).abs() < 0.01,
+            "{}",
+            p.depth.at(125, 30)
+        );
     }
 
     #[test]
