@@ -676,6 +676,10 @@ fn flatten_unvouched(
     (out, share)
 }
 
+/// Smallest share of the picture an object-cue region must cover to be a figure: smaller ones
+/// are texture elements (a printed pattern's motifs, gravel), not objects standing out.
+pub const MIN_FIGURE_SHARE: f32 = 0.002;
+
 /// Share of a row an object region must cover for the row to count as crossed by it.
 pub const BAND_ROW_SHARE: f32 = 0.7;
 
@@ -712,7 +716,9 @@ pub fn neutral_outside_figures(object: &GrayRaster, neutral: &GrayRaster) -> Gra
             .iter()
             .filter(|&&n| n as f32 >= BAND_ROW_SHARE * w as f32)
             .sum();
-        if 2 * in_full_rows >= members.len() {
+        if 2 * in_full_rows >= members.len()
+            || (members.len() as f32) < MIN_FIGURE_SHARE * o.len() as f32
+        {
             for i in members {
                 out.data_mut()[i] = neutral.data()[i];
             }
@@ -1107,6 +1113,37 @@ mod tests {
             "a diagonal reaching both sides is a figure"
         );
         assert_eq!(out.at(0, 0), 0.0);
+    }
+
+    #[test]
+    fn a_printed_patterns_motifs_are_not_figures() {
+        // 100 × 100: 2 × 2 motifs every 8 pixels (0.04 % of the picture each) and one 10 × 10
+        // object (1 %): the motifs take the neutral value, the object stays a figure; a region
+        // of exactly MIN_FIGURE_SHARE (20 pixels) is a figure, one pixel less is not.
+        let (w, h) = (100, 100);
+        let neutral = Raster::new(w, h, 0.3);
+        let object = Raster::from_fn(w, h, |x, y| {
+            let motif = x % 8 < 2 && y % 8 < 2 && y < 60;
+            let square = (70..80).contains(&x) && (70..80).contains(&y);
+            let just = y == 90 && (2..22).contains(&x);
+            let short = y == 95 && (2..21).contains(&x);
+            if motif || square || just || short {
+                0.9
+            } else {
+                0.0
+            }
+        });
+        assert_eq!((MIN_FIGURE_SHARE * (w * h) as f32).round(), 20.0);
+        let out = neutral_outside_figures(&object, &neutral);
+        assert_eq!(out.at(8, 8), 0.3);
+        assert_eq!(out.at(75, 75), 0.9);
+        assert_eq!(out.at(10, 90), 0.9);
+        assert_eq!(out.at(10, 95), 0.3);
+        assert_eq!(
+            out.at(4, 4),
+            0.0,
+            "outside every region the cue is unchanged"
+        );
     }
 
     #[test]
