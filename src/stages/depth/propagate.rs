@@ -25,10 +25,12 @@
 //! The default solver ([`PropagateMode::Geodesic`], [`geodesic_correction`]) spreads the same
 //! correction by geodesic distance instead: a point-like stroke in a harmonic (Laplacian)
 //! problem only moves its neighbourhood, where the artist meant its region, and the iterative
-//! solve stops short on the badly conditioned system; the geodesic answer is direct. On Aloe's
-//! simulated artist (`eval scribbles`, full size) it reaches δ<1.25 0.851 / 0.862 after 10 /
-//! 30 strokes against the Laplacian's 0.811 / 0.841, and the novel view 18.77 / 18.90 dB
-//! against 18.51 / 18.88.
+//! solve stops short on the badly conditioned system; the geodesic answer is direct, and a
+//! patch enclosed by what a stroke moved (an eye in a face) follows it instead of tearing. On
+//! Aloe's simulated artist (`eval scribbles`, full size, 10 / 30 strokes) the two trade places
+//! with the estimate they start from: δ<1.25 0.849 / 0.853 against the Laplacian's 0.811 /
+//! 0.841 from one estimate, 0.847 / 0.861 against 0.850 / 0.861 from the next (docs/
+//! measurements.md).
 
 use crate::error::{Error, Result};
 use crate::raster::{GrayRaster, Raster, RgbRaster};
@@ -374,8 +376,7 @@ fn default_kappa() -> f32 {
 pub enum PropagateMode {
     /// The affinity Laplacian over 4-neighbours (Levin et al.), coarse to fine: on Aloe's
     /// simulated artist it reached δ<1.25 0.831 / 0.878 after 10 / 30 strokes against the
-    /// feature-space interpolation's 0.744 / 0.766 (half-size pair); at full size 0.811 /
-    /// 0.841 against the geodesic mode's 0.851 / 0.862.
+    /// feature-space interpolation's 0.744 / 0.766 (half-size pair).
     Laplacian,
     /// Each pixel takes the corrections of the strokes it is joined to, weighted by its
     /// geodesic distance to each over the photo (a step costs its length plus the colour and
