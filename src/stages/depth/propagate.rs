@@ -651,43 +651,52 @@ fn data_term(
 ) -> (GrayRaster, GrayRaster) {
     let mut weight = Raster::new(gw, gh, 0.0f32);
     let mut rhs = Raster::new(gw, gh, 0.0f32);
-    let (sx, sy) = (gw as f32 / w as f32, gh as f32 / h as f32);
     for t in targets {
-        let (cx, cy) = ((t.x + 0.5) * sx - 0.5, (t.y + 0.5) * sy - 0.5);
-        let r = (t.radius_px * sx.max(sy)).max(0.5);
-        let (x0, x1) = (
-            (cx - r).floor().max(0.0),
-            (cx + r).ceil().min(gw as f32 - 1.0),
-        );
-        let (y0, y1) = (
-            (cy - r).floor().max(0.0),
-            (cy + r).ceil().min(gh as f32 - 1.0),
-        );
-        if x0 > x1 || y0 > y1 {
-            continue; // Entirely outside the photo.
-        }
         let lt = t.depth.ln();
-        let mut any = false;
-        for y in y0 as usize..=y1 as usize {
-            for x in x0 as usize..=x1 as usize {
-                let d2 = (x as f32 - cx).powi(2) + (y as f32 - cy).powi(2);
-                if d2 <= r * r {
-                    weight.set(x, y, weight.at(x, y) + 1.0);
-                    rhs.set(x, y, rhs.at(x, y) + (lt - log_grid.at(x, y)));
-                    any = true;
-                }
-            }
-        }
-        if !any {
-            let (x, y) = (
-                cx.round().clamp(0.0, gw as f32 - 1.0) as usize,
-                cy.round().clamp(0.0, gh as f32 - 1.0) as usize,
-            );
+        for (x, y) in dab_cells(t, (w, h), (gw, gh)) {
             weight.set(x, y, weight.at(x, y) + 1.0);
             rhs.set(x, y, rhs.at(x, y) + (lt - log_grid.at(x, y)));
         }
     }
     (weight, rhs)
+}
+
+/// The cells of a `gw × gh` grid (of a `w × h` photo) that target `t`'s dab covers, or the
+/// nearest cell when the dab falls between cells; none when it lies wholly outside the photo.
+fn dab_cells(
+    t: &DepthTarget,
+    (w, h): (usize, usize),
+    (gw, gh): (usize, usize),
+) -> Vec<(usize, usize)> {
+    let (sx, sy) = (gw as f32 / w as f32, gh as f32 / h as f32);
+    let (cx, cy) = ((t.x + 0.5) * sx - 0.5, (t.y + 0.5) * sy - 0.5);
+    let r = (t.radius_px * sx.max(sy)).max(0.5);
+    let (x0, x1) = (
+        (cx - r).floor().max(0.0),
+        (cx + r).ceil().min(gw as f32 - 1.0),
+    );
+    let (y0, y1) = (
+        (cy - r).floor().max(0.0),
+        (cy + r).ceil().min(gh as f32 - 1.0),
+    );
+    if x0 > x1 || y0 > y1 {
+        return Vec::new(); // Entirely outside the photo.
+    }
+    let mut cells = Vec::new();
+    for y in y0 as usize..=y1 as usize {
+        for x in x0 as usize..=x1 as usize {
+            if (x as f32 - cx).powi(2) + (y as f32 - cy).powi(2) <= r * r {
+                cells.push((x, y));
+            }
+        }
+    }
+    if cells.is_empty() {
+        cells.push((
+            cx.round().clamp(0.0, gw as f32 - 1.0) as usize,
+            cy.round().clamp(0.0, gh as f32 - 1.0) as usize,
+        ));
+    }
+    cells
 }
 
 /// Solves `(W + λL + εI)c = rhs` on one grid by Jacobi-preconditioned conjugate gradients from
@@ -853,36 +862,10 @@ pub fn geodesic_correction(
     };
     // Each group's source cells and their corrections (cells a group's dabs share average).
     let mut sources: Vec<Vec<(usize, f32)>> = vec![Vec::new(); groups];
-    let (sx, sy) = (gw as f32 / w as f32, gh as f32 / h as f32);
     for t in targets {
-        let (cx, cy) = ((t.x + 0.5) * sx - 0.5, (t.y + 0.5) * sy - 0.5);
-        let r = (t.radius_px * sx.max(sy)).max(0.5);
-        let (x0, x1) = (
-            (cx - r).floor().max(0.0),
-            (cx + r).ceil().min(gw as f32 - 1.0),
-        );
-        let (y0, y1) = (
-            (cy - r).floor().max(0.0),
-            (cy + r).ceil().min(gh as f32 - 1.0),
-        );
-        if x0 > x1 || y0 > y1 {
-            continue; // Entirely outside the photo.
-        }
         let lt = t.depth.ln();
         let list = &mut sources[group_of(t.depth)];
-        let before = list.len();
-        for y in y0 as usize..=y1 as usize {
-            for x in x0 as usize..=x1 as usize {
-                if (x as f32 - cx).powi(2) + (y as f32 - cy).powi(2) <= r * r {
-                    list.push((y * gw + x, lt - log_grid.at(x, y)));
-                }
-            }
-        }
-        if list.len() == before {
-            let (x, y) = (
-                cx.round().clamp(0.0, gw as f32 - 1.0) as usize,
-                cy.round().clamp(0.0, gh as f32 - 1.0) as usize,
-            );
+        for (x, y) in dab_cells(t, (w, h), (gw, gh)) {
             list.push((y * gw + x, lt - log_grid.at(x, y)));
         }
     }
