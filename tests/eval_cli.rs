@@ -373,15 +373,21 @@ fn bench_depth_times_the_strokes_solve() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let row = text
-        .lines()
-        .find(|l| l.starts_with("| 3 | 320×"))
-        .unwrap_or_else(|| panic!("a strokes row:\n{text}"));
-    let cells: Vec<f64> = row
-        .split('|')
-        .filter_map(|c| c.trim().parse::<f64>().ok())
-        .collect();
-    // strokes, cold seconds, warm seconds.
-    assert_eq!(cells.len(), 3, "{row}");
-    assert!(cells[1] > 0.0 && cells[2] > 0.0, "{row}");
+    let numbers = |prefix: &str| -> Vec<f64> {
+        let row = text
+            .lines()
+            .find(|l| l.starts_with(prefix))
+            .unwrap_or_else(|| panic!("a row {prefix}:\n{text}"));
+        row.split('|')
+            .filter_map(|c| c.trim().parse::<f64>().ok())
+            .collect()
+    };
+    // The geodesic solver (the default): strokes and its seconds (it has no warm start).
+    let geodesic = numbers("| geodesic (default) | 3 | 320×");
+    assert_eq!(geodesic.len(), 2, "{text}");
+    assert!(geodesic[1] > 0.0, "{text}");
+    // The Laplacian: strokes, cold seconds, warm-started seconds.
+    let laplacian = numbers("| affinity Laplacian | 3 | 320×");
+    assert_eq!(laplacian.len(), 3, "{text}");
+    assert!(laplacian[1] > 0.0 && laplacian[2] > 0.0, "{text}");
 }
