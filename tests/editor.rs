@@ -471,11 +471,21 @@ fn size_to_scene_sizes_the_preset_and_says_so() {
             .into_iter()
             .find(|n| n.contains("orbit") && n.contains("amplitude"))
     };
+    // Every message seen while waiting (they expire), for the failure's report.
+    let mut seen: Vec<String> = Vec::new();
     while said(&h).is_none() {
+        for n in h.state().notices() {
+            if !seen.contains(&n) {
+                seen.push(n);
+            }
+        }
         assert!(
             start.elapsed() < limit,
-            "the sizing did not finish: {:?}",
-            h.state().notices()
+            "the sizing did not finish: messages seen {seen:?}; sizing pending {}; job {:?}; \
+             snapshot (generation, draft) {:?}",
+            h.state().sizing_pending(),
+            h.state().job(),
+            h.state().snapshot().map(|s| (s.generation, s.draft))
         );
         std::thread::sleep(Duration::from_millis(20));
         h.step();

@@ -105,6 +105,11 @@ impl EditorApp {
         &self.job
     }
 
+    /// Whether a "Size to scene" waits for the final scene of the current generation.
+    pub fn sizing_pending(&self) -> bool {
+        self.pending_sizing.is_some()
+    }
+
     /// Where things were drawn in the last frame.
     pub fn probe(&self) -> &Probe {
         &self.probe
