@@ -92,6 +92,16 @@ fn wait_idle(h: &mut Harness<'_, EditorApp>, limit: Duration) {
     h.step();
 }
 
+/// The harness opened on `file`, idle, with the Depth tab shown (`None`: skip, as [`harness`]).
+fn on_depth_tab(file: PathBuf) -> Option<Harness<'static, EditorApp>> {
+    let mut h = harness(file)?;
+    wait_idle(&mut h, Duration::from_secs(600));
+    h.get_by_label("3 Depth").click();
+    h.step();
+    h.step();
+    Some(h)
+}
+
 fn layer_count(h: &Harness<'_, EditorApp>) -> usize {
     h.state()
         .snapshot()
@@ -720,14 +730,10 @@ fn the_fallback_path_prompt_saves_a_project_and_autosave_recovers_it() {
 #[test]
 fn strokes_made_during_a_rebuild_are_all_kept() {
     let dir = tempfile::tempdir().unwrap();
-    let Some(mut h) = harness(fast_project(dir.path())) else {
+    let Some(mut h) = on_depth_tab(fast_project(dir.path())) else {
         return;
     };
     let limit = Duration::from_secs(600);
-    wait_idle(&mut h, limit);
-    h.get_by_label("3 Depth").click();
-    h.step();
-    h.step();
     h.get_by_label("pull (nearer)").click();
     h.step();
     let view = h.state().probe().view.expect("the depth view");
@@ -886,13 +892,9 @@ fn the_gpu_preview_has_no_gaps_when_the_output_is_small() {
 #[test]
 fn the_depth_tab_shows_which_cue_decided() {
     let dir = tempfile::tempdir().unwrap();
-    let Some(mut h) = harness(fast_project(dir.path())) else {
+    let Some(mut h) = on_depth_tab(fast_project(dir.path())) else {
         return;
     };
-    wait_idle(&mut h, Duration::from_secs(600));
-    h.get_by_label("3 Depth").click();
-    h.step();
-    h.step();
     assert!(
         h.query_by_label("sky").is_none(),
         "no legend before it is asked for"
@@ -916,13 +918,9 @@ fn the_depth_tab_shows_which_cue_decided() {
 #[test]
 fn the_depth_tab_offers_the_installed_models() {
     let dir = tempfile::tempdir().unwrap();
-    let Some(mut h) = harness(fast_project(dir.path())) else {
+    let Some(h) = on_depth_tab(fast_project(dir.path())) else {
         return;
     };
-    wait_idle(&mut h, Duration::from_secs(600));
-    h.get_by_label("3 Depth").click();
-    h.step();
-    h.step();
     let installed: Vec<&str> = makeit4d::models::models_dir()
         .map(|d| {
             makeit4d::models::CATALOGUE
@@ -1185,14 +1183,10 @@ fn the_scene_exports_as_gltf_and_the_preview_shows_the_anaglyph() {
 #[test]
 fn depth_targets_are_picked_painted_spread_hidden_and_undone() {
     let dir = tempfile::tempdir().unwrap();
-    let Some(mut h) = harness(fast_project(dir.path())) else {
+    let Some(mut h) = on_depth_tab(fast_project(dir.path())) else {
         return;
     };
     let limit = Duration::from_secs(600);
-    wait_idle(&mut h, limit);
-    h.get_by_label("3 Depth").click();
-    h.step();
-    h.step();
     // The eyedropper: the depth under the cursor is shown, and a click takes it.
     h.get_by_label("pick depth (E)").click();
     h.step();
@@ -1261,14 +1255,10 @@ fn depth_targets_are_picked_painted_spread_hidden_and_undone() {
 #[test]
 fn a_region_pops_up_as_a_card() {
     let dir = tempfile::tempdir().unwrap();
-    let Some(mut h) = harness(fast_project(dir.path())) else {
+    let Some(mut h) = on_depth_tab(fast_project(dir.path())) else {
         return;
     };
     let limit = Duration::from_secs(600);
-    wait_idle(&mut h, limit);
-    h.get_by_label("3 Depth").click();
-    h.step();
-    h.step();
     h.key_press(egui::Key::R);
     h.step();
     let view = h.state().probe().view.expect("the depth view");
@@ -1393,14 +1383,10 @@ fn a_tilted_plane_is_dragged_by_its_handles() {
         hidden: false,
     });
     p.save(&file).unwrap();
-    let Some(mut h) = harness(file) else {
+    let Some(mut h) = on_depth_tab(file) else {
         return;
     };
     let limit = Duration::from_secs(600);
-    wait_idle(&mut h, limit);
-    h.get_by_label("3 Depth").click();
-    h.step();
-    h.step();
     h.key_press(egui::Key::R);
     h.step();
     h.step();
@@ -1463,14 +1449,10 @@ fn a_tilted_plane_is_dragged_by_its_handles() {
 #[test]
 fn a_target_stroke_takes_the_depth_of_a_point() {
     let dir = tempfile::tempdir().unwrap();
-    let Some(mut h) = harness(fast_project(dir.path())) else {
+    let Some(mut h) = on_depth_tab(fast_project(dir.path())) else {
         return;
     };
     let limit = Duration::from_secs(600);
-    wait_idle(&mut h, limit);
-    h.get_by_label("3 Depth").click();
-    h.step();
-    h.step();
     h.get_by_label("same as a point (L)").click();
     h.step();
     let view = h.state().probe().view.expect("the depth view");

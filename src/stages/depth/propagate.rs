@@ -898,35 +898,31 @@ pub fn geodesic_correction(
         }
     }
     let two_tau2 = 2.0 * (params.geodesic_fade.max(1e-3) as f64).powi(2);
+    // Per cell: Σ w_k c_k, Σ w_k and max f_k over the groups, each worker thread summing into
+    // its own buffers.
+    let zeros = || (vec![0.0f64; n], vec![0.0f64; n], vec![0.0f64; n]);
     let (num, den, reach) = sources
         .par_iter()
         .filter(|s| !s.is_empty())
-        .map(|list| {
+        .fold(zeros, |(mut num, mut den, mut reach), list| {
             let (dist, label, edge) = geodesic_transform(list, &cost, gw, gh);
-            let mut num = vec![0.0f64; n];
-            let mut den = vec![0.0f64; n];
-            let mut reach = vec![0.0f64; n];
             for i in 0..n {
-                let d2 = (dist[i] * dist[i]) as f64;
                 let f = (-((edge[i] as f64).powi(2)) / two_tau2).exp();
-                let wk = f / (d2 + 1.0);
-                num[i] = wk * label[i] as f64;
-                den[i] = wk;
-                reach[i] = f;
+                let wk = f / ((dist[i] * dist[i]) as f64 + 1.0);
+                num[i] += wk * label[i] as f64;
+                den[i] += wk;
+                reach[i] = reach[i].max(f);
             }
             (num, den, reach)
         })
-        .reduce(
-            || (vec![0.0; n], vec![0.0; n], vec![0.0; n]),
-            |(mut a, mut b, mut r), (c, d, q)| {
-                for i in 0..n {
-                    a[i] += c[i];
-                    b[i] += d[i];
-                    r[i] = r[i].max(q[i]);
-                }
-                (a, b, r)
-            },
-        );
+        .reduce(zeros, |(mut a, mut b, mut r), (c, d, q)| {
+            for i in 0..n {
+                a[i] += c[i];
+                b[i] += d[i];
+                r[i] = r[i].max(q[i]);
+            }
+            (a, b, r)
+        });
     let blend: Vec<f64> = (0..n)
         .map(|i| if den[i] > 0.0 { num[i] / den[i] } else { 0.0 })
         .collect();
@@ -964,8 +960,9 @@ pub fn geodesic_correction(
 
 /// Geodesic distance from `sources` (cell, correction) over a `gw × gh` grid whose cells have
 /// the steps `cost[cell] = [right, down-left, down, down-right]` (cost, edge strength), with
-/// each cell's nearest source's correction and the strongest edge on the path to it: forward and backward raster scans until nothing changes (at most 16
-/// round trips; paths that wind more than that are rare on photos and only come out longer).
+/// each cell's nearest source's correction and the strongest edge on the path to it: forward
+/// and backward raster scans until nothing changes (at most 16 round trips; paths that wind
+/// more than that are rare on photos and only come out longer).
 fn geodesic_transform(
     sources: &[(usize, f32)],
     cost: &[[(f32, f32); 4]],
@@ -1274,6 +1271,16 @@ mod tests {
         }
     }
 
+    /// `depth` at `(x, y)` is `want` within the relative tolerance `tol`.
+    #[track_caller]
+    fn assert_depth(depth: &GrayRaster, x: usize, y: usize, want: f32, tol: f32) {
+        let got = depth.at(x, y);
+        assert!(
+            (got / want - 1.0).abs() < tol,
+            "({x}, {y}): {got} vs {want}"
+        );
+    }
+
     #[test]
     fn geodesic_strokes_blend_in_a_region_and_stop_at_strong_edges() {
         // Three vertical bands: dark, dark, bright (a strong edge at x = 100). Two strokes in the
@@ -1300,31 +1307,15 @@ mod tests {
         )
         .unwrap();
         // Each stroke decides its own pixels.
-        assert!(
-            (p.depth.at(20, 30) / 2.0 - 1.0).abs() < 0.02,
-            "{}",
-            p.depth.at(20, 30)
-        );
-        assert!(
-            (p.depth.at(80, 30) / 8.0 - 1.0).abs() < 0.02,
-            "{}",
-            p.depth.at(80, 30)
-        );
+        assert_depth(&p.depth, 20, 30, 2.0, 0.02);
+        assert_depth(&p.depth, 80, 30, 8.0, 0.02);
         // Halfway between them the two weigh the same: the mean log depth, √(2·8) = 4.
-        assert!(
-            (p.depth.at(50, 30) / 4.0 - 1.0).abs() < 0.05,
-            "{}",
-            p.depth.at(50, 30)
-        );
+        assert_depth(&p.depth, 50, 30, 4.0, 0.05);
         // Far from both along the same region, the nearer one decides (inverse-square weights).
         assert!(p.depth.at(2, 5) < 2.6, "{}", p.depth.at(2, 5));
         // Behind the strong edge, no stroke speaks: the estimate stays.
         for x in [110usize, 130, 149] {
-            assert!(
-                (p.depth.at(x, 30) / 4.0 - 1.0).abs() < 0.01,
-                "x {x}: {}",
-                p.depth.at(x, 30)
-            );
+            assert_depth(&p.depth, x, 30, 4.0, 0.01);
         }
         // The same strokes always give the same depth.
         let again = propagate(
@@ -1365,21 +1356,9 @@ mod tests {
         };
         let p = propagate(&image, &estimate, &[stroke], &params, None).unwrap();
         // The eye goes with the face (no step around it); the wall keeps the estimate.
-        assert!(
-            (p.depth.at(60, 30) / 2.0 - 1.0).abs() < 0.03,
-            "{}",
-            p.depth.at(60, 30)
-        );
-        assert!(
-            (p.depth.at(80, 30) / 2.0 - 1.0).abs() < 0.01,
-            "{}",
-            p.depth.at(80, 30)
-        );
-        assert!(
-            (p.depth.at(125, 30) / 4.0 - 1.0).abs() < 0.01,
-            "{}",
-            p.depth.at(125, 30)
-        );
+        assert_depth(&p.depth, 60, 30, 2.0, 0.03);
+        assert_depth(&p.depth, 80, 30, 2.0, 0.01);
+        assert_depth(&p.depth, 125, 30, 4.0, 0.01);
     }
 
     #[test]
