@@ -358,6 +358,18 @@ fn eval_scribbles_strokes_improve_the_depth() {
     let o = run(&["--strokes", "5,1", "--no-nvs"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("ascending"));
+    // The geodesic solver's edge span: 1 to 16 cells, else one line naming the flag.
+    for bad in ["0", "17"] {
+        let o = run(&["--strokes", "0,1", "--no-nvs", "--edge-span", bad]);
+        assert_ne!(o.status.code(), Some(0));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains("--edge-span") && err.lines().count() == 1,
+            "{err}"
+        );
+    }
+    let o = run(&["--strokes", "0,1", "--no-nvs", "--edge-span", "1"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
 #[test]

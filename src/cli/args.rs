@@ -389,6 +389,10 @@ pub(crate) struct EvalScribblesArgs {
     /// solver's own).
     #[arg(long)]
     pub(crate) edge_cost: Option<f32>,
+    /// Geodesic solver: a step's change is the mean of this many grid cells behind it against
+    /// as many ahead, 1–16 (default: the solver's own).
+    #[arg(long)]
+    pub(crate) edge_span: Option<usize>,
     /// Feature-space solver: spatial scale, a fraction of the diagonal.
     #[arg(long)]
     pub(crate) sigma_space: Option<f32>,

@@ -212,6 +212,12 @@ pub(crate) fn eval_scribbles(
     if let Some(v) = args.edge_cost {
         options.params.geodesic_edge_cost = v;
     }
+    if let Some(v) = args.edge_span {
+        if !(1..=makeit4d::stages::depth::propagate::MAX_GEODESIC_EDGE_SPAN).contains(&v) {
+            anyhow::bail!("--edge-span {v}: must be 1 to 16 grid cells");
+        }
+        options.params.geodesic_edge_span = v;
+    }
     if let Some(v) = args.sigma_space {
         options.params.sigma_space = v;
     }

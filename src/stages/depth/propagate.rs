@@ -195,7 +195,7 @@ pub fn apply_target_strokes(
         .collect();
     let (first, mut applied) = apply_resolved(image, depth, &fixed, params, warm)?;
     let (w, h) = first.size();
-    let mut anchors = Vec::new();
+    let mut pins = Vec::new();
     let mut resolved: Vec<TargetStroke> = strokes
         .iter()
         .map(|s| match s.same_as {
@@ -211,7 +211,7 @@ pub fn apply_target_strokes(
                 near.sort_by(f32::total_cmp);
                 let depth = near.get(near.len() / 2).copied().unwrap_or(s.depth);
                 // The point keeps that depth too: the stroke's correction must not move it.
-                anchors.push(TargetStroke {
+                pins.push(TargetStroke {
                     points: vec![p],
                     depth,
                     same_as: None,
@@ -226,7 +226,7 @@ pub fn apply_target_strokes(
             _ => s.clone(),
         })
         .collect();
-    resolved.extend(anchors);
+    resolved.extend(pins);
     // Solved as any set of strokes is (from the caller's start, not from the first pass's
     // answer), so that the same strokes always give the same depth.
     let seconds = applied.seconds;
@@ -294,7 +294,15 @@ fn apply_resolved(
         ));
     }
     let started = std::time::Instant::now();
-    let p = propagate(image, depth, &dabs, params, warm)?;
+    let mut p = propagate(image, depth, &dabs, params, warm)?;
+    if far > 0.0 {
+        // Nor does a correction carry anything beyond it.
+        for z in p.depth.data_mut() {
+            if z.is_finite() && *z > far {
+                *z = far;
+            }
+        }
+    }
     applied.seconds = started.elapsed().as_secs_f64();
     applied.correction = Some(p.correction);
     Ok((p.depth, applied))
@@ -345,6 +353,18 @@ pub struct PropagateParams {
     /// costs little and a strong edge a lot.
     #[serde(default = "default_geodesic_edge_cost")]
     pub geodesic_edge_cost: f32,
+    /// Geodesic mode: a step's colour and depth change is the mean of this many solve-grid
+    /// cells behind it against as many ahead (1: the two cells alone; at most
+    /// [`MAX_GEODESIC_EDGE_SPAN`]).
+    #[serde(default = "default_geodesic_edge_span")]
+    pub geodesic_edge_span: usize,
+}
+
+/// Longest [`PropagateParams::geodesic_edge_span`].
+pub const MAX_GEODESIC_EDGE_SPAN: usize = 16;
+
+fn default_geodesic_edge_span() -> usize {
+    3
 }
 
 fn default_geodesic_fade() -> f32 {
@@ -407,6 +427,7 @@ impl Default for PropagateParams {
             affinity_floor: 0.0,
             geodesic_fade: default_geodesic_fade(),
             geodesic_edge_cost: default_geodesic_edge_cost(),
+            geodesic_edge_span: default_geodesic_edge_span(),
         }
     }
 }
@@ -873,11 +894,48 @@ pub fn geodesic_correction(
     let gamma = params.geodesic_edge_cost.max(0.0);
     let inv_sc = 1.0 / params.sigma_colour.max(1e-4).powi(2);
     let inv_sz = 1.0 / params.sigma_log_depth.max(1e-4).powi(2);
-    let step = |a: usize, b: usize, len: f32| -> (f32, f32) {
-        let (p, q) = (colour.data()[a], colour.data()[b]);
+    // The change across a step from cell (x, y) by (dx, dy), squared in σ units: the mean of
+    // `span` cells behind the step against the mean of `span` cells ahead of it, along its
+    // direction. Measured so, an edge blurred over a few cells (soft focus, a soft-lit
+    // portrait, the solve grid's own downsampling) counts its whole contrast rather than a
+    // share per step, and a step along an edge crosses none. Only the step where that change
+    // peaks along the direction carries it (the others near the edge carry their own two
+    // cells' change), so a region reaches its edge whole.
+    let span = params.geodesic_edge_span.clamp(1, MAX_GEODESIC_EDGE_SPAN) as i64;
+    let change = |x: i64, y: i64, dx: i64, dy: i64, span: i64| -> f32 {
+        // Beyond the grid's border, its last cells repeat (a diagonal step along the border
+        // sees as many cells as any other).
+        let cell = |k: i64| -> usize {
+            let cx = (x + k * dx).clamp(0, gw as i64 - 1) as usize;
+            let cy = (y + k * dy).clamp(0, gh as i64 - 1) as usize;
+            cy * gw + cx
+        };
+        let mean = |ks: std::ops::RangeInclusive<i64>| {
+            let (mut m, mut n) = ([0.0f32; 4], 0.0f32);
+            for i in ks.map(cell) {
+                let c = colour.data()[i];
+                m[0] += c[0];
+                m[1] += c[1];
+                m[2] += c[2];
+                m[3] += log_grid.data()[i];
+                n += 1.0;
+            }
+            m.map(|v| v / n)
+        };
+        let (p, q) = (mean(1 - span..=0), mean(1..=span));
         let dc = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2);
-        let dz = (log_grid.data()[a] - log_grid.data()[b]).powi(2);
-        let e2 = dc * inv_sc + dz * inv_sz;
+        dc * inv_sc + (p[3] - q[3]).powi(2) * inv_sz
+    };
+    let step = |x: i64, y: i64, dx: i64, dy: i64, len: f32| -> (f32, f32) {
+        let here = change(x, y, dx, dy, span);
+        let e2 = if span == 1
+            || (here >= change(x - dx, y - dy, dx, dy, span)
+                && here >= change(x + dx, y + dy, dx, dy, span))
+        {
+            here
+        } else {
+            change(x, y, dx, dy, 1)
+        };
         (len + gamma * e2, e2.sqrt())
     };
     const OFFSETS: [(i64, i64, f32); 4] = [
@@ -892,7 +950,7 @@ pub fn geodesic_correction(
             for (k, &(dx, dy, len)) in OFFSETS.iter().enumerate() {
                 let (qx, qy) = (x as i64 + dx, y as i64 + dy);
                 if qx >= 0 && qx < gw as i64 && qy < gh as i64 {
-                    cost[y * gw + x][k] = step(y * gw + x, qy as usize * gw + qx as usize, len);
+                    cost[y * gw + x][k] = step(x as i64, y as i64, dx, dy, len);
                 }
             }
         }
@@ -1327,6 +1385,68 @@ mod tests {
         )
         .unwrap();
         assert_eq!(again.depth, p.depth);
+    }
+
+    #[test]
+    fn a_soft_edge_counts_its_whole_contrast() {
+        // Dark (0.1) and light (0.7) halves joined by a ramp over three cells (0.25, 0.4, 0.55),
+        // 60 × 20 (the solve grid is the photo); the estimate is 10; a stroke at 5 on the left.
+        let (w, h) = (60, 20);
+        let image = Raster::from_fn(w, h, |x, _| {
+            let v = match x {
+                0..=27 => 0.1,
+                28 => 0.25,
+                29 => 0.4,
+                30 => 0.55,
+                _ => 0.7,
+            };
+            [v, v, v]
+        });
+        let estimate = Raster::new(w, h, 10.0f32);
+        let stroke = DepthTarget {
+            x: 5.0,
+            y: 10.0,
+            radius_px: 0.5,
+            depth: 5.0,
+        };
+        let solve = |span: usize| {
+            let params = PropagateParams {
+                geodesic_edge_span: span,
+                ..PropagateParams::default()
+            };
+            propagate(&image, &estimate, &[stroke], &params, None).unwrap()
+        };
+        // Cell by cell, the strongest step is 0.15·√3 / σ_c = 4.33: the stroke keeps
+        // exp(−4.33²/2·3²) = 0.353 of its say behind it, 10·0.5^0.353 = 7.83.
+        let one = solve(1);
+        assert_depth(&one.depth, 50, 10, 7.83, 0.02);
+        // Three cells either side: the middle step sees 0.15 against 0.55, 0.4·√3 / σ_c = 11.5,
+        // exp(−11.5²/18) < 0.001: the light half keeps the estimate.
+        let three = solve(3);
+        assert_depth(&three.depth, 50, 10, 10.0, 0.005);
+        assert_depth(&three.depth, 10, 10, 5.0, 0.01);
+    }
+
+    #[test]
+    fn a_correction_carries_nothing_past_the_far_plane() {
+        // A uniform photo (no edges: the stroke reaches every cell at full strength) 60 × 20.
+        let (w, h) = (60, 20);
+        let image = Raster::new(w, h, [0.5f32, 0.5, 0.5]);
+        let params = PropagateParams::default();
+        // A stroke that pushes back a ramp (1 → 10 across the photo) by 25 %: what would pass
+        // the far plane (the estimate's largest depth, 10) stops at it.
+        let ramp = Raster::from_fn(w, h, |x, _| 1.0 + 9.0 * x as f32 / (w - 1) as f32);
+        let back = TargetStroke {
+            points: vec![[30.0 / (w - 1) as f32, 0.5]],
+            radius: 0.5 / w as f32,
+            depth: 1.25 * ramp.at(30, 10),
+            hidden: false,
+            same_as: None,
+        };
+        let (depth, _) = apply_target_strokes(&image, &ramp, &[back], &params, None).unwrap();
+        assert_depth(&depth, 20, 10, 1.25 * ramp.at(20, 10), 0.01);
+        assert_eq!(depth.at(w - 1, 10), 10.0);
+        assert!(depth.data().iter().all(|z| *z <= 10.0));
     }
 
     #[test]
