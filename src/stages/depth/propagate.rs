@@ -368,7 +368,7 @@ fn default_geodesic_edge_span() -> usize {
 }
 
 fn default_geodesic_fade() -> f32 {
-    3.0
+    1.5
 }
 
 fn default_geodesic_edge_cost() -> f32 {
@@ -1412,11 +1412,12 @@ mod tests {
         let solve = |span: usize| {
             let params = PropagateParams {
                 geodesic_edge_span: span,
+                geodesic_fade: 3.0,
                 ..PropagateParams::default()
             };
             propagate(&image, &estimate, &[stroke], &params, None).unwrap()
         };
-        // Cell by cell, the strongest step is 0.15·√3 / σ_c = 4.33: the stroke keeps
+        // Cell by cell, the strongest step is 0.15·√3 / σ_c = 4.33: with τ = 3 the stroke keeps
         // exp(−4.33²/2·3²) = 0.353 of its say behind it, 10·0.5^0.353 = 7.83.
         let one = solve(1);
         assert_depth(&one.depth, 50, 10, 7.83, 0.02);
