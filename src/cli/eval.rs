@@ -213,8 +213,9 @@ pub(crate) fn eval_scribbles(
         options.params.geodesic_edge_cost = v;
     }
     if let Some(v) = args.edge_span {
-        if !(1..=makeit4d::stages::depth::propagate::MAX_GEODESIC_EDGE_SPAN).contains(&v) {
-            anyhow::bail!("--edge-span {v}: must be 1 to 16 grid cells");
+        use makeit4d::stages::depth::propagate::MAX_GEODESIC_EDGE_SPAN;
+        if !(1..=MAX_GEODESIC_EDGE_SPAN).contains(&v) {
+            anyhow::bail!("--edge-span {v}: must be 1 to {MAX_GEODESIC_EDGE_SPAN} grid cells");
         }
         options.params.geodesic_edge_span = v;
     }

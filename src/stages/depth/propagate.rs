@@ -195,7 +195,7 @@ pub fn apply_target_strokes(
         .collect();
     let (first, mut applied) = apply_resolved(image, depth, &fixed, params, warm)?;
     let (w, h) = first.size();
-    let mut pins = Vec::new();
+    let mut anchors = Vec::new();
     let mut resolved: Vec<TargetStroke> = strokes
         .iter()
         .map(|s| match s.same_as {
@@ -211,7 +211,7 @@ pub fn apply_target_strokes(
                 near.sort_by(f32::total_cmp);
                 let depth = near.get(near.len() / 2).copied().unwrap_or(s.depth);
                 // The point keeps that depth too: the stroke's correction must not move it.
-                pins.push(TargetStroke {
+                anchors.push(TargetStroke {
                     points: vec![p],
                     depth,
                     same_as: None,
@@ -226,7 +226,7 @@ pub fn apply_target_strokes(
             _ => s.clone(),
         })
         .collect();
-    resolved.extend(pins);
+    resolved.extend(anchors);
     // Solved as any set of strokes is (from the caller's start, not from the first pass's
     // answer), so that the same strokes always give the same depth.
     let seconds = applied.seconds;
@@ -926,32 +926,49 @@ pub fn geodesic_correction(
         let dc = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2);
         dc * inv_sc + (p[3] - q[3]).powi(2) * inv_sz
     };
-    let step = |x: i64, y: i64, dx: i64, dy: i64, len: f32| -> (f32, f32) {
-        let here = change(x, y, dx, dy, span);
-        let e2 = if span == 1
-            || (here >= change(x - dx, y - dy, dx, dy, span)
-                && here >= change(x + dx, y + dy, dx, dy, span))
-        {
-            here
-        } else {
-            change(x, y, dx, dy, 1)
-        };
-        (len + gamma * e2, e2.sqrt())
-    };
     const OFFSETS: [(i64, i64, f32); 4] = [
         (1, 0, 1.0),
         (-1, 1, std::f32::consts::SQRT_2),
         (0, 1, 1.0),
         (1, 1, std::f32::consts::SQRT_2),
     ];
+    // The wide change of every step, once (a step outside the grid changes nothing).
+    let wide: Vec<[f32; 4]> = if span > 1 {
+        (0..n)
+            .map(|i| {
+                let (x, y) = ((i % gw) as i64, (i / gw) as i64);
+                OFFSETS.map(|(dx, dy, _)| change(x, y, dx, dy, span))
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let wide_at = |x: i64, y: i64, k: usize| -> f32 {
+        if x < 0 || y < 0 || x >= gw as i64 || y >= gh as i64 {
+            0.0
+        } else {
+            wide[y as usize * gw + x as usize][k]
+        }
+    };
     let mut cost = vec![[(f32::INFINITY, 0.0f32); 4]; n];
-    for y in 0..gh {
-        for x in 0..gw {
+    for y in 0..gh as i64 {
+        for x in 0..gw as i64 {
             for (k, &(dx, dy, len)) in OFFSETS.iter().enumerate() {
-                let (qx, qy) = (x as i64 + dx, y as i64 + dy);
-                if qx >= 0 && qx < gw as i64 && qy < gh as i64 {
-                    cost[y * gw + x][k] = step(x as i64, y as i64, dx, dy, len);
+                let (qx, qy) = (x + dx, y + dy);
+                if qx < 0 || qx >= gw as i64 || qy >= gh as i64 {
+                    continue;
                 }
+                let e2 = if span == 1 {
+                    change(x, y, dx, dy, 1)
+                } else {
+                    let here = wide_at(x, y, k);
+                    if here >= wide_at(x - dx, y - dy, k) && here >= wide_at(qx, qy, k) {
+                        here
+                    } else {
+                        change(x, y, dx, dy, 1)
+                    }
+                };
+                cost[y as usize * gw + x as usize][k] = (len + gamma * e2, e2.sqrt());
             }
         }
     }
