@@ -127,6 +127,12 @@ pub fn render_project(
     for w in &scene.warnings {
         note(Note::Warning(w.clone()));
     }
+    if let Some(line) = scene
+        .output_camera(&project)
+        .crop_note(scene.input.rgb.size())
+    {
+        note(Note::Info(line));
+    }
     let path_warnings = path_warnings(&project, &scene, job.diagnostics, progress, note)?;
     crate::image_io::prepare_output_dir(out)?;
     if let Some(path) = &job.save_project {

@@ -192,6 +192,9 @@ pub struct CameraInfo {
     pub views: Vec<View>,
     /// Output size.
     pub output_size: (usize, usize),
+    /// The photo's size as the scene holds it (its shape decides what an output of another
+    /// shape leaves out).
+    pub photo_size: (usize, usize),
     /// Why the path cannot be evaluated, if it cannot.
     pub error: Option<String>,
 }

@@ -74,11 +74,13 @@ impl EditorApp {
             Ok(views) => CameraInfo {
                 views,
                 output_size,
+                photo_size: (iw, ih),
                 error: None,
             },
             Err(e) => CameraInfo {
                 views: Vec::new(),
                 output_size,
+                photo_size: (iw, ih),
                 error: Some(format!("{e:#}")),
             },
         };

@@ -856,7 +856,8 @@ pub(crate) struct RenderArgs {
     /// disables).
     #[arg(long, value_name = "FRACTION", value_parser = parse_fraction)]
     pub(crate) synth_threshold: Option<f32>,
-    /// Output size WIDTHxHEIGHT (default: the input's).
+    /// Output size WIDTHxHEIGHT (default: the input's). Another shape than the photo's is
+    /// filled with square pixels: the photo is centred and what overhangs is left out.
     #[arg(long, value_parser = parse_size)]
     pub(crate) size: Option<(usize, usize)>,
     /// Horizontal field of view of the input photo, degrees.

@@ -35,7 +35,10 @@ pub fn scene_scale(depth: &GrayRaster, sky: &GrayRaster) -> Result<SceneScale> {
 }
 
 /// How a project's frames are seen: the output size (the project's, else the photo's) and the
-/// input camera scaled to it. The one place that turns a project into per-frame views: the
+/// input camera scaled to it with square pixels. An output of another shape than the photo is
+/// filled as a video editor fills a frame: the photo is scaled by the larger of the two ratios
+/// and centred, so a square portrait at 16:10 loses a strip at the top and the bottom instead
+/// of being stretched sideways ([`OutputCamera::crop`] says how much). The one place that turns a project into per-frame views: the
 /// canvas stage sizes the canvas from them, the cloud stage its density, and export, the
 /// diagnostics, autocruise, the editor's camera plot and both previews render them.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -65,8 +68,13 @@ impl OutputCamera {
             (Some(ow), Some(oh)) => (ow, oh),
             _ => photo_size,
         };
+        let s = fill_scale(input_size, size);
         let intrinsics = Intrinsics::from_hfov(w, h, project.camera.hfov_deg)
-            .scaled(size.0 as f32 / w as f32, size.1 as f32 / h as f32);
+            .scaled(s, s)
+            .padded(
+                0.5 * (size.0 as f32 - w as f32 * s),
+                0.5 * (size.1 as f32 - h as f32 * s),
+            );
         Self { size, intrinsics }
     }
 
@@ -86,6 +94,58 @@ impl OutputCamera {
         }
         Ok(views)
     }
+
+    /// The share of the photo's width and height that the output leaves out ([`fill_crop`]).
+    pub fn crop(&self, input_size: (usize, usize)) -> (f32, f32) {
+        fill_crop(input_size, self.size)
+    }
+
+    /// One line for the user when the output crops the photo ([`fill_crop_note`]).
+    pub fn crop_note(&self, input_size: (usize, usize)) -> Option<String> {
+        fill_crop_note(input_size, self.size)
+    }
+}
+
+/// The share of a photo of `input`'s width and height that an output of `output` filled with
+/// it leaves out (each split evenly between the two sides): `(0, 0)` when the shapes match.
+pub fn fill_crop(input: (usize, usize), output: (usize, usize)) -> (f32, f32) {
+    let s = fill_scale(input, output);
+    let share = |out: usize, inp: usize| {
+        if inp == 0 {
+            0.0
+        } else {
+            (1.0 - out as f32 / (inp as f32 * s)).max(0.0)
+        }
+    };
+    (share(output.0, input.0), share(output.1, input.1))
+}
+
+/// One line for the user when an output of `output` crops a photo of `input`, `None` when the
+/// shapes match (within half a percent).
+pub fn fill_crop_note(input: (usize, usize), output: (usize, usize)) -> Option<String> {
+    let (cw, ch) = fill_crop(input, output);
+    let (ow, oh) = output;
+    let (what, ends, share) = if cw >= ch {
+        ("width", "left and right", cw)
+    } else {
+        ("height", "top and bottom", ch)
+    };
+    (share > 0.005).then(|| {
+        format!(
+            "the {ow}×{oh} output has another shape than the photo: filled with square pixels, \
+             {:.0} % of the photo's {what} left out, half each at the {ends}",
+            100.0 * share
+        )
+    })
+}
+
+/// The uniform scale that makes a photo of `input` cover an output of `output`: the larger of
+/// the two ratios (1 for an empty size).
+fn fill_scale(input: (usize, usize), output: (usize, usize)) -> f32 {
+    if input.0 == 0 || input.1 == 0 {
+        return 1.0;
+    }
+    (output.0 as f32 / input.0 as f32).max(output.1 as f32 / input.1 as f32)
 }
 
 /// Flies autocruise (`project.camera.autocruise`, `project.output.frames` frames) over
@@ -108,4 +168,71 @@ pub fn autocruise(
         project.output.frames,
         progress,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn project(hfov: f32, out: Option<(usize, usize)>) -> Project {
+        let mut p = Project::new(std::path::Path::new("photo.png"));
+        p.camera.hfov_deg = hfov;
+        p.output.width = out.map(|o| o.0);
+        p.output.height = out.map(|o| o.1);
+        p
+    }
+
+    #[test]
+    fn an_output_of_another_shape_is_filled_with_square_pixels() {
+        // A 512×512 photo at 60° across, rendered at 640×400: scale 1.25, the width kept
+        // (hfov 60°), 80 of 640 scaled rows cut at the top and as many at the bottom.
+        let cam = OutputCamera::of(&project(60.0, Some((640, 400))), (512, 512));
+        let f = 320.0 / 30f32.to_radians().tan();
+        assert!((cam.intrinsics.fx - f).abs() < 1e-3, "{:?}", cam.intrinsics);
+        assert_eq!(cam.intrinsics.fx, cam.intrinsics.fy);
+        assert!((cam.intrinsics.cx - 319.5).abs() < 1e-4);
+        assert!((cam.intrinsics.cy - 199.5).abs() < 1e-4);
+        assert!((cam.intrinsics.hfov_deg(640) - 60.0).abs() < 1e-3);
+        let (cw, ch) = cam.crop((512, 512));
+        assert!(cw.abs() < 1e-6 && (ch - 0.375).abs() < 1e-6, "{cw} {ch}");
+        let note = cam.crop_note((512, 512)).unwrap();
+        assert!(
+            note.contains("38 % of the photo's height left out, half each at the top and bottom"),
+            "{note}"
+        );
+        // The output's top edge (v = −0.5) is 120 of the 640 scaled rows down, the photo's
+        // 96th row edge (v = 95.5); its centre column is the photo's.
+        let photo = Intrinsics::from_hfov(512, 512, 60.0);
+        let (u, v, _) = cam
+            .intrinsics
+            .project(photo.unproject(255.5, 95.5, 1.0))
+            .unwrap();
+        assert!(
+            (u - 319.5).abs() < 1e-3 && (v + 0.5).abs() < 1e-3,
+            "{u} {v}"
+        );
+
+        // A wide photo in a square: the height kept, the sides cut.
+        let cam = OutputCamera::of(&project(60.0, Some((400, 400))), (800, 400));
+        assert!((cam.intrinsics.fy - cam.intrinsics.fx).abs() < 1e-6);
+        assert!((cam.intrinsics.fx - 400.0 / 30f32.to_radians().tan()).abs() < 1e-3);
+        assert!((cam.intrinsics.cx - 199.5).abs() < 1e-4);
+        let (cw, ch) = cam.crop((800, 400));
+        assert!((cw - 0.5).abs() < 1e-6 && ch.abs() < 1e-6);
+        assert!(
+            cam.crop_note((800, 400))
+                .unwrap()
+                .contains("left and right")
+        );
+
+        // The same shape: the camera only scaled, nothing left out, nothing said.
+        let cam = OutputCamera::of(&project(50.0, Some((1280, 800))), (640, 400));
+        assert!((cam.intrinsics.hfov_deg(1280) - 50.0).abs() < 1e-3);
+        assert_eq!(cam.crop((640, 400)), (0.0, 0.0));
+        assert!(cam.crop_note((640, 400)).is_none());
+        // No output size: the photo's own.
+        let cam = OutputCamera::of(&project(50.0, None), (640, 400));
+        assert_eq!(cam.size, (640, 400));
+        assert!(cam.crop_note((640, 400)).is_none());
+    }
 }

@@ -37,7 +37,7 @@ mod working;
 
 pub use builder::{SceneBuilder, build_scene};
 pub use cache::{CACHE_ENTRIES, CacheBytes, MIN_SPARE_BYTES, spare_budget};
-pub use camera::{OutputCamera, autocruise, scene_scale};
+pub use camera::{OutputCamera, autocruise, fill_crop, fill_crop_note, scene_scale};
 pub use canvas::canvas_layout;
 pub use sizing::{
     MIN_SIZED_AMPLITUDE, PresetSizing, SIZING_MARGIN, UNSURE_NOTE_SHARE, size_preset,

@@ -200,6 +200,10 @@ impl StagePanel for ExportPanel {
                     .labelled_by(height.id);
             });
         }
+        let size = self.size.unwrap_or((pw, ph));
+        if let Some(note) = crate::scene::fill_crop_note(cx.camera.photo_size, size) {
+            ui.label(note);
+        }
         ui.label(format!(
             "{} frames at {} fps: the project's path (its length is set on the Input tab)",
             out.frames, out.fps
