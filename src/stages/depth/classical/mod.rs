@@ -204,6 +204,12 @@ impl ClassicalDepth {
 
         // Reflection, sky and horizon.
         let mut sky_work = sky_mask(&work, &work_luma, &texture, p);
+        if let Some(line) = sea_line(&work, &work_luma, &sky_work) {
+            // A sea or a plain under the sky: what lies below its horizon is not sky.
+            for y in line + 1..wh {
+                sky_work.row_mut(y).fill(0.0);
+            }
+        }
         let sky_horizon = horizon_from_sky(&sky_work);
         let row_fraction = |row: f32| row / (wh as f32 - 1.0).max(1.0);
         // Water lies below the sky (a symmetric cloud is not a lake).
@@ -1505,6 +1511,76 @@ mod tests {
         );
         // The cloud is not nearer than the ground below the horizon.
         assert!(e.depth.at(35, 16) >= e.depth.at(80, 60));
+    }
+
+    /// A pale sky brightening towards a sea horizon between rows `line` and `line + 1`, a deep-blue calm sea
+    /// below it down to row `shore`, and a textured beach of grass below that.
+    fn seascape(w: usize, h: usize, line: usize, shore: usize) -> RgbRaster {
+        Raster::from_fn(w, h, |x, y| {
+            let t = y as f32 / h as f32;
+            let sky = [0.55 + 0.1 * t, 0.65 + 0.08 * t, 0.82];
+            let sea = [0.35, 0.55, 0.75];
+            if y < shore {
+                // Soft over 12 rows, as a photo's horizon is (haze, the lens): the texture
+                // measure does not see it, so the sky mask runs on into the sea.
+                let s = ((y as f32 - line as f32 + 5.5) / 12.0).clamp(0.0, 1.0);
+                let s = s * s * (3.0 - 2.0 * s);
+                std::array::from_fn(|c| sky[c] + (sea[c] - sky[c]) * s)
+            } else {
+                let n = hash(x, y) * 0.3;
+                [0.55 + n, 0.45 + n, 0.2]
+            }
+        })
+    }
+
+    #[test]
+    fn a_sea_under_the_sky_is_not_sky() {
+        let (w, h) = (160, 100);
+        let img = seascape(w, h, 39, 60);
+        let luma_img = img.map(luma);
+        // The sky mask takes the calm sea for sky (smooth, blue, light enough) …
+        let all = Raster::from_fn(w, h, |_, y| if y < 60 { 1.0 } else { 0.0 });
+        // … the line is the last sky row, the step between rows 39 and 40.
+        assert_eq!(sea_line(&img, &luma_img, &all), Some(39));
+        // A smooth sky alone, and a bright haze under a darker cloud bank: no line.
+        let smooth = Raster::from_fn(w, h, |_, y| {
+            let t = y as f32 / h as f32;
+            [0.5 + 0.3 * t, 0.6 + 0.25 * t, 0.85]
+        });
+        assert_eq!(sea_line(&smooth, &smooth.map(luma), &all), None);
+        let bank = Raster::from_fn(w, h, |_, y| {
+            if y <= 39 {
+                [0.45, 0.5, 0.6]
+            } else {
+                [0.75, 0.78, 0.85]
+            }
+        });
+        assert_eq!(sea_line(&bank, &bank.map(luma), &all), None);
+        // A line across a fifth of the width is no horizon.
+        let part = Raster::from_fn(w, h, |x, y| {
+            if x < 32 {
+                img.at(x, y)
+            } else {
+                smooth.at(x, y)
+            }
+        });
+        assert_eq!(sea_line(&part, &part.map(luma), &all), None);
+        // The estimator: the sea is not sky, and lies nearer than the sky and beyond the beach.
+        let a = estimator()
+            .analyse(&img, &intrinsics(w, h), &Progress::none())
+            .unwrap();
+        let e = a.estimate;
+        check_sane(&e, w, h);
+        assert!(e.sky.at(80, 20) > 0.5 && e.sky.at(80, 50) < 0.5);
+        assert!((a.horizon - 0.4).abs() < 0.03, "horizon {}", a.horizon);
+        assert!(
+            e.depth.at(80, 50) < e.depth.at(80, 20),
+            "the sea is nearer than the sky"
+        );
+        assert!(
+            e.depth.at(80, 80) < e.depth.at(80, 50),
+            "the beach is nearer than the sea"
+        );
     }
 
     #[test]

@@ -79,6 +79,83 @@ pub(super) fn sky_mask(
     sky
 }
 
+/// Rows on each side of a row that [`sea_line`] compares.
+const SEA_LINE_SPAN: usize = 3;
+
+/// The horizon of a sea or a plain seen through what the sky mask took for sky: the topmost
+/// row where a straight horizontal colour edge crosses the mask, darker below, `None` when
+/// there is none. At each row the mean colour of the [`SEA_LINE_SPAN`] mask rows above is
+/// compared with the [`SEA_LINE_SPAN`] below, in the columns where all of them are sky (at
+/// least 40 % of the width); the row is a sea line when that step (L1 over RGB, median over
+/// the columns) is at least 0.06 and four times the median step of the sky rows above it,
+/// when 70 % of the columns step by at least half that (it is straight and crosses the
+/// picture), when the lower side is darker (under a cloud bank the sky below is the brighter),
+/// and when it is the largest step within the span. A smooth sky's gradient steps by about a
+/// hundredth; a deep-blue sea under a pale sky by a tenth.
+pub fn sea_line(work: &RgbRaster, work_luma: &GrayRaster, sky: &GrayRaster) -> Option<usize> {
+    let (w, h) = work.size();
+    let k = SEA_LINE_SPAN;
+    if w == 0 || h < 2 * k + 2 {
+        return None;
+    }
+    // Per row y (a step between rows y and y + 1): the median step, the share of columns
+    // stepping by at least `half`, and the luma difference (below − above).
+    let row_step = |y: usize| -> Option<(f32, Vec<f32>, f32)> {
+        let cols: Vec<usize> = (0..w)
+            .filter(|&x| (y + 1 - k..=y + k).all(|r| sky.at(x, r) > 0.5))
+            .collect();
+        if (cols.len() as f32) < 0.4 * w as f32 {
+            return None;
+        }
+        let mut steps = Vec::with_capacity(cols.len());
+        let (mut above_l, mut below_l) = (0.0f32, 0.0f32);
+        for &x in &cols {
+            let (mut a, mut b) = ([0.0f32; 3], [0.0f32; 3]);
+            for r in 0..k {
+                let (ca, cb) = (work.at(x, y - r), work.at(x, y + 1 + r));
+                for c in 0..3 {
+                    a[c] += ca[c] / k as f32;
+                    b[c] += cb[c] / k as f32;
+                }
+                above_l += work_luma.at(x, y - r);
+                below_l += work_luma.at(x, y + 1 + r);
+            }
+            steps.push((a[0] - b[0]).abs() + (a[1] - b[1]).abs() + (a[2] - b[2]).abs());
+        }
+        let median = quantile(&steps, 0.5)?;
+        Some((median, steps, below_l - above_l))
+    };
+    let rows: Vec<Option<(f32, Vec<f32>, f32)>> = (0..h)
+        .map(|y| {
+            if y + 1 < k || y + k >= h {
+                None
+            } else {
+                row_step(y)
+            }
+        })
+        .collect();
+    let median_of = |y: usize| rows[y].as_ref().map(|r| r.0);
+    for (y, row) in rows.iter().enumerate() {
+        let Some((step, steps, darker)) = row else {
+            continue;
+        };
+        let sky_above: Vec<f32> = (0..y.saturating_sub(k)).filter_map(median_of).collect();
+        let Some(baseline) = quantile(&sky_above, 0.5) else {
+            continue;
+        };
+        let threshold = 0.06f32.max(4.0 * baseline);
+        let straight = steps.iter().filter(|&&s| s >= 0.5 * threshold).count() as f32
+            >= 0.7 * steps.len() as f32;
+        let peak = (y.saturating_sub(k)..=(y + k).min(h - 1))
+            .filter_map(median_of)
+            .all(|other| other <= *step);
+        if *step >= threshold && straight && *darker < 0.0 && peak {
+            return Some(y);
+        }
+    }
+    None
+}
+
 /// Fills the holes of a sky mask that are sky too: a part of the picture surrounded by sky
 /// (not connected to the bottom row, nor to the side borders below row `horizon_row`) whose
 /// pixels are mostly [`sky_coloured`] is a cloud, and stays at the far plane with the sky. A
