@@ -80,7 +80,7 @@ pub(super) fn sky_mask(
 }
 
 /// Rows on each side of a row that [`sea_line`] compares.
-const SEA_LINE_SPAN: usize = 3;
+pub const SEA_LINE_SPAN: usize = 3;
 
 /// The horizon of a sea or a plain seen through what the sky mask took for sky: the topmost
 /// row where a straight horizontal colour edge crosses the mask, darker below, `None` when
