@@ -358,6 +358,11 @@ impl ClassicalDepth {
         // rail, a shore, a row of rooftops) is ground, not a figure; there the object cue
         // says what the position cue says.
         let object_work = neutral_outside_figures(&object_work, &position_work);
+        let object_work = if landscape {
+            neutral_ground_bands(&object_work, &position_work, v_horizon_work)
+        } else {
+            object_work
+        };
         let mut fused = Raster::from_fn(ww, wh, |x, y| {
             if plane(y) {
                 return position_work.at(x, y);
@@ -725,6 +730,55 @@ pub fn neutral_outside_figures(object: &GrayRaster, neutral: &GrayRaster) -> Gra
         if 2 * in_full_rows >= members.len()
             || (members.len() as f32) < MIN_FIGURE_SHARE * o.len() as f32
         {
+            for i in members {
+                out.data_mut()[i] = neutral.data()[i];
+            }
+        }
+    }
+    out
+}
+
+/// `object` with its background bands on the ground made `neutral`: a region of the object
+/// cue's background (4-connected pixels ≤ ½) that lies wholly below the horizon row
+/// `v_horizon` and is a band across the picture (at least half its pixels in rows it covers to
+/// [`BAND_ROW_SHARE`] of the width: a road, a field, a strip of water) is ground, and there the
+/// object cue says what the position cue says, as [`neutral_outside_figures`] does for bands
+/// it calls near. Without it, a dark road under a pale rail reads as farther than the rail
+/// above it, and a fly-in tears the road into strips.
+pub fn neutral_ground_bands(
+    object: &GrayRaster,
+    neutral: &GrayRaster,
+    v_horizon: f32,
+) -> GrayRaster {
+    let (w, h) = object.size();
+    let mut out = object.clone();
+    let o = object.data();
+    let mut seen = vec![false; o.len()];
+    let mut queue = VecDeque::new();
+    for start in 0..o.len() {
+        if seen[start] || o[start] > 0.5 {
+            continue;
+        }
+        seen[start] = true;
+        queue.push_back(start);
+        let mut members = Vec::new();
+        let mut per_row = vec![0usize; h];
+        while let Some(i) = queue.pop_front() {
+            members.push(i);
+            per_row[i / w] += 1;
+            for n in crate::raster::neighbours4(i, w, h).into_iter().flatten() {
+                if !seen[n] && o[n] <= 0.5 {
+                    seen[n] = true;
+                    queue.push_back(n);
+                }
+            }
+        }
+        let top = per_row.iter().position(|&n| n > 0).unwrap_or(h);
+        let in_full_rows: usize = per_row
+            .iter()
+            .filter(|&&n| n as f32 >= BAND_ROW_SHARE * w as f32)
+            .sum();
+        if top as f32 > v_horizon && 2 * in_full_rows >= members.len() {
             for i in members {
                 out.data_mut()[i] = neutral.data()[i];
             }
@@ -1119,6 +1173,35 @@ mod tests {
             "a diagonal reaching both sides is a figure"
         );
         assert_eq!(out.at(0, 0), 0.0);
+    }
+
+    #[test]
+    fn background_bands_on_the_ground_follow_the_ground() {
+        // 40 × 30, horizon at row 10. The object cue's background (0.1) in three pieces split
+        // by near bands (0.9, rows 14..16 and 20..22, across the whole width): above the
+        // horizon (rows 0..14), a band on the ground (rows 16..20) and, below the second near
+        // band, the ground around a figure standing on the bottom edge (rows 22..30 minus a
+        // 30 × 7 figure: 40 of its 110 pixels in full rows, no band). Only the band on the
+        // ground takes the neutral value.
+        let (w, h) = (40, 30);
+        let neutral = Raster::from_fn(w, h, |_, y| y as f32 / h as f32);
+        let object = Raster::from_fn(w, h, |x, y| {
+            let near = (14..16).contains(&y) || (20..22).contains(&y);
+            let blob = (5..35).contains(&x) && (23..30).contains(&y);
+            if near || blob { 0.9 } else { 0.1 }
+        });
+        let out = neutral_ground_bands(&object, &neutral, 10.0);
+        assert_eq!(
+            out.at(20, 18),
+            18.0 / 30.0,
+            "a band on the ground is ground"
+        );
+        assert_eq!(out.at(20, 5), 0.1, "the background above the horizon stays");
+        assert_eq!(out.at(1, 25), 0.1, "around a figure the background stays");
+        assert_eq!(out.at(20, 15), 0.9, "near bands are not this rule's");
+        // With the horizon below the band, it is not on the ground.
+        let out = neutral_ground_bands(&object, &neutral, 17.0);
+        assert_eq!(out.at(20, 18), 0.1);
     }
 
     #[test]
