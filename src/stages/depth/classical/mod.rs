@@ -699,13 +699,37 @@ pub const BAND_ROW_SHARE: f32 = 0.7;
 /// [`BAND_ROW_SHARE`] of the width (a rail, a shore: ground, not a figure; a plant whose
 /// leaves reach both sides still covers few rows whole).
 pub fn neutral_outside_figures(object: &GrayRaster, neutral: &GrayRaster) -> GrayRaster {
-    let (w, h) = object.size();
     let mut out = object.clone();
-    let o = object.data();
+    let total = object.len();
+    for_each_region(
+        object,
+        |o| o > 0.5,
+        |members, per_row| {
+            if is_band(members.len(), per_row, object.width())
+                || (members.len() as f32) < MIN_FIGURE_SHARE * total as f32
+            {
+                for &i in members {
+                    out.data_mut()[i] = neutral.data()[i];
+                }
+            }
+        },
+    );
+    out
+}
+
+/// Calls `f(members, per_row)` for each 4-connected region of the pixels of `values` where
+/// `inside` holds: its pixel indices and its pixel count per row.
+fn for_each_region(
+    values: &GrayRaster,
+    inside: impl Fn(f32) -> bool,
+    mut f: impl FnMut(&[usize], &[usize]),
+) {
+    let (w, h) = values.size();
+    let o = values.data();
     let mut seen = vec![false; o.len()];
     let mut queue = VecDeque::new();
     for start in 0..o.len() {
-        if seen[start] || o[start] <= 0.5 {
+        if seen[start] || !inside(o[start]) {
             continue;
         }
         seen[start] = true;
@@ -716,26 +740,24 @@ pub fn neutral_outside_figures(object: &GrayRaster, neutral: &GrayRaster) -> Gra
             members.push(i);
             per_row[i / w] += 1;
             for n in crate::raster::neighbours4(i, w, h).into_iter().flatten() {
-                if !seen[n] && o[n] > 0.5 {
+                if !seen[n] && inside(o[n]) {
                     seen[n] = true;
                     queue.push_back(n);
                 }
             }
         }
-        // A band: most of its pixels lie in rows it crosses nearly whole.
-        let in_full_rows: usize = per_row
-            .iter()
-            .filter(|&&n| n as f32 >= BAND_ROW_SHARE * w as f32)
-            .sum();
-        if 2 * in_full_rows >= members.len()
-            || (members.len() as f32) < MIN_FIGURE_SHARE * o.len() as f32
-        {
-            for i in members {
-                out.data_mut()[i] = neutral.data()[i];
-            }
-        }
+        f(&members, &per_row);
     }
-    out
+}
+
+/// A band across a picture `w` wide: at least half of a region's `count` pixels lie in rows it
+/// covers to [`BAND_ROW_SHARE`] of the width (`per_row`: its pixels per row).
+fn is_band(count: usize, per_row: &[usize], w: usize) -> bool {
+    let in_full_rows: usize = per_row
+        .iter()
+        .filter(|&&n| n as f32 >= BAND_ROW_SHARE * w as f32)
+        .sum();
+    2 * in_full_rows >= count
 }
 
 /// `object` with its background bands on the ground made `neutral`: a region of the object
@@ -750,40 +772,19 @@ pub fn neutral_ground_bands(
     neutral: &GrayRaster,
     v_horizon: f32,
 ) -> GrayRaster {
-    let (w, h) = object.size();
     let mut out = object.clone();
-    let o = object.data();
-    let mut seen = vec![false; o.len()];
-    let mut queue = VecDeque::new();
-    for start in 0..o.len() {
-        if seen[start] || o[start] > 0.5 {
-            continue;
-        }
-        seen[start] = true;
-        queue.push_back(start);
-        let mut members = Vec::new();
-        let mut per_row = vec![0usize; h];
-        while let Some(i) = queue.pop_front() {
-            members.push(i);
-            per_row[i / w] += 1;
-            for n in crate::raster::neighbours4(i, w, h).into_iter().flatten() {
-                if !seen[n] && o[n] <= 0.5 {
-                    seen[n] = true;
-                    queue.push_back(n);
+    for_each_region(
+        object,
+        |o| o <= 0.5,
+        |members, per_row| {
+            let top = per_row.iter().position(|&n| n > 0).unwrap_or(per_row.len());
+            if top as f32 > v_horizon && is_band(members.len(), per_row, object.width()) {
+                for &i in members {
+                    out.data_mut()[i] = neutral.data()[i];
                 }
             }
-        }
-        let top = per_row.iter().position(|&n| n > 0).unwrap_or(h);
-        let in_full_rows: usize = per_row
-            .iter()
-            .filter(|&&n| n as f32 >= BAND_ROW_SHARE * w as f32)
-            .sum();
-        if top as f32 > v_horizon && 2 * in_full_rows >= members.len() {
-            for i in members {
-                out.data_mut()[i] = neutral.data()[i];
-            }
-        }
-    }
+        },
+    );
     out
 }
 
