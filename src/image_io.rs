@@ -607,13 +607,24 @@ pub fn save_gray16_png(path: &Path, image: &GrayRaster) -> Result<()> {
     write_atomic(path, &encode_png(&DynamicImage::ImageLuma16(out))?)
 }
 
+/// Prefix of the empty file [`prepare_output_dir`] writes and removes to test a folder.
+const WRITE_PROBE: &str = ".makeit4d-write-test.";
+
 /// Makes sure `dir` exists (creating it) and is a writable folder; the error names the folder.
+/// A probe left by a run killed while it tested the folder is removed first.
 pub fn prepare_output_dir(dir: &Path) -> Result<()> {
     if dir.exists() && !dir.is_dir() {
         return Err(Error::file(dir, "exists and is not a folder"));
     }
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, format!("cannot create: {e}")))?;
-    let probe = dir.join(format!(".makeit4d-write-test.{}", std::process::id()));
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for entry in entries.flatten() {
+            if entry.file_name().to_string_lossy().starts_with(WRITE_PROBE) {
+                let _ = std::fs::remove_file(entry.path());
+            }
+        }
+    }
+    let probe = dir.join(format!("{WRITE_PROBE}{}", std::process::id()));
     std::fs::write(&probe, b"")
         .map_err(|e| Error::file(dir, format!("folder is not writable: {e}")))?;
     let _ = std::fs::remove_file(&probe);
@@ -626,6 +637,19 @@ mod tests {
 
     fn tmp() -> tempfile::TempDir {
         tempfile::tempdir().expect("tempdir")
+    }
+
+    #[test]
+    fn a_probe_left_by_a_killed_run_is_removed() {
+        let dir = tmp();
+        std::fs::write(dir.path().join(".makeit4d-write-test.12345"), b"").unwrap();
+        std::fs::write(dir.path().join("frame_0000.png"), b"kept").unwrap();
+        prepare_output_dir(dir.path()).unwrap();
+        let left: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(left, vec![std::ffi::OsString::from("frame_0000.png")]);
     }
 
     #[test]
