@@ -38,9 +38,10 @@ pub fn scene_scale(depth: &GrayRaster, sky: &GrayRaster) -> Result<SceneScale> {
 /// input camera scaled to it with square pixels. An output of another shape than the photo is
 /// filled as a video editor fills a frame: the photo is scaled by the larger of the two ratios
 /// and centred, so a square portrait at 16:10 loses a strip at the top and the bottom instead
-/// of being stretched sideways ([`OutputCamera::crop`] says how much). The one place that turns a project into per-frame views: the
-/// canvas stage sizes the canvas from them, the cloud stage its density, and export, the
-/// diagnostics, autocruise, the editor's camera plot and both previews render them.
+/// of being stretched sideways ([`fill_crop`] says how much). The one place that turns a
+/// project into per-frame views: the canvas stage sizes the canvas from them, the cloud stage
+/// its density, and export, the diagnostics, autocruise, the editor's camera plot and both
+/// previews render them.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct OutputCamera {
     /// Output width and height in pixels.
@@ -93,11 +94,6 @@ impl OutputCamera {
             )));
         }
         Ok(views)
-    }
-
-    /// The share of the photo's width and height that the output leaves out ([`fill_crop`]).
-    pub fn crop(&self, input_size: (usize, usize)) -> (f32, f32) {
-        fill_crop(input_size, self.size)
     }
 
     /// One line for the user when the output crops the photo ([`fill_crop_note`]).
@@ -193,7 +189,7 @@ mod tests {
         assert!((cam.intrinsics.cx - 319.5).abs() < 1e-4);
         assert!((cam.intrinsics.cy - 199.5).abs() < 1e-4);
         assert!((cam.intrinsics.hfov_deg(640) - 60.0).abs() < 1e-3);
-        let (cw, ch) = cam.crop((512, 512));
+        let (cw, ch) = fill_crop((512, 512), cam.size);
         assert!(cw.abs() < 1e-6 && (ch - 0.375).abs() < 1e-6, "{cw} {ch}");
         let note = cam.crop_note((512, 512)).unwrap();
         assert!(
@@ -217,7 +213,7 @@ mod tests {
         assert!((cam.intrinsics.fy - cam.intrinsics.fx).abs() < 1e-6);
         assert!((cam.intrinsics.fx - 400.0 / 30f32.to_radians().tan()).abs() < 1e-3);
         assert!((cam.intrinsics.cx - 199.5).abs() < 1e-4);
-        let (cw, ch) = cam.crop((800, 400));
+        let (cw, ch) = fill_crop((800, 400), cam.size);
         assert!((cw - 0.5).abs() < 1e-6 && ch.abs() < 1e-6);
         assert!(
             cam.crop_note((800, 400))
@@ -228,7 +224,7 @@ mod tests {
         // The same shape: the camera only scaled, nothing left out, nothing said.
         let cam = OutputCamera::of(&project(50.0, Some((1280, 800))), (640, 400));
         assert!((cam.intrinsics.hfov_deg(1280) - 50.0).abs() < 1e-3);
-        assert_eq!(cam.crop((640, 400)), (0.0, 0.0));
+        assert_eq!(fill_crop((640, 400), cam.size), (0.0, 0.0));
         assert!(cam.crop_note((640, 400)).is_none());
         // No output size: the photo's own.
         let cam = OutputCamera::of(&project(50.0, None), (640, 400));

@@ -699,33 +699,29 @@ pub const BAND_ROW_SHARE: f32 = 0.7;
 /// [`BAND_ROW_SHARE`] of the width (a rail, a shore: ground, not a figure; a plant whose
 /// leaves reach both sides still covers few rows whole).
 pub fn neutral_outside_figures(object: &GrayRaster, neutral: &GrayRaster) -> GrayRaster {
-    let mut out = object.clone();
-    let total = object.len();
-    for_each_region(
+    let (w, total) = (object.width(), object.len());
+    neutral_regions(
         object,
+        neutral,
         |o| o > 0.5,
         |members, per_row| {
-            if is_band(members.len(), per_row, object.width())
+            is_band(members.len(), per_row, w)
                 || (members.len() as f32) < MIN_FIGURE_SHARE * total as f32
-            {
-                for &i in members {
-                    out.data_mut()[i] = neutral.data()[i];
-                }
-            }
         },
-    );
-    out
+    )
 }
 
-/// Calls `f(members, per_row)` for each 4-connected region of the pixels of `values` where
-/// `inside` holds: its pixel indices and its pixel count per row.
-fn for_each_region(
-    values: &GrayRaster,
+/// `object` with `neutral` in each 4-connected region of the pixels where `inside` holds that
+/// `pick(members, per_row)` chooses (its pixel indices and its pixel count per row).
+fn neutral_regions(
+    object: &GrayRaster,
+    neutral: &GrayRaster,
     inside: impl Fn(f32) -> bool,
-    mut f: impl FnMut(&[usize], &[usize]),
-) {
-    let (w, h) = values.size();
-    let o = values.data();
+    pick: impl Fn(&[usize], &[usize]) -> bool,
+) -> GrayRaster {
+    let (w, h) = object.size();
+    let mut out = object.clone();
+    let o = object.data();
     let mut seen = vec![false; o.len()];
     let mut queue = VecDeque::new();
     for start in 0..o.len() {
@@ -746,8 +742,13 @@ fn for_each_region(
                 }
             }
         }
-        f(&members, &per_row);
+        if pick(&members, &per_row) {
+            for i in members {
+                out.data_mut()[i] = neutral.data()[i];
+            }
+        }
     }
+    out
 }
 
 /// A band across a picture `w` wide: at least half of a region's `count` pixels lie in rows it
@@ -772,20 +773,16 @@ pub fn neutral_ground_bands(
     neutral: &GrayRaster,
     v_horizon: f32,
 ) -> GrayRaster {
-    let mut out = object.clone();
-    for_each_region(
+    let w = object.width();
+    neutral_regions(
         object,
+        neutral,
         |o| o <= 0.5,
         |members, per_row| {
             let top = per_row.iter().position(|&n| n > 0).unwrap_or(per_row.len());
-            if top as f32 > v_horizon && is_band(members.len(), per_row, object.width()) {
-                for &i in members {
-                    out.data_mut()[i] = neutral.data()[i];
-                }
-            }
+            top as f32 > v_horizon && is_band(members.len(), per_row, w)
         },
-    );
-    out
+    )
 }
 
 /// Whether the sky mask covers at least 5 % of the bottom row.
@@ -1597,8 +1594,8 @@ mod tests {
         assert!(e.depth.at(35, 16) >= e.depth.at(80, 60));
     }
 
-    /// A pale sky brightening towards a sea horizon between rows `line` and `line + 1`, a deep-blue calm sea
-    /// below it down to row `shore`, and a textured beach of grass below that.
+    /// A pale sky brightening towards a sea horizon between rows `line` and `line + 1`, a calm
+    /// deep-blue sea below it down to row `shore`, and a textured beach of grass below that.
     fn seascape(w: usize, h: usize, line: usize, shore: usize) -> RgbRaster {
         Raster::from_fn(w, h, |x, y| {
             let t = y as f32 / h as f32;
