@@ -761,13 +761,19 @@ fn is_band(count: usize, per_row: &[usize], w: usize) -> bool {
     2 * in_full_rows >= count
 }
 
+/// Share of the bottom row a background region on the ground must cover to be the ground in
+/// front of the camera ([`neutral_ground_bands`]).
+pub const GROUND_BOTTOM_SHARE: f32 = 0.5;
+
 /// `object` with its background bands on the ground made `neutral`: a region of the object
 /// cue's background (4-connected pixels ≤ ½) that lies wholly below the horizon row
 /// `v_horizon` and is a band across the picture (at least half its pixels in rows it covers to
 /// [`BAND_ROW_SHARE`] of the width: a road, a field, a strip of water) is ground, and there the
 /// object cue says what the position cue says, as [`neutral_outside_figures`] does for bands
-/// it calls near. Without it, a dark road under a pale rail reads as farther than the rail
-/// above it, and a fly-in tears the road into strips.
+/// it calls near. So is such a region that covers at least [`GROUND_BOTTOM_SHARE`] of the
+/// bottom row (the ground in front of the camera, a wedge of road under a slanting line:
+/// what stands on the bottom edge leaves less of it). Without it, a dark road under a pale
+/// rail reads as farther than the rail above it, and a fly-in tears the road into strips.
 pub fn neutral_ground_bands(
     object: &GrayRaster,
     neutral: &GrayRaster,
@@ -780,7 +786,9 @@ pub fn neutral_ground_bands(
         |o| o <= 0.5,
         |members, per_row| {
             let top = per_row.iter().position(|&n| n > 0).unwrap_or(per_row.len());
-            top as f32 > v_horizon && is_band(members.len(), per_row, w)
+            let bottom = per_row.last().copied().unwrap_or(0) as f32;
+            top as f32 > v_horizon
+                && (is_band(members.len(), per_row, w) || bottom >= GROUND_BOTTOM_SHARE * w as f32)
         },
     )
 }
@@ -1200,6 +1208,20 @@ mod tests {
         // With the horizon below the band, it is not on the ground.
         let out = neutral_ground_bands(&object, &neutral, 17.0);
         assert_eq!(out.at(20, 18), 0.1);
+        // A wedge of road under a slanting near line (row 22 at the left to row 29 at x = 35):
+        // no band (its rows are short), but it covers 35 of the bottom row's 40 pixels: the
+        // ground in front of the camera. Cut to 19 pixels of the bottom row (under half) by a
+        // figure, it stays.
+        let line = |x: usize| 22 + x / 5;
+        for (cut, expected) in [(40, 29.0 / 30.0), (19, 0.1)] {
+            let object = Raster::from_fn(w, h, |x, y| {
+                let near = y < 20 || y == line(x) || (y == 29 && x >= cut.min(35));
+                if near { 0.9 } else { 0.1 }
+            });
+            let out = neutral_ground_bands(&object, &neutral, 10.0);
+            assert_eq!(out.at(2, 29), expected, "cut at {cut}");
+            assert_eq!(out.at(2, 15), 0.9);
+        }
     }
 
     #[test]
