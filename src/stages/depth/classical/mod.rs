@@ -285,9 +285,12 @@ impl ClassicalDepth {
 
         // Object cue.
         let (mut object_work, border_coherence) = object_cue(&work, &texture, p);
-        // Much brighter than the image (sky through branches, bright clouds): not an object.
+        // Much brighter than the image (sky through branches, bright clouds): not an object —
+        // where the picture shows some sky. Without any, a bright thing is a thing (a pale
+        // flower in a close-up).
         let median_luma = quantile(work_luma.data(), 0.5).unwrap_or(0.0);
-        if median_luma > 0.0 {
+        let any_sky = sky_work.data().iter().any(|s| *s > 0.5);
+        if median_luma > 0.0 && any_sky {
             let f = p.sky_bright_factor;
             for (o, l) in object_work.data_mut().iter_mut().zip(work_luma.data()) {
                 let sky_like = ((l / median_luma - 0.75 * f) / (0.5 * f)).clamp(0.0, 1.0);
@@ -1082,6 +1085,37 @@ mod tests {
             let (c, _) = box_stats(&a.estimate.confidence, 56, 136, y0, y1);
             assert!(c < 0.5, "rows {y0}..{y1}: confidence {c}");
         }
+    }
+
+    #[test]
+    fn a_bright_flower_without_a_sky_is_a_thing() {
+        // A close-up: a pale, bright blossom (luma 3 × the median) high on a dark green,
+        // blurred-looking background, no sky anywhere. Bright things are discounted as sky
+        // seen through gaps only where the picture shows a sky: here the blossom stays a
+        // figure of the object cue and is nearer than the leaves beside it.
+        let (w, h) = (160, 100);
+        let img = Raster::from_fn(w, h, |x, y| {
+            let (dx, dy) = (x as f32 - 40.0, y as f32 - 30.0);
+            if dx * dx + dy * dy < 14.0 * 14.0 {
+                [0.75, 0.8, 0.95]
+            } else {
+                let n = 0.03 * hash(x, y);
+                [0.12 + n, 0.3 + n, 0.08 + n]
+            }
+        });
+        let a = estimator()
+            .analyse(&img, &intrinsics(w, h), &Progress::none())
+            .unwrap();
+        check_sane(&a.estimate, w, h);
+        assert!(a.sky_work.data().iter().all(|s| *s <= 0.5), "no sky here");
+        let (ww, wh) = a.object_work.size();
+        let at = |x: f32, y: f32| {
+            a.object_work
+                .at((x * ww as f32) as usize, (y * wh as f32) as usize)
+        };
+        assert!(at(0.25, 0.3) > 0.5, "the blossom: {}", at(0.25, 0.3));
+        let z = |x: usize, y: usize| a.estimate.depth.at(x, y);
+        assert!(z(40, 30) < z(70, 30), "{} against {}", z(40, 30), z(70, 30));
     }
 
     #[test]
