@@ -4,9 +4,9 @@
 # photo's own shape with at least 640x400 (W = max(640, 400 w/h), H = max(400, 640 h/w)):
 #   BIN render PHOTO --out DIR/TAG/NAME-fly-in --size WxH --frames 40 --preset fly-in --range 39..40
 #   BIN render PHOTO --out DIR/TAG/NAME-orbit  --size WxH --frames 40 --preset orbit  --range 20..21
-# then `python3 contact-sheet.py DIR OUT.jpg` (Pillow): each frame's centre 640x400 (what a 640x400
-# output fills with square pixels), halved; rows = photos, columns = fly-in before / after, orbit
-# before / after.
+# then, from the repository root, `python3 docs/gallery/contact-sheet.py DIR OUT.jpg` (Pillow):
+# each frame's centre 640x400 (what a 640x400 output fills with square pixels), halved; rows =
+# photos, columns = fly-in before / after, orbit before / after.
 import os
 import sys
 
