@@ -697,30 +697,61 @@ pub const MIN_FIGURE_SHARE: f32 = 0.002;
 /// Share of a row an object region must cover for the row to count as crossed by it.
 pub const BAND_ROW_SHARE: f32 = 0.7;
 
+/// Largest share of the picture's rows a band the object cue calls near may span and still
+/// stand on the ground below it ([`neutral_outside_figures`]).
+pub const STANDING_BAND_ROWS: f32 = 0.25;
+
 /// `object` where its regions (4-connected pixels > ½) are figures, `neutral` in regions that
 /// are bands across the picture — at least half their pixels in rows they cover to
 /// [`BAND_ROW_SHARE`] of the width (a rail, a shore: ground, not a figure; a plant whose
-/// leaves reach both sides still covers few rows whole).
+/// leaves reach both sides still covers few rows whole). A band that spans at most
+/// [`STANDING_BAND_ROWS`] of the rows (a guard rail, a fence, a wall seen side-on) stands on the
+/// ground just below it: each of its columns takes `neutral` at the row under its lowest pixel
+/// there, the pop-up model's contact (Hoiem et al. 2005), so its foot joins the ground without
+/// a step. A taller band (a field of grass, a row of boats up a beach) may be receding ground as
+/// well as a standing thing, and taken for a wall it would move as one; it keeps `neutral` at
+/// its own rows. A region under [`MIN_FIGURE_SHARE`] of the picture takes `neutral` too.
 pub fn neutral_outside_figures(object: &GrayRaster, neutral: &GrayRaster) -> GrayRaster {
-    let (w, total) = (object.width(), object.len());
+    let (w, h) = object.size();
+    let total = object.len();
     neutral_regions(
         object,
         neutral,
         |o| o > 0.5,
         |members, per_row| {
-            is_band(members.len(), per_row, w)
-                || (members.len() as f32) < MIN_FIGURE_SHARE * total as f32
+            if is_band(members.len(), per_row, w) {
+                let rows = per_row.iter().filter(|&&n| n > 0).count();
+                Some(if rows as f32 <= STANDING_BAND_ROWS * h as f32 {
+                    Neutral::AtFoot
+                } else {
+                    Neutral::InPlace
+                })
+            } else {
+                ((members.len() as f32) < MIN_FIGURE_SHARE * total as f32)
+                    .then_some(Neutral::InPlace)
+            }
         },
     )
 }
 
+/// Where a region chosen by [`neutral_regions`] reads the neutral map.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Neutral {
+    /// At each of its own pixels.
+    InPlace,
+    /// Column by column, at the row under the region's lowest pixel in that column (the last
+    /// row where it reaches the bottom).
+    AtFoot,
+}
+
 /// `object` with `neutral` in each 4-connected region of the pixels where `inside` holds that
-/// `pick(members, per_row)` chooses (its pixel indices and its pixel count per row).
+/// `pick(members, per_row)` chooses (its pixel indices and its pixel count per row), read as
+/// the choice says.
 fn neutral_regions(
     object: &GrayRaster,
     neutral: &GrayRaster,
     inside: impl Fn(f32) -> bool,
-    pick: impl Fn(&[usize], &[usize]) -> bool,
+    pick: impl Fn(&[usize], &[usize]) -> Option<Neutral>,
 ) -> GrayRaster {
     let (w, h) = object.size();
     let mut out = object.clone();
@@ -745,9 +776,22 @@ fn neutral_regions(
                 }
             }
         }
-        if pick(&members, &per_row) {
-            for i in members {
-                out.data_mut()[i] = neutral.data()[i];
+        match pick(&members, &per_row) {
+            None => {}
+            Some(Neutral::InPlace) => {
+                for i in members {
+                    out.data_mut()[i] = neutral.data()[i];
+                }
+            }
+            Some(Neutral::AtFoot) => {
+                let mut foot = vec![0usize; w];
+                for &i in &members {
+                    foot[i % w] = foot[i % w].max(i / w);
+                }
+                for i in members {
+                    let x = i % w;
+                    out.data_mut()[i] = neutral.at(x, (foot[x] + 1).min(h - 1));
+                }
             }
         }
     }
@@ -790,8 +834,9 @@ pub fn neutral_ground_bands(
         |members, per_row| {
             let top = per_row.iter().position(|&n| n > 0).unwrap_or(per_row.len());
             let bottom = per_row.last().copied().unwrap_or(0) as f32;
-            top as f32 > v_horizon
-                && (is_band(members.len(), per_row, w) || bottom >= GROUND_BOTTOM_SHARE * w as f32)
+            (top as f32 > v_horizon
+                && (is_band(members.len(), per_row, w) || bottom >= GROUND_BOTTOM_SHARE * w as f32))
+                .then_some(Neutral::InPlace)
         },
     )
 }
@@ -1213,6 +1258,21 @@ mod tests {
             "a diagonal reaching both sides is a figure"
         );
         assert_eq!(out.at(0, 0), 0.0);
+        // On a ground that nears downwards, the thin band (4 of 30 rows) stands on the row
+        // under it (row 14); a band over 10 of the 30 rows (more than a quarter) keeps the
+        // ground at its own rows.
+        let ground = Raster::from_fn(w, h, |_, y| y as f32 / 100.0);
+        let out = neutral_outside_figures(&object, &ground);
+        for y in 10..14 {
+            assert_eq!(out.at(30, y), 0.14, "row {y}");
+        }
+        let tall = Raster::from_fn(w, h, |_, y| if (10..20).contains(&y) { 0.9 } else { 0.0 });
+        let out = neutral_outside_figures(&tall, &ground);
+        assert_eq!(out.at(30, 12), 0.12);
+        assert_eq!(out.at(30, 19), 0.19);
+        // A thin band on the bottom edge stands on its own last row.
+        let low = Raster::from_fn(w, h, |_, y| if y >= 27 { 0.9 } else { 0.0 });
+        assert_eq!(neutral_outside_figures(&low, &ground).at(3, 27), 0.29);
     }
 
     #[test]
