@@ -405,6 +405,10 @@ pub(crate) struct EvalScribblesArgs {
     /// Inpainting preset of the novel views: draft, preview or final.
     #[arg(long, default_value = "preview")]
     pub(crate) inpaint_preset: String,
+    /// The simulated user strokes where the aligned disparity is off by more than this many
+    /// pixels of the pair (default: where its ratio to the truth is over 1.25).
+    #[arg(long)]
+    pub(crate) tolerance_px: Option<f64>,
     /// Print JSON instead of a markdown table.
     #[arg(long)]
     pub(crate) json: bool,

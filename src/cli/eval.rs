@@ -179,6 +179,12 @@ pub(crate) fn eval_scribbles(
         nvs: !args.no_nvs,
         ..ScribbleOptions::default()
     };
+    if let Some(px) = args.tolerance_px {
+        if !(px.is_finite() && px > 0.0) {
+            anyhow::bail!("--tolerance-px {px}: must be a positive number of pixels");
+        }
+        options.tolerance_px = Some(px);
+    }
     options.nvs_options.preset = args.inpaint_preset.parse()?;
     if let Some(v) = args.sigma_colour {
         options.params.sigma_colour = v;

@@ -29,6 +29,9 @@ pub struct ScribbleOptions {
     pub strokes: Vec<usize>,
     /// Depth ratio beyond which a pixel is wrong.
     pub tolerance: f64,
+    /// Instead of the ratio: the aligned disparity's error, pixels of the pair, beyond which a
+    /// pixel is wrong (`None`: the ratio).
+    pub tolerance_px: Option<f64>,
     /// Largest dab radius, pixels.
     pub radius_px: f32,
     /// The solver.
@@ -44,6 +47,7 @@ impl Default for ScribbleOptions {
         Self {
             strokes: vec![0, 1, 2, 5, 10, 20, 30],
             tolerance: 1.25,
+            tolerance_px: None,
             radius_px: 12.0,
             params: PropagateParams::default(),
             nvs: true,
@@ -131,6 +135,15 @@ impl ScribbleTable {
             }
         }
         out
+    }
+}
+
+/// Whether an aligned disparity `a` is wrong against the truth `g` (both positive): off by a
+/// ratio over `ratio`, or with `px`, by more than `px` pixels.
+pub fn is_wrong(a: f64, g: f64, ratio: f64, px: Option<f64>) -> bool {
+    match px {
+        Some(px) => (a - g).abs() > px,
+        None => (a / g).max(g / a) > ratio,
     }
 }
 
@@ -234,7 +247,7 @@ pub fn eval_scribbles(
                     return false;
                 }
                 let a = (m.scale / current.at(x, y) as f64 + m.shift).max(1e-9);
-                (a / g).max(g / a) > options.tolerance
+                is_wrong(a, g, options.tolerance, options.tolerance_px)
             });
             let Some((cx, cy, dist)) = simulated_click(&wrong) else {
                 break; // Nothing left to correct.
@@ -327,6 +340,19 @@ pub fn eval_scribbles(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_pixel_is_wrong_by_ratio_or_by_pixels() {
+        // 10 against 12: a ratio of 1.2, two pixels.
+        assert!(!is_wrong(10.0, 12.0, 1.25, None));
+        assert!(is_wrong(10.0, 12.0, 1.1, None));
+        assert!(is_wrong(12.0, 10.0, 1.1, None));
+        assert!(is_wrong(10.0, 12.0, 1.25, Some(1.0)));
+        assert!(!is_wrong(10.0, 12.0, 1.25, Some(3.0)));
+        // Far away a pixel of error is a large ratio; near, a small one.
+        assert!(is_wrong(1.0, 2.5, 1.25, None));
+        assert!(!is_wrong(1.0, 2.5, 1.25, Some(2.0)));
+    }
 
     #[test]
     fn the_simulated_user_clicks_the_middle_of_the_largest_wrong_region() {

@@ -121,11 +121,29 @@ impl Default for DefocusParams {
     }
 }
 
-/// The defocus cue of `image` (sRGB in `[0, 1]`) at the size of `guide`, the luma of the
-/// estimator's working copy: measured on a copy of [`DefocusParams::long_side`], spread, and
-/// made to follow `guide`'s edges.
-pub fn defocus_cue(image: &RgbRaster, guide: &GrayRaster, p: &DefocusParams) -> Defocus {
-    let (w, h) = guide.size();
+/// Confidence of the defocus cue from which a photo is taken as shot in shallow focus: what
+/// the sky detector finds there is a backdrop out of focus (bokeh), so no horizon is read from
+/// it. Between the plain landscapes' (0–0.6 on the photos here: a motion-blurred road gives
+/// 0.57) and a close-up's bokeh.
+pub const SHALLOW_FOCUS_CONFIDENCE: f32 = 0.75;
+
+/// The edges' blur measured on a copy of [`DefocusParams::long_side`]: the first half of the
+/// cue, enough to say how sure it is ([`DefocusEdges::confidence`]) before it is spread
+/// ([`DefocusEdges::spread`]).
+#[derive(Clone, Debug)]
+pub struct DefocusEdges {
+    /// Blur σ at edge pixels of the measured copy (0 elsewhere).
+    sigma: GrayRaster,
+    /// Each edge pixel's weight (0 off edges).
+    weight: GrayRaster,
+    /// The 10th and 90th percentiles of the edges' blur (pixels).
+    pub sigma_range: (f32, f32),
+    /// As [`Defocus::confidence`].
+    pub confidence: f32,
+}
+
+/// Measures the blur of `image`'s edges (sRGB in `[0, 1]`).
+pub fn defocus_edges(image: &RgbRaster, p: &DefocusParams) -> DefocusEdges {
     let (iw, ih) = image.size();
     let s = (p.long_side as f32 / iw.max(ih).max(1) as f32).min(1.0);
     let (mw, mh) = (
@@ -146,8 +164,7 @@ pub fn defocus_cue(image: &RgbRaster, guide: &GrayRaster, p: &DefocusParams) -> 
         quantile(&edges, 0.1).unwrap_or(0.0),
         quantile(&edges, 0.9).unwrap_or(0.0),
     );
-    let floor = 0.25f32;
-    let ratio = (hi.max(floor) / lo.max(floor)).max(1.0);
+    let ratio = (hi.max(SIGMA_FLOOR) / lo.max(SIGMA_FLOOR)).max(1.0);
     let confidence = if edges.len() < 16 {
         0.0
     } else {
@@ -155,34 +172,62 @@ pub fn defocus_cue(image: &RgbRaster, guide: &GrayRaster, p: &DefocusParams) -> 
         let absolute = (hi - p.onset_blur) / (p.full_blur - p.onset_blur).max(1e-6);
         relative.clamp(0.0, 1.0) * absolute.clamp(0.0, 1.0)
     };
-    // Spread in log σ by normalised convolution, at the working size.
-    let log_s = Raster::from_fn(mw, mh, |x, y| {
-        weight.at(x, y) * sigma.at(x, y).max(floor).ln()
-    });
-    let (ws, wd) = (log_s.resized(w, h), weight.resized(w, h));
-    let radius = (p.spread * w.max(h) as f32).max(1.0);
-    let (num, den) = (gaussian_blur(&ws, radius), gaussian_blur(&wd, radius));
-    let mid = 0.5 * (lo.max(floor).ln() + hi.max(floor).ln());
-    let dense = Raster::from_fn(w, h, |x, y| {
-        let d = den.at(x, y);
-        if d > 1e-6 { num.at(x, y) / d } else { mid }
-    });
-    let r = ((0.02 * w.max(h) as f32).round() as usize).max(1);
-    let dense = guided_filter(guide, &dense, r, 1e-3);
-    let (llo, lhi) = (lo.max(floor).ln(), hi.max(floor).ln());
-    let span = (lhi - llo).max(1e-6);
-    let nearness = dense.map(|l| {
-        if l.is_finite() {
-            1.0 - ((l - llo) / span).clamp(0.0, 1.0)
-        } else {
-            0.5
-        }
-    });
-    Defocus {
-        nearness,
-        sigma: dense.map(|l| if l.is_finite() { l.exp() } else { 0.0 }),
-        confidence,
+    DefocusEdges {
+        sigma,
+        weight,
         sigma_range: (lo, hi),
+        confidence,
+    }
+}
+
+/// Smallest blur the percentiles count, pixels (sharper reads as this).
+const SIGMA_FLOOR: f32 = 0.25;
+
+/// The defocus cue of `image` (sRGB in `[0, 1]`) at the size of `guide`, the luma of the
+/// estimator's working copy: measured on a copy of [`DefocusParams::long_side`], spread, and
+/// made to follow `guide`'s edges.
+pub fn defocus_cue(image: &RgbRaster, guide: &GrayRaster, p: &DefocusParams) -> Defocus {
+    defocus_edges(image, p).spread(guide, p)
+}
+
+impl DefocusEdges {
+    /// The dense cue at the size of `guide` (the estimator's working luma): the edges' blur
+    /// spread and made to follow `guide`'s edges.
+    pub fn spread(&self, guide: &GrayRaster, p: &DefocusParams) -> Defocus {
+        let (w, h) = guide.size();
+        let (mw, mh) = self.sigma.size();
+        let (sigma, weight) = (&self.sigma, &self.weight);
+        let (lo, hi) = self.sigma_range;
+        let floor = SIGMA_FLOOR;
+        // Spread in log σ by normalised convolution, at the working size.
+        let log_s = Raster::from_fn(mw, mh, |x, y| {
+            weight.at(x, y) * sigma.at(x, y).max(floor).ln()
+        });
+        let (ws, wd) = (log_s.resized(w, h), weight.resized(w, h));
+        let radius = (p.spread * w.max(h) as f32).max(1.0);
+        let (num, den) = (gaussian_blur(&ws, radius), gaussian_blur(&wd, radius));
+        let mid = 0.5 * (lo.max(floor).ln() + hi.max(floor).ln());
+        let dense = Raster::from_fn(w, h, |x, y| {
+            let d = den.at(x, y);
+            if d > 1e-6 { num.at(x, y) / d } else { mid }
+        });
+        let r = ((0.02 * w.max(h) as f32).round() as usize).max(1);
+        let dense = guided_filter(guide, &dense, r, 1e-3);
+        let (llo, lhi) = (lo.max(floor).ln(), hi.max(floor).ln());
+        let span = (lhi - llo).max(1e-6);
+        let nearness = dense.map(|l| {
+            if l.is_finite() {
+                1.0 - ((l - llo) / span).clamp(0.0, 1.0)
+            } else {
+                0.5
+            }
+        });
+        Defocus {
+            nearness,
+            sigma: dense.map(|l| if l.is_finite() { l.exp() } else { 0.0 }),
+            confidence: self.confidence,
+            sigma_range: (lo, hi),
+        }
     }
 }
 

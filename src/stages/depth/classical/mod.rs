@@ -202,8 +202,21 @@ impl ClassicalDepth {
         let work_luma = work.map(luma);
         let texture = texture_energy(&work_luma);
 
+        // Shallow focus, measured first: a backdrop thrown out of focus is as smooth as a sky.
+        let defocus_edges =
+            (p.defocus_weight > 0.0).then(|| defocus_edges(&image, &DefocusParams::default()));
+        let shallow_focus = p.horizon.is_none()
+            && defocus_edges
+                .as_ref()
+                .is_some_and(|d| d.confidence >= SHALLOW_FOCUS_CONFIDENCE);
+
         // Reflection, sky and horizon.
         let mut sky_work = sky_mask(&work, &work_luma, &texture, p);
+        if shallow_focus {
+            // A photo plainly focused near, with the rest out of focus (a close-up, a
+            // portrait): its smooth bright blur is bokeh, not a sky over a horizon.
+            sky_work.data_mut().fill(0.0);
+        }
         if let Some(line) = sea_line(&work, &work_luma, &sky_work) {
             // A sea or a plain under the sky: what lies below its horizon is not sky.
             for y in line + 1..wh {
@@ -220,9 +233,12 @@ impl ClassicalDepth {
             let below = &sky_work.data()[from * ww..];
             4 * below.iter().filter(|s| **s > 0.5).count() >= below.len().max(1)
         };
-        let mirror = find_mirror_line(&gaussian_blur(&work_luma, 1.0)).filter(|m| {
-            sky_horizon.is_none_or(|s| row_fraction(m.axis) >= s - 0.02) && !sky_below(m)
-        });
+        let mirror = (!shallow_focus)
+            .then(|| find_mirror_line(&gaussian_blur(&work_luma, 1.0)))
+            .flatten()
+            .filter(|m| {
+                sky_horizon.is_none_or(|s| row_fraction(m.axis) >= s - 0.02) && !sky_below(m)
+            });
         let mut sky_horizon = sky_horizon;
         if mirror.is_none()
             && p.horizon.is_none()
@@ -323,8 +339,9 @@ impl ClassicalDepth {
             p.detail_weight * (1.0 - coherent_border)
         };
         // Defocus: in focus is nearer, where no landscape cue applies.
-        let defocus = (!landscape && p.defocus_weight > 0.0)
-            .then(|| defocus_cue(&image, &work_luma, &DefocusParams::default()));
+        let defocus = defocus_edges
+            .filter(|_| !landscape)
+            .map(|d| d.spread(&work_luma, &DefocusParams::default()));
         let wf = defocus
             .as_ref()
             .map_or(0.0, |d| p.defocus_weight * d.confidence);
@@ -1161,6 +1178,84 @@ mod tests {
         assert!(at(0.25, 0.3) > 0.5, "the blossom: {}", at(0.25, 0.3));
         let z = |x: usize, y: usize| a.estimate.depth.at(x, y);
         assert!(z(40, 30) < z(70, 30), "{} against {}", z(40, 30), z(70, 30));
+    }
+
+    #[test]
+    fn a_close_up_on_bokeh_has_no_sky_and_its_sharp_subject_is_in_front() {
+        // A close-up in shallow focus: a pale blue blur over the top (smooth and bright like a
+        // sky), a green blur below, both with out-of-focus blobs, and a sharp chequered
+        // subject in the middle. The sky detector alone reads the top as sky over a horizon,
+        // which turns the photo into a landscape (ground ramp, no defocus cue): the green blur
+        // at the bottom comes out nearest. Plainly in shallow focus, there is no sky: the
+        // sharp subject stands in front of one blurred background.
+        let (w, h) = (320, 200);
+        let blobs = |x: usize, y: usize| {
+            let cell = |cx: usize, cy: usize| {
+                let (dx, dy) = (x as f32 - cx as f32, y as f32 - cy as f32);
+                if dx * dx + dy * dy < 18.0 * 18.0 {
+                    1.0
+                } else {
+                    0.0
+                }
+            };
+            cell(60, 40) + cell(250, 30) + cell(50, 160) + cell(270, 170)
+        };
+        let background = Raster::from_fn(w, h, |x, y| {
+            let b = 0.15 * blobs(x, y);
+            if y < 90 {
+                [0.55 + b, 0.72 + b, 0.95]
+            } else {
+                [0.25 + b, 0.5 + b, 0.15 + b]
+            }
+        });
+        let blurred = Raster::from_fn(w, h, |x, y| {
+            let mut c = [0.0f32; 3];
+            let mut n = 0.0;
+            for dy in -9i64..=9 {
+                for dx in -9i64..=9 {
+                    let g = (-((dx * dx + dy * dy) as f32) / (2.0 * 4.0 * 4.0)).exp();
+                    let (sx, sy) = (
+                        (x as i64 + dx).clamp(0, w as i64 - 1) as usize,
+                        (y as i64 + dy).clamp(0, h as i64 - 1) as usize,
+                    );
+                    let v = background.at(sx, sy);
+                    for k in 0..3 {
+                        c[k] += g * v[k];
+                    }
+                    n += g;
+                }
+            }
+            c.map(|v| v / n)
+        });
+        let img = Raster::from_fn(w, h, |x, y| {
+            if (130..190).contains(&x) && (50..150).contains(&y) {
+                if (x / 6 + y / 6).is_multiple_of(2) {
+                    [0.9, 0.5, 0.1]
+                } else {
+                    [0.5, 0.1, 0.05]
+                }
+            } else {
+                blurred.at(x, y)
+            }
+        });
+        let a = estimator()
+            .analyse(&img, &intrinsics(w, h), &Progress::none())
+            .unwrap();
+        check_sane(&a.estimate, w, h);
+        assert!(
+            defocus_edges(&img, &DefocusParams::default()).confidence >= SHALLOW_FOCUS_CONFIDENCE
+        );
+        assert!(!a.horizon_detected, "horizon at {}", a.horizon);
+        assert!(a.sky_work.data().iter().all(|s| *s <= 0.5), "no sky here");
+        let z = |x: usize, y: usize| a.estimate.depth.at(x, y);
+        for (x, y) in [(20, 20), (300, 60), (20, 185), (300, 190), (160, 185)] {
+            assert!(
+                z(160, 100) < z(x, y),
+                "subject {} against the background at ({x}, {y}) {}",
+                z(160, 100),
+                z(x, y)
+            );
+        }
     }
 
     #[test]
