@@ -457,6 +457,11 @@ pub fn apply_popups(
     }
     let regions = Regions::find(image, estimate)?;
     let (w, h) = depth.size();
+    let guide = if image.size() == (w, h) {
+        image.clone()
+    } else {
+        image.resized(w, h)
+    };
     let far = estimate
         .data()
         .iter()
@@ -507,15 +512,93 @@ pub fn apply_popups(
                 })
             }
         };
+        let weight = feathered(&mask, &guide);
         for y in 0..h {
             for x in 0..w {
-                if mask.at(x, y) > 0.5 {
+                let m = weight.at(x, y);
+                if m >= 1.0 {
                     depth.set(x, y, plane(x, y));
+                } else if m > 0.0 {
+                    // Blended in disparity: the card meets what is around it without a step.
+                    let (z, c) = (depth.at(x, y), plane(x, y));
+                    if z.is_finite() && z > 0.0 {
+                        depth.set(x, y, 1.0 / ((1.0 - m) / z + m / c));
+                    }
                 }
             }
         }
     }
     Ok(())
+}
+
+/// Radius of a pop-up's feather, as a share of the photo's long side ([`feathered`]).
+pub const POPUP_FEATHER: f32 = 0.015;
+
+/// Colour step (the largest of the three sRGB channels between neighbours, 0–1) from which a
+/// region's border follows an edge of the photo and stays sharp ([`feathered`]).
+pub const POPUP_EDGE_STEP: f32 = 0.08;
+
+/// A pop-up's weight, 1 on its region `mask` and 0 away from it. Where the region's border follows
+/// an edge of the photo (`image`: a colour step of [`POPUP_EDGE_STEP`] within the feather's
+/// reach) it is the sharp mask: the card is a clean step along the object's outline. Where the
+/// border crosses no edge (a region of bokeh, a sky, a wall: SLIC borders where nothing ends) it
+/// ramps across the border over twice the radius — [`POPUP_FEATHER`] of the long side, at most
+/// a quarter of the region's inradius, so the region's middle is always the exact plane: a card
+/// cut along such a border tore the frame there (a step of depth inside the blur).
+pub fn feathered(mask: &GrayRaster, image: &RgbRaster) -> GrayRaster {
+    use crate::raster::morph::{chamfer_distance, sliding_extreme};
+    let (w, h) = mask.size();
+    if !image.same_size(mask) || mask.is_empty() {
+        return mask.clone();
+    }
+    let outside = mask.map(|m| m <= 0.5);
+    let inradius = chamfer_distance(&outside)
+        .data()
+        .iter()
+        .copied()
+        .filter(|d| d.is_finite())
+        .fold(0.0f32, f32::max);
+    let r = (POPUP_FEATHER * w.max(h) as f32)
+        .min(inradius / 4.0)
+        .floor()
+        .max(0.0) as usize;
+    if r == 0 {
+        return mask.clone();
+    }
+    let blurred = crate::raster::box_mean(&crate::raster::box_mean(mask, r), r);
+    let step = |a: [f32; 3], b: [f32; 3]| {
+        (a[0] - b[0])
+            .abs()
+            .max((a[1] - b[1]).abs())
+            .max((a[2] - b[2]).abs())
+    };
+    let edge = Raster::from_fn(w, h, |x, y| {
+        let c = image.at(x, y);
+        let right = if x + 1 < w {
+            step(c, image.at(x + 1, y))
+        } else {
+            0.0
+        };
+        let down = if y + 1 < h {
+            step(c, image.at(x, y + 1))
+        } else {
+            0.0
+        };
+        (right.max(down) / POPUP_EDGE_STEP).clamp(0.0, 1.0)
+    });
+    let reach = 2 * r + 1;
+    let edge = sliding_extreme(&edge, reach, reach, 0.0f32, f32::max);
+    Raster::from_fn(w, h, |x, y| {
+        let (e, hard, soft) = (edge.at(x, y), mask.at(x, y), blurred.at(x, y));
+        let m = e * hard + (1.0 - e) * soft;
+        if !m.is_finite() || m <= 0.01 {
+            0.0
+        } else if m >= 0.99 {
+            1.0
+        } else {
+            m
+        }
+    })
 }
 
 #[cfg(test)]
@@ -647,6 +730,47 @@ mod tests {
             apply_popups(&image, &estimate, &mut d, &[sky], ground, &intrinsics).unwrap();
             assert_eq!(d.at(80, 10), 500.0);
         }
+    }
+
+    #[test]
+    fn a_card_ramps_into_a_smooth_neighbour_and_steps_at_an_edge() {
+        // The left half is the region. Radius: 1.5 % of 400 = 6 px (the inradius, 200, allows
+        // 50), so the ramp spans about 2·6 px on each side of the border.
+        let (w, h) = (400, 200);
+        let mask = Raster::from_fn(w, h, |x, _| if x < 200 { 1.0 } else { 0.0 });
+        let smooth = Raster::new(w, h, [0.5f32, 0.5, 0.5]);
+        let m = feathered(&mask, &smooth);
+        assert!(m.data().iter().all(|v| (0.0..=1.0).contains(v)));
+        // No step: across the border the weight falls in small steps through ½.
+        let (a, b) = (m.at(199, 100), m.at(200, 100));
+        assert!(a > 0.5 && a < 0.8 && b < 0.5 && b > 0.2, "{a} {b}");
+        for x in 170..230 {
+            assert!((m.at(x, 100) - m.at(x + 1, 100)).abs() < 0.1, "step at {x}");
+        }
+        // The middle is the exact plane, far away nothing.
+        assert_eq!(
+            (m.at(100, 100), m.at(186, 100), m.at(300, 100)),
+            (1.0, 1.0, 0.0)
+        );
+        // Along an edge of the photo (a colour step of 0.3) the card keeps its outline.
+        let edged = Raster::from_fn(w, h, |x, _| {
+            if x < 200 {
+                [0.5f32; 3]
+            } else {
+                [0.8, 0.5, 0.5]
+            }
+        });
+        let m = feathered(&mask, &edged);
+        assert_eq!((m.at(199, 100), m.at(200, 100)), (1.0, 0.0));
+        // A region too small to ramp (inradius under 4 px) stays sharp.
+        let dot = Raster::from_fn(w, h, |x, y| {
+            if (100..104).contains(&x) && (100..104).contains(&y) {
+                1.0
+            } else {
+                0.0
+            }
+        });
+        assert_eq!(feathered(&dot, &smooth), dot);
     }
 
     #[test]
