@@ -332,6 +332,21 @@ pub fn run(
         a.apply_edit("Depth target", targeted.clone())
     })?;
     measure(&mut d, "undo", Answer::Scene, &mut |a| a.undo())?;
+    // A region popped up as a card facing the camera at the depth under it (its border
+    // feathered where it crosses no edge).
+    let mut popped = project(&d)?;
+    popped
+        .depth
+        .popups
+        .push(crate::stages::depth::regions::PopUp {
+            seeds: vec![[0.45, 0.7]],
+            shape: crate::stages::depth::regions::PopUpShape::Facing { depth: here },
+            hidden: false,
+        });
+    measure(&mut d, "depth pop-up", Answer::Depth, &mut |a| {
+        a.apply_edit("Depth pop-up", popped.clone())
+    })?;
+    measure(&mut d, "undo", Answer::Scene, &mut |a| a.undo())?;
 
     // Playback.
     d.app.seek(0);
