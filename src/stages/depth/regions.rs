@@ -567,6 +567,9 @@ pub fn feathered(mask: &GrayRaster, image: &RgbRaster) -> GrayRaster {
     }
     let blurred = crate::raster::box_mean(&crate::raster::box_mean(mask, r), r);
     let step = |a: [f32; 3], b: [f32; 3]| {
+        if !a.iter().chain(&b).all(|v| v.is_finite()) {
+            return f32::INFINITY;
+        }
         (a[0] - b[0])
             .abs()
             .max((a[1] - b[1]).abs())
@@ -584,7 +587,13 @@ pub fn feathered(mask: &GrayRaster, image: &RgbRaster) -> GrayRaster {
         } else {
             0.0
         };
-        (right.max(down) / POPUP_EDGE_STEP).clamp(0.0, 1.0)
+        let e = right.max(down) / POPUP_EDGE_STEP;
+        // A colour that is not a number cannot vouch for a smooth area: keep the mask sharp.
+        if e.is_finite() {
+            e.clamp(0.0, 1.0)
+        } else {
+            1.0
+        }
     });
     let reach = 2 * r + 1;
     let edge = sliding_extreme(&edge, reach, reach, 0.0f32, f32::max);
@@ -771,6 +780,17 @@ mod tests {
             }
         });
         assert_eq!(feathered(&dot, &smooth), dot);
+        // A picture with a NaN keeps the card sharp there; the whole picture as the region and
+        // an empty region stay as they are.
+        let mut holed = smooth.clone();
+        holed.set(199, 100, [f32::NAN, 0.5, 0.5]);
+        let m = feathered(&mask, &holed);
+        assert!(m.data().iter().all(|v| v.is_finite()));
+        assert_eq!((m.at(199, 100), m.at(200, 100)), (1.0, 0.0));
+        let all = Raster::new(w, h, 1.0f32);
+        assert_eq!(feathered(&all, &smooth), all);
+        let none = Raster::new(w, h, 0.0f32);
+        assert_eq!(feathered(&none, &smooth), none);
     }
 
     #[test]
