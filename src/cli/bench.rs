@@ -265,6 +265,28 @@ pub(crate) fn bench_motion(args: BenchMotionArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// One finished row of the editor bench, as the progress line on stderr says it.
+fn progress_line(row: &makeit4d::app::bench::EditRow) -> String {
+    let s = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.2} s"));
+    match row.playback {
+        Some((fps, agree)) => format!(
+            "{}: {fps:.1} pictures/s{}",
+            row.edit,
+            if agree {
+                ""
+            } else {
+                " (some pictures were not the timeline's frame)"
+            }
+        ),
+        None => format!(
+            "{}: first picture {}, final {}",
+            row.edit,
+            s(row.first_picture_s),
+            s(row.final_s)
+        ),
+    }
+}
+
 pub(crate) fn bench_editor(args: BenchEditorArgs) -> anyhow::Result<()> {
     let photos = if args.photos.is_empty() {
         let shared = PathBuf::from("../shared/data/photos/forest_path.jpg");
@@ -296,7 +318,9 @@ pub(crate) fn bench_editor(args: BenchEditorArgs) -> anyhow::Result<()> {
             limit: std::time::Duration::from_secs_f64(args.limit),
             playback_seconds: args.playback_seconds,
         };
-        makeit4d::app::bench::run(&options, |row| eprintln!("{row:?}"))?
+        makeit4d::app::bench::run(&options, |row| {
+            eprintln!("bench editor: {}", progress_line(row))
+        })?
     };
     let mut trades = Vec::new();
     for photo in &photos {
@@ -316,7 +340,12 @@ pub(crate) fn bench_editor(args: BenchEditorArgs) -> anyhow::Result<()> {
                 makeit4d::path::CameraPath::Preset(makeit4d::path::Preset::new(kind));
             let t = makeit4d::app::bench::sketch_trade(&project)
                 .map_err(|e| anyhow::anyhow!("{}: {e:#}", photo.display()))?;
-            eprintln!("{} {kind}: {t:?}", photo.display());
+            eprintln!(
+                "bench editor: {} {kind}: sketch {:.2} s, final {:.2} s",
+                photo.display(),
+                t.sketch_s,
+                t.final_s
+            );
             trades.push((photo.clone(), kind, t));
         }
     }
