@@ -183,7 +183,7 @@ pub(crate) fn eval_scribbles(
         if !(px.is_finite() && px > 0.0) {
             anyhow::bail!("--tolerance-px {px}: must be a positive number of pixels");
         }
-        options.tolerance_px = Some(px);
+        options.tolerance = makeit4d::eval::scribbles::Tolerance::Pixels(px);
     }
     options.nvs_options.preset = args.inpaint_preset.parse()?;
     if let Some(v) = args.sigma_colour {

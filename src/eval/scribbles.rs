@@ -27,11 +27,8 @@ use serde::Serialize;
 pub struct ScribbleOptions {
     /// Stroke counts to report (ascending; 0 is the estimate).
     pub strokes: Vec<usize>,
-    /// Depth ratio beyond which a pixel is wrong.
-    pub tolerance: f64,
-    /// Instead of the ratio: the aligned disparity's error, pixels of the pair, beyond which a
-    /// pixel is wrong (`None`: the ratio).
-    pub tolerance_px: Option<f64>,
+    /// How wrong a pixel must be for the simulated user to stroke it.
+    pub tolerance: Tolerance,
     /// Largest dab radius, pixels.
     pub radius_px: f32,
     /// The solver.
@@ -46,8 +43,7 @@ impl Default for ScribbleOptions {
     fn default() -> Self {
         Self {
             strokes: vec![0, 1, 2, 5, 10, 20, 30],
-            tolerance: 1.25,
-            tolerance_px: None,
+            tolerance: Tolerance::Ratio(1.25),
             radius_px: 12.0,
             params: PropagateParams::default(),
             nvs: true,
@@ -138,12 +134,22 @@ impl ScribbleTable {
     }
 }
 
-/// Whether an aligned disparity `a` is wrong against the truth `g` (both positive): off by a
-/// ratio over `ratio`, or with `px`, by more than `px` pixels.
-pub fn is_wrong(a: f64, g: f64, ratio: f64, px: Option<f64>) -> bool {
-    match px {
-        Some(px) => (a - g).abs() > px,
-        None => (a / g).max(g / a) > ratio,
+/// How far the aligned disparity may be off the truth before the simulated user strokes it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Tolerance {
+    /// A ratio (the δ<1.25 criterion: 1.25).
+    Ratio(f64),
+    /// Pixels of disparity of the pair.
+    Pixels(f64),
+}
+
+impl Tolerance {
+    /// Whether an aligned disparity `a` is wrong against the truth `g` (both positive).
+    pub fn is_wrong(self, a: f64, g: f64) -> bool {
+        match self {
+            Tolerance::Ratio(r) => (a / g).max(g / a) > r,
+            Tolerance::Pixels(px) => (a - g).abs() > px,
+        }
     }
 }
 
@@ -247,7 +253,7 @@ pub fn eval_scribbles(
                     return false;
                 }
                 let a = (m.scale / current.at(x, y) as f64 + m.shift).max(1e-9);
-                is_wrong(a, g, options.tolerance, options.tolerance_px)
+                options.tolerance.is_wrong(a, g)
             });
             let Some((cx, cy, dist)) = simulated_click(&wrong) else {
                 break; // Nothing left to correct.
@@ -343,15 +349,16 @@ mod tests {
 
     #[test]
     fn a_pixel_is_wrong_by_ratio_or_by_pixels() {
+        use Tolerance::{Pixels, Ratio};
         // 10 against 12: a ratio of 1.2, two pixels.
-        assert!(!is_wrong(10.0, 12.0, 1.25, None));
-        assert!(is_wrong(10.0, 12.0, 1.1, None));
-        assert!(is_wrong(12.0, 10.0, 1.1, None));
-        assert!(is_wrong(10.0, 12.0, 1.25, Some(1.0)));
-        assert!(!is_wrong(10.0, 12.0, 1.25, Some(3.0)));
+        assert!(!Ratio(1.25).is_wrong(10.0, 12.0));
+        assert!(Ratio(1.1).is_wrong(10.0, 12.0));
+        assert!(Ratio(1.1).is_wrong(12.0, 10.0));
+        assert!(Pixels(1.0).is_wrong(10.0, 12.0));
+        assert!(!Pixels(3.0).is_wrong(10.0, 12.0));
         // Far away a pixel of error is a large ratio; near, a small one.
-        assert!(is_wrong(1.0, 2.5, 1.25, None));
-        assert!(!is_wrong(1.0, 2.5, 1.25, Some(2.0)));
+        assert!(Ratio(1.25).is_wrong(1.0, 2.5));
+        assert!(!Pixels(2.0).is_wrong(1.0, 2.5));
     }
 
     #[test]

@@ -457,10 +457,11 @@ pub fn apply_popups(
     }
     let regions = Regions::find(image, estimate)?;
     let (w, h) = depth.size();
-    let guide = if image.size() == (w, h) {
-        image.clone()
+    // The photo's edges, once for every card's feather.
+    let edges = if image.size() == (w, h) {
+        colour_edges(image)
     } else {
-        image.resized(w, h)
+        colour_edges(&image.resized(w, h))
     };
     let far = estimate
         .data()
@@ -512,7 +513,7 @@ pub fn apply_popups(
                 })
             }
         };
-        let weight = feathered(&mask, &guide);
+        let weight = feathered(&mask, &edges);
         for y in 0..h {
             for x in 0..w {
                 let m = weight.at(x, y);
@@ -538,17 +539,47 @@ pub const POPUP_FEATHER: f32 = 0.015;
 /// region's border follows an edge of the photo and stays sharp ([`feathered`]).
 pub const POPUP_EDGE_STEP: f32 = 0.08;
 
+/// Where `image` has an edge, `[0, 1]`: the largest colour step to the right or below (the
+/// largest of the three sRGB channels) over [`POPUP_EDGE_STEP`], capped at 1; 1 where a colour
+/// is not a number (it cannot vouch for a smooth area).
+pub fn colour_edges(image: &RgbRaster) -> GrayRaster {
+    let (w, h) = image.size();
+    let step = |a: [f32; 3], b: [f32; 3]| {
+        if !a.iter().chain(&b).all(|v| v.is_finite()) {
+            return f32::INFINITY;
+        }
+        (a[0] - b[0])
+            .abs()
+            .max((a[1] - b[1]).abs())
+            .max((a[2] - b[2]).abs())
+    };
+    Raster::from_fn(w, h, |x, y| {
+        let c = image.at(x, y);
+        let right = if x + 1 < w {
+            step(c, image.at(x + 1, y))
+        } else {
+            0.0
+        };
+        let down = if y + 1 < h {
+            step(c, image.at(x, y + 1))
+        } else {
+            0.0
+        };
+        (right.max(down) / POPUP_EDGE_STEP).min(1.0)
+    })
+}
+
 /// A pop-up's weight, 1 on its region `mask` and 0 away from it. Where the region's border follows
-/// an edge of the photo (`image`: a colour step of [`POPUP_EDGE_STEP`] within the feather's
-/// reach) it is the sharp mask: the card is a clean step along the object's outline. Where the
-/// border crosses no edge (a region of bokeh, a sky, a wall: SLIC borders where nothing ends) it
-/// ramps across the border over twice the radius — [`POPUP_FEATHER`] of the long side, at most
-/// a quarter of the region's inradius, so the region's middle is always the exact plane: a card
-/// cut along such a border tore the frame there (a step of depth inside the blur).
-pub fn feathered(mask: &GrayRaster, image: &RgbRaster) -> GrayRaster {
+/// an edge of the photo (`edges`, [`colour_edges`]: within the feather's reach) it is the sharp
+/// mask: the card is a clean step along the object's outline. Where the border crosses no edge
+/// (a region of bokeh, a sky, a wall: SLIC borders where nothing ends) it ramps across the
+/// border over twice the radius — [`POPUP_FEATHER`] of the long side, at most a quarter of the
+/// region's inradius, so the region's middle is always the exact plane: a card cut along such a
+/// border tore the frame there (a step of depth inside the blur).
+pub fn feathered(mask: &GrayRaster, edges: &GrayRaster) -> GrayRaster {
     use crate::raster::morph::{chamfer_distance, sliding_extreme};
     let (w, h) = mask.size();
-    if !image.same_size(mask) || mask.is_empty() {
+    if !edges.same_size(mask) || mask.is_empty() {
         return mask.clone();
     }
     let outside = mask.map(|m| m <= 0.5);
@@ -566,37 +597,8 @@ pub fn feathered(mask: &GrayRaster, image: &RgbRaster) -> GrayRaster {
         return mask.clone();
     }
     let blurred = crate::raster::box_mean(&crate::raster::box_mean(mask, r), r);
-    let step = |a: [f32; 3], b: [f32; 3]| {
-        if !a.iter().chain(&b).all(|v| v.is_finite()) {
-            return f32::INFINITY;
-        }
-        (a[0] - b[0])
-            .abs()
-            .max((a[1] - b[1]).abs())
-            .max((a[2] - b[2]).abs())
-    };
-    let edge = Raster::from_fn(w, h, |x, y| {
-        let c = image.at(x, y);
-        let right = if x + 1 < w {
-            step(c, image.at(x + 1, y))
-        } else {
-            0.0
-        };
-        let down = if y + 1 < h {
-            step(c, image.at(x, y + 1))
-        } else {
-            0.0
-        };
-        let e = right.max(down) / POPUP_EDGE_STEP;
-        // A colour that is not a number cannot vouch for a smooth area: keep the mask sharp.
-        if e.is_finite() {
-            e.clamp(0.0, 1.0)
-        } else {
-            1.0
-        }
-    });
     let reach = 2 * r + 1;
-    let edge = sliding_extreme(&edge, reach, reach, 0.0f32, f32::max);
+    let edge = sliding_extreme(edges, reach, reach, 0.0f32, f32::max);
     Raster::from_fn(w, h, |x, y| {
         let (e, hard, soft) = (edge.at(x, y), mask.at(x, y), blurred.at(x, y));
         let m = e * hard + (1.0 - e) * soft;
@@ -748,7 +750,7 @@ mod tests {
         let (w, h) = (400, 200);
         let mask = Raster::from_fn(w, h, |x, _| if x < 200 { 1.0 } else { 0.0 });
         let smooth = Raster::new(w, h, [0.5f32, 0.5, 0.5]);
-        let m = feathered(&mask, &smooth);
+        let m = feathered(&mask, &colour_edges(&smooth));
         assert!(m.data().iter().all(|v| (0.0..=1.0).contains(v)));
         // No step: across the border the weight falls in small steps through ½.
         let (a, b) = (m.at(199, 100), m.at(200, 100));
@@ -769,7 +771,7 @@ mod tests {
                 [0.8, 0.5, 0.5]
             }
         });
-        let m = feathered(&mask, &edged);
+        let m = feathered(&mask, &colour_edges(&edged));
         assert_eq!((m.at(199, 100), m.at(200, 100)), (1.0, 0.0));
         // A region too small to ramp (inradius under 4 px) stays sharp.
         let dot = Raster::from_fn(w, h, |x, y| {
@@ -779,18 +781,18 @@ mod tests {
                 0.0
             }
         });
-        assert_eq!(feathered(&dot, &smooth), dot);
+        assert_eq!(feathered(&dot, &colour_edges(&smooth)), dot);
         // A picture with a NaN keeps the card sharp there; the whole picture as the region and
         // an empty region stay as they are.
         let mut holed = smooth.clone();
         holed.set(199, 100, [f32::NAN, 0.5, 0.5]);
-        let m = feathered(&mask, &holed);
+        let m = feathered(&mask, &colour_edges(&holed));
         assert!(m.data().iter().all(|v| v.is_finite()));
         assert_eq!((m.at(199, 100), m.at(200, 100)), (1.0, 0.0));
         let all = Raster::new(w, h, 1.0f32);
-        assert_eq!(feathered(&all, &smooth), all);
+        assert_eq!(feathered(&all, &colour_edges(&smooth)), all);
         let none = Raster::new(w, h, 0.0f32);
-        assert_eq!(feathered(&none, &smooth), none);
+        assert_eq!(feathered(&none, &colour_edges(&smooth)), none);
     }
 
     #[test]
