@@ -393,6 +393,10 @@ pub(crate) struct EvalScribblesArgs {
     /// as many ahead, 1–16 (default: the solver's own).
     #[arg(long)]
     pub(crate) edge_span: Option<usize>,
+    /// Geodesic solver: the step of the estimate's log depth from a stroke's own at which its
+    /// say has fallen to e^(−1/2); `inf` turns the rule off (default: the solver's own).
+    #[arg(long)]
+    pub(crate) depth_reach: Option<f32>,
     /// Feature-space solver: spatial scale, a fraction of the diagonal.
     #[arg(long)]
     pub(crate) sigma_space: Option<f32>,

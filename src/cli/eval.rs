@@ -225,6 +225,12 @@ pub(crate) fn eval_scribbles(
         }
         options.params.geodesic_edge_span = v;
     }
+    if let Some(v) = args.depth_reach {
+        if v.is_nan() || v <= 0.0 {
+            anyhow::bail!("--depth-reach {v}: must be > 0 (inf: off)");
+        }
+        options.params.geodesic_depth_reach = v;
+    }
     if let Some(v) = args.sigma_space {
         options.params.sigma_space = v;
     }

@@ -358,6 +358,13 @@ pub struct PropagateParams {
     /// [`MAX_GEODESIC_EDGE_SPAN`]).
     #[serde(default = "default_geodesic_edge_span")]
     pub geodesic_edge_span: usize,
+    /// Geodesic mode: the step `ρ` of the estimate's log depth between a pixel and a stroke's
+    /// own (where its dab lies) at which the stroke's say there has fallen to `e^(−1/2)`
+    /// (`exp(−Δe²/2ρ²)`): a stroke speaks for what the estimate puts near its depth, so a
+    /// face stroked nearer does not drag a wall the estimate puts thirteen times farther
+    /// along with it, whatever soft edges join them. Infinite: off.
+    #[serde(default = "default_geodesic_depth_reach")]
+    pub geodesic_depth_reach: f32,
 }
 
 /// Longest [`PropagateParams::geodesic_edge_span`].
@@ -365,6 +372,12 @@ pub const MAX_GEODESIC_EDGE_SPAN: usize = 16;
 
 fn default_geodesic_edge_span() -> usize {
     3
+}
+
+/// 1: a stroke's say halves (e^(−½)) where the estimate is e ≈ 2.7 times nearer or farther
+/// than under the stroke, and is a tenth at 8.6 times.
+fn default_geodesic_depth_reach() -> f32 {
+    1.0
 }
 
 fn default_geodesic_fade() -> f32 {
@@ -428,6 +441,7 @@ impl Default for PropagateParams {
             geodesic_fade: default_geodesic_fade(),
             geodesic_edge_cost: default_geodesic_edge_cost(),
             geodesic_edge_span: default_geodesic_edge_span(),
+            geodesic_depth_reach: default_geodesic_depth_reach(),
         }
     }
 }
@@ -851,14 +865,18 @@ pub const MAX_GEODESIC_GROUPS: usize = 64;
 /// the strength `s = √(‖ΔI‖²/σ_c² + Δe²/σ_z²)` and costs its length plus `γ·s²` cells. Then
 ///
 /// ```text
-/// c = (Σ_k w_k c_k / Σ_k w_k) · max_k f_k,   w_k = f_k / (D_k² + 1),   f_k = exp(−E_k²/2τ²)
+/// c = (Σ_k w_k c_k / Σ_k w_k) · max_k f_k,   w_k = f_k / (D_k² + 1),
+/// f_k = exp(−E_k²/2τ² − (e − e_k)²/2ρ²)
 /// ```
+///
+/// where `e` is the cell's log estimate and `e_k` the estimate's at group `k`'s nearest cell.
 ///
 /// A stroke decides its own pixels and their neighbourhood (inverse-square weights, as in
 /// inverse-distance interpolation), two strokes in one region blend by distance, a region
 /// joined to a stroke without a strong edge takes its correction whatever its size, and behind
-/// an edge stronger than `τ` (`geodesic_fade`) the correction fades to 0: the estimate keeps
-/// its relief where no stroke speaks.
+/// an edge stronger than `τ` (`geodesic_fade`), or where the estimate lies more than a factor
+/// `e^ρ` (`geodesic_depth_reach`) from the stroke's own depth, the correction fades to 0: the
+/// estimate keeps its relief where no stroke speaks.
 pub fn geodesic_correction(
     colour: &RgbRaster,
     log_grid: &GrayRaster,
@@ -882,12 +900,13 @@ pub fn geodesic_correction(
         (rank * groups / distinct.len()).min(groups - 1)
     };
     // Each group's source cells and their corrections (cells a group's dabs share average).
-    let mut sources: Vec<Vec<(usize, f32)>> = vec![Vec::new(); groups];
+    let mut sources: Vec<Vec<(usize, [f32; 2])>> = vec![Vec::new(); groups];
     for t in targets {
         let lt = t.depth.ln();
         let list = &mut sources[group_of(t.depth)];
         for (x, y) in dab_cells(t, (w, h), (gw, gh)) {
-            list.push((y * gw + x, lt - log_grid.at(x, y)));
+            let e = log_grid.at(x, y);
+            list.push((y * gw + x, [lt - e, e]));
         }
     }
     // Step costs to the four forward neighbours (right, down-left, down, down-right).
@@ -973,42 +992,57 @@ pub fn geodesic_correction(
         }
     }
     let two_tau2 = 2.0 * (params.geodesic_fade.max(1e-3) as f64).powi(2);
-    // Per cell: Σ w_k c_k, Σ w_k and max f_k over the groups, each worker thread summing into
-    // its own buffers.
-    let zeros = || (vec![0.0f64; n], vec![0.0f64; n], vec![0.0f64; n]);
-    let (num, den, reach) = sources
+    let two_rho2 = 2.0 * (params.geodesic_depth_reach.max(1e-3) as f64).powi(2);
+    // Per cell: Σ w_k c_k, Σ w_k, max f_k and the largest edge fade alone (what the
+    // enclosure rule counts as reached), each worker thread summing into its own buffers.
+    let zeros = || {
+        [
+            vec![0.0f64; n],
+            vec![0.0f64; n],
+            vec![0.0f64; n],
+            vec![0.0f64; n],
+        ]
+    };
+    let [num, den, reach, joined] = sources
         .par_iter()
         .filter(|s| !s.is_empty())
-        .fold(zeros, |(mut num, mut den, mut reach), list| {
+        .fold(zeros, |[mut num, mut den, mut reach, mut joined], list| {
             let (dist, label, edge) = geodesic_transform(list, &cost, gw, gh);
             for i in 0..n {
-                let f = (-((edge[i] as f64).powi(2)) / two_tau2).exp();
+                let fe = (-((edge[i] as f64).powi(2)) / two_tau2).exp();
+                // A stroke speaks for what the estimate puts near its own depth: behind a
+                // step of the estimate's log depth of `ρ` its say has fallen to e^(−1/2).
+                let de = (log_grid.data()[i] - label[i][1]) as f64;
+                let f = fe * (-de * de / two_rho2).exp();
                 let wk = f / ((dist[i] * dist[i]) as f64 + 1.0);
-                num[i] += wk * label[i] as f64;
+                num[i] += wk * label[i][0] as f64;
                 den[i] += wk;
                 reach[i] = reach[i].max(f);
+                joined[i] = joined[i].max(fe);
             }
-            (num, den, reach)
+            [num, den, reach, joined]
         })
-        .reduce(zeros, |(mut a, mut b, mut r), (c, d, q)| {
+        .reduce(zeros, |[mut a, mut b, mut r, mut j], [c, d, q, k]| {
             for i in 0..n {
                 a[i] += c[i];
                 b[i] += d[i];
                 r[i] = r[i].max(q[i]);
+                j[i] = j[i].max(k[i]);
             }
-            (a, b, r)
+            [a, b, r, j]
         });
     let blend: Vec<f64> = (0..n)
         .map(|i| if den[i] > 0.0 { num[i] / den[i] } else { 0.0 })
         .collect();
     // A patch that no stroke reaches but that is mostly enclosed by what the strokes moved (an
     // eye in a face, a window in a wall) follows its surroundings instead of keeping the
-    // estimate's depth and tearing out of them: the share of reached cells within a box of
+    // estimate's depth and tearing out of them: the share of cells joined to a stroke
+    // without a strong edge (the depth rule aside: what it holds back is not a hole) within a box of
     // half-size `ENCLOSURE_REACH` × the diagonal decides (0.6 → 0.9), and the patch takes their
     // mean correction. Along the straight edge of a large region that share is about a half,
     // so such a region keeps the estimate.
     let radius = ((ENCLOSURE_REACH * ((gw * gw + gh * gh) as f32).sqrt()).round() as usize).max(1);
-    let reach_r = Raster::from_vec(gw, gh, reach.iter().map(|&v| v as f32).collect())
+    let reach_r = Raster::from_vec(gw, gh, joined.iter().map(|&v| v as f32).collect())
         .unwrap_or_else(|| Raster::new(gw, gh, 0.0));
     let moved = Raster::from_vec(
         gw,
@@ -1028,7 +1062,7 @@ pub fn geodesic_correction(
             } else {
                 0.0
             };
-            reach[i] * blend[i] + (1.0 - reach[i]) * enclosed * follow
+            reach[i] * blend[i] + (1.0 - joined[i]) * enclosed * follow
         })
         .collect()
 }
@@ -1039,25 +1073,26 @@ pub fn geodesic_correction(
 /// and backward raster scans until nothing changes (at most 16 round trips; paths that wind
 /// more than that are rare on photos and only come out longer).
 fn geodesic_transform(
-    sources: &[(usize, f32)],
+    sources: &[(usize, [f32; 2])],
     cost: &[[(f32, f32); 4]],
     gw: usize,
     gh: usize,
-) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+) -> (Vec<f32>, Vec<[f32; 2]>, Vec<f32>) {
     let n = gw * gh;
     let mut dist = vec![f32::INFINITY; n];
-    let mut label = vec![0.0f32; n];
+    let mut label = vec![[0.0f32; 2]; n];
     let mut edge = vec![0.0f32; n];
-    let mut sum = vec![0.0f32; n];
+    let mut sum = vec![[0.0f32; 2]; n];
     let mut count = vec![0u32; n];
     for &(i, c) in sources {
-        sum[i] += c;
+        sum[i][0] += c[0];
+        sum[i][1] += c[1];
         count[i] += 1;
     }
     for i in 0..n {
         if count[i] > 0 {
             dist[i] = 0.0;
-            label[i] = sum[i] / count[i] as f32;
+            label[i] = sum[i].map(|v| v / count[i] as f32);
         }
     }
     for _ in 0..16 {
@@ -1337,11 +1372,11 @@ mod tests {
                 ]
             })
             .collect();
-        let (dist, label, edge) = geodesic_transform(&[(1, 0.25)], &cost, 10, 1);
+        let (dist, label, edge) = geodesic_transform(&[(1, [0.25, 0.0])], &cost, 10, 1);
         let want_dist = [1.0, 0.0, 1.0, 2.0, 3.0, 10.0, 11.0, 12.0, 13.0, 14.0];
         for x in 0..10 {
             assert!((dist[x] - want_dist[x]).abs() < 1e-5, "x {x}: {}", dist[x]);
-            assert_eq!(label[x], 0.25);
+            assert_eq!(label[x][0], 0.25);
             assert_eq!(edge[x], if x >= 5 { 2.0 } else { 0.0 }, "x {x}");
         }
     }
@@ -1354,6 +1389,52 @@ mod tests {
             (got / want - 1.0).abs() < tol,
             "({x}, {y}): {got} vs {want}"
         );
+    }
+
+    #[test]
+    fn a_stroke_speaks_for_what_the_estimate_puts_near_its_depth() {
+        // One colour everywhere (no edge to stop at) and an estimate whose log depth climbs
+        // steadily from 2 at the left to 2·e² at the right: from a stroke at the left asking
+        // for half the depth, the correction ln ½ reaches a pixel whose estimate is e^Δe times
+        // the stroke's scaled by exp(−Δe²/2ρ²) (ρ = 1), and all of it with the rule off.
+        let (w, h) = (300, 40);
+        let image = Raster::new(w, h, [0.5f32; 3]);
+        let slope = 2.0 / (w - 1) as f32;
+        let estimate = Raster::from_fn(w, h, |x, _| 2.0 * (slope * x as f32).exp());
+        let target = DepthTarget {
+            x: 3.0,
+            y: 20.0,
+            radius_px: 3.0,
+            depth: 1.0,
+        };
+        let solve = |reach: f32| {
+            let params = PropagateParams {
+                mode: PropagateMode::Geodesic,
+                geodesic_depth_reach: reach,
+                ..PropagateParams::default()
+            };
+            propagate(&image, &estimate, &[target], &params, None)
+                .unwrap()
+                .depth
+        };
+        let (on, off) = (solve(1.0), solve(f32::INFINITY));
+        // The dab's cells' mean log estimate, on the solve grid (about 3 px in).
+        let e0 = slope * 3.0;
+        let c = -estimate.at(3, 20).ln();
+        for x in [75usize, 150, 225, 299] {
+            let de = slope * x as f32 - e0;
+            let share = |d: &GrayRaster| (d.at(x, 20) / estimate.at(x, 20)).ln() / c;
+            assert!((share(&off) - 1.0).abs() < 0.05, "x {x}: {}", share(&off));
+            let want = (-de * de / 2.0).exp();
+            assert!(
+                (share(&on) - want).abs() < 0.05,
+                "x {x}: {} vs {want}",
+                share(&on)
+            );
+        }
+        // At the stroke both give its depth.
+        assert_depth(&on, 3, 20, 1.0, 0.03);
+        assert_depth(&off, 3, 20, 1.0, 0.03);
     }
 
     #[test]
@@ -1447,10 +1528,14 @@ mod tests {
 
     #[test]
     fn a_correction_carries_nothing_past_the_far_plane() {
-        // A uniform photo (no edges: the stroke reaches every cell at full strength) 60 × 20.
+        // A uniform photo (no edges) 60 × 20, the depth rule off: the stroke reaches every cell
+        // at full strength.
         let (w, h) = (60, 20);
         let image = Raster::new(w, h, [0.5f32, 0.5, 0.5]);
-        let params = PropagateParams::default();
+        let params = PropagateParams {
+            geodesic_depth_reach: f32::INFINITY,
+            ..PropagateParams::default()
+        };
         // A stroke that pushes back a ramp (1 → 10 across the photo) by 25 %: what would pass
         // the far plane (the estimate's largest depth, 10) stops at it.
         let ramp = Raster::from_fn(w, h, |x, _| 1.0 + 9.0 * x as f32 / (w - 1) as f32);
