@@ -1036,13 +1036,13 @@ pub fn geodesic_correction(
         .collect();
     // A patch that no stroke reaches but that is mostly enclosed by what the strokes moved (an
     // eye in a face, a window in a wall) follows its surroundings instead of keeping the
-    // estimate's depth and tearing out of them: the share of cells joined to a stroke
-    // without a strong edge (the depth rule aside: what it holds back is not a hole) within a box of
+    // estimate's depth and tearing out of them: the share of cells joined to a stroke without a
+    // strong edge (the depth rule aside: what it holds back is not a hole) within a box of
     // half-size `ENCLOSURE_REACH` × the diagonal decides (0.6 → 0.9), and the patch takes their
     // mean correction. Along the straight edge of a large region that share is about a half,
     // so such a region keeps the estimate.
     let radius = ((ENCLOSURE_REACH * ((gw * gw + gh * gh) as f32).sqrt()).round() as usize).max(1);
-    let reach_r = Raster::from_vec(gw, gh, joined.iter().map(|&v| v as f32).collect())
+    let joined_r = Raster::from_vec(gw, gh, joined.iter().map(|&v| v as f32).collect())
         .unwrap_or_else(|| Raster::new(gw, gh, 0.0));
     let moved = Raster::from_vec(
         gw,
@@ -1050,7 +1050,7 @@ pub fn geodesic_correction(
         (0..n).map(|i| (reach[i] * blend[i]) as f32).collect(),
     )
     .unwrap_or_else(|| Raster::new(gw, gh, 0.0));
-    let around = crate::raster::box_mean(&reach_r, radius);
+    let around = crate::raster::box_mean(&joined_r, radius);
     let moved_around = crate::raster::box_mean(&moved, radius);
     (0..n)
         .map(|i| {
@@ -1067,11 +1067,11 @@ pub fn geodesic_correction(
         .collect()
 }
 
-/// Geodesic distance from `sources` (cell, correction) over a `gw × gh` grid whose cells have
-/// the steps `cost[cell] = [right, down-left, down, down-right]` (cost, edge strength), with
-/// each cell's nearest source's correction and the strongest edge on the path to it: forward
-/// and backward raster scans until nothing changes (at most 16 round trips; paths that wind
-/// more than that are rare on photos and only come out longer).
+/// Geodesic distance from `sources` (cell, [correction, log estimate]) over a `gw × gh` grid
+/// whose cells have the steps `cost[cell] = [right, down-left, down, down-right]` (cost, edge
+/// strength), with each cell's nearest source's pair and the strongest edge on the path to it:
+/// forward and backward raster scans until nothing changes (at most 16 round trips; paths that
+/// wind more than that are rare on photos and only come out longer).
 fn geodesic_transform(
     sources: &[(usize, [f32; 2])],
     cost: &[[(f32, f32); 4]],
