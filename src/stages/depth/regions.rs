@@ -13,7 +13,7 @@
 
 use crate::error::{Error, Result};
 use crate::geometry::Intrinsics;
-use crate::raster::{GrayRaster, Raster, RgbRaster};
+use crate::raster::{GrayRaster, Raster, Rgb, RgbRaster};
 use serde::{Deserialize, Serialize};
 
 /// Longest side of the copy regions are found on, pixels.
@@ -458,11 +458,14 @@ pub fn apply_popups(
     let regions = Regions::find(image, estimate)?;
     let (w, h) = depth.size();
     // The photo's edges, once for every card's feather.
-    let edges = if image.size() == (w, h) {
-        colour_edges(image)
+    let resized;
+    let photo = if image.size() == (w, h) {
+        image
     } else {
-        colour_edges(&image.resized(w, h))
+        resized = image.resized(w, h);
+        &resized
     };
+    let edges = colour_edges(photo);
     let far = estimate
         .data()
         .iter()
@@ -470,6 +473,11 @@ pub fn apply_popups(
         .filter(|z| z.is_finite() && *z > 0.0)
         .fold(0.0f32, f32::max)
         .max(f32::MIN_POSITIVE);
+    // How far a card's hard border may be off the photo's outline: one pixel of the
+    // segmentation copy in photo pixels (its labels are sampled by nearest neighbour), plus
+    // the mixed pixel on the outline itself.
+    let (lw, lh) = regions.labels.size();
+    let rim = ((w.max(h) as f32 / lw.max(lh).max(1) as f32).ceil() as usize).max(1) + 1;
     for p in visible {
         let mask = regions.mask(&p.seeds, w, h);
         let Some(lowest) = (0..h).rev().find(|&y| (0..w).any(|x| mask.at(x, y) > 0.5)) else {
@@ -514,6 +522,7 @@ pub fn apply_popups(
             }
         };
         let weight = feathered(&mask, &edges);
+        let outline = rim_outline(photo, &weight, depth, rim);
         for y in 0..h {
             for x in 0..w {
                 let m = weight.at(x, y);
@@ -528,8 +537,164 @@ pub fn apply_popups(
                 }
             }
         }
+        // The outline of something nearer stays with it.
+        for (i, nearer) in outline {
+            let (x, y) = (i % w, i / w);
+            if nearer * RIM_DEPTH_RATIO < plane(x, y) {
+                depth.set(x, y, nearer);
+            }
+        }
     }
     Ok(())
+}
+
+/// A card's hard border and what lies across it are two surfaces when their depths differ by
+/// more than this ratio (the ratio `eval depth`'s δ<1.25 calls a wrong depth); then the mixed
+/// pixels of the outline between them go with the nearer one ([`rim_outline`]).
+pub const RIM_DEPTH_RATIO: f32 = 1.25;
+
+/// A pixel of a card's rim is the outline of the nearer surface across the border when its
+/// colour lies at least this share of the way from the farther side's colour to the nearer's
+/// (the split the layers use for mixed pixels, `stages::layers::edges::FOREGROUND_SPLIT`).
+pub const RIM_SPLIT: f32 = 0.1;
+
+/// Along a card's hard border (`weight` 1 inside, 0 outside), the photo's outline goes with
+/// what is nearer across the border. A region's border, cut on the segmentation copy, lies up
+/// to `rim` pixels off the outline, and an outline pixel given the card's farther depth stays
+/// behind as a line of the nearer object's colour when the camera moves (a face's outline
+/// drawn on the wall in an orbit). Within `rim` rings of the border, a card pixel takes the
+/// depth of the outside pixel it was reached from (the nearest surface next to it, carried
+/// ring by ring) when its colour is that surface's rather than the card's: with `f` the colour
+/// across the border and `b` the card's colour beyond the rim (both carried ring by ring),
+/// `(c − b)·(f − b) ≥ RIM_SPLIT·|f − b|²`, where `f` and `b` differ by an edge
+/// ([`POPUP_EDGE_STEP`]). Returns those pixels (row-major index) with the depth found across
+/// the border; the caller keeps it only where it is nearer than the card by
+/// [`RIM_DEPTH_RATIO`]. A nearer card's own outline is not grown outwards: a drop on a leaf
+/// that the leaf's region left out would lose its rim to the leaf and tear.
+fn rim_outline(
+    photo: &RgbRaster,
+    weight: &GrayRaster,
+    depth: &GrayRaster,
+    rim: usize,
+) -> Vec<(usize, f32)> {
+    use crate::raster::morph::sliding_extreme;
+    let (w, h) = weight.size();
+    let rim = rim.clamp(1, 1000);
+    // 1 = card, 2 = outside; the band is where both lie within twice the rim (the card's own
+    // colour is carried from up to twice the rim inside).
+    let side = weight.map(|m| u8::from(m >= 1.0) | (u8::from(m <= 0.0) << 1));
+    let reach = 4 * rim + 1;
+    let near = sliding_extreme(&side, reach, reach, 0u8, |a, b| a | b);
+    let band: Vec<usize> = (0..w * h).filter(|&i| near.data()[i] == 3).collect();
+    if band.is_empty() {
+        return Vec::new();
+    }
+    let mut slot = vec![u32::MAX; w * h];
+    for (k, &i) in band.iter().enumerate() {
+        slot[i] = k as u32;
+    }
+    let card = |i: usize| side.data()[i] == 1;
+    let valid = |z: f32| {
+        if z.is_finite() && z > 0.0 {
+            z
+        } else {
+            f32::INFINITY
+        }
+    };
+    let across = grow(
+        &band,
+        &slot,
+        (w, h),
+        photo,
+        rim,
+        |i| (side.data()[i] == 2).then(|| valid(depth.data()[i])),
+        &card,
+    );
+    let own = grow(
+        &band,
+        &slot,
+        (w, h),
+        photo,
+        rim,
+        |i| (card(i) && across.ring[slot[i] as usize] > rim as u16).then_some(0.0),
+        &card,
+    );
+    let mut moves = Vec::new();
+    for (k, &i) in band.iter().enumerate() {
+        let ring = across.ring[k];
+        if !card(i) || ring == 0 || ring > rim as u16 || own.ring[k] == u16::MAX {
+            continue;
+        }
+        let (c, f, b) = (photo.data()[i], across.colour[k], own.colour[k]);
+        let fb = [f[0] - b[0], f[1] - b[1], f[2] - b[2]];
+        let step = fb[0].abs().max(fb[1].abs()).max(fb[2].abs());
+        let along = (c[0] - b[0]) * fb[0] + (c[1] - b[1]) * fb[1] + (c[2] - b[2]) * fb[2];
+        let norm = fb[0] * fb[0] + fb[1] * fb[1] + fb[2] * fb[2];
+        if step >= POPUP_EDGE_STEP && along >= RIM_SPLIT * norm {
+            moves.push((i, across.depth[k]));
+        }
+    }
+    moves
+}
+
+/// Values grown ring by ring (8-neighbours) over the `band`'s pixels (`slot` maps a pixel to
+/// its place in the band): from the seeds, each pixel `over` allows takes the depth and colour
+/// of the neighbour of the previous ring with the least depth (the nearest surface next to
+/// it). `ring` is 0 at a seed, `u16::MAX` where not reached.
+struct Grown {
+    depth: Vec<f32>,
+    colour: Vec<Rgb>,
+    ring: Vec<u16>,
+}
+
+fn grow(
+    band: &[usize],
+    slot: &[u32],
+    (w, h): (usize, usize),
+    photo: &RgbRaster,
+    rings: usize,
+    seed: impl Fn(usize) -> Option<f32>,
+    over: &dyn Fn(usize) -> bool,
+) -> Grown {
+    let n = band.len();
+    let mut g = Grown {
+        depth: vec![f32::INFINITY; n],
+        colour: band.iter().map(|&i| photo.data()[i]).collect(),
+        ring: vec![u16::MAX; n],
+    };
+    for (k, &i) in band.iter().enumerate() {
+        if let Some(z) = seed(i) {
+            g.depth[k] = z;
+            g.ring[k] = 0;
+        }
+    }
+    for r in 1..=rings.min(u16::MAX as usize - 1) as u16 {
+        for (k, &i) in band.iter().enumerate() {
+            if g.ring[k] != u16::MAX || !over(i) {
+                continue;
+            }
+            let (x, y) = (i % w, i / w);
+            let mut best: Option<(f32, usize)> = None;
+            for ny in y.saturating_sub(1)..(y + 2).min(h) {
+                for nx in x.saturating_sub(1)..(x + 2).min(w) {
+                    let s = slot[ny * w + nx];
+                    if s == u32::MAX || g.ring[s as usize] >= r {
+                        continue;
+                    }
+                    let s = s as usize;
+                    if best.is_none_or(|b| g.depth[s] < b.0) {
+                        best = Some((g.depth[s], s));
+                    }
+                }
+            }
+            if let Some((z, s)) = best {
+                g.depth[k] = z;
+                g.colour[k] = g.colour[s];
+                g.ring[k] = r;
+            }
+        }
+    }
+    g
 }
 
 /// Radius of a pop-up's feather, as a share of the photo's long side ([`feathered`]).
@@ -740,6 +905,95 @@ mod tests {
             };
             apply_popups(&image, &estimate, &mut d, &[sky], ground, &intrinsics).unwrap();
             assert_eq!(d.at(80, 10), 500.0);
+        }
+    }
+
+    /// A dark object (depth 2) left of a pale wall, the wall's card cut two pixels into the
+    /// object, with one mixed pixel (half and half) and one faint pixel (a twentieth) on the
+    /// outline: the object's pixels and the mixed one go with the object, the faint one and
+    /// the wall stay on the card.
+    #[test]
+    fn a_far_card_leaves_a_nearer_objects_outline_to_it() {
+        let (w, h) = (40, 12);
+        let grey = |v: f32| [v, v, v];
+        let photo = Raster::from_fn(w, h, |x, _| match x {
+            0..=11 => grey(0.1),
+            12 => grey(0.5),
+            13 => grey(0.86),
+            _ => grey(0.9),
+        });
+        let weight = Raster::from_fn(w, h, |x, _| if x >= 10 { 1.0 } else { 0.0 });
+        let depth = Raster::from_fn(w, h, |x, _| if x < 10 { 2.0 } else { 100.0 });
+        let moved = |rim: usize, photo: &RgbRaster| {
+            let mut m = Raster::new(w, h, f32::INFINITY);
+            for (i, z) in rim_outline(photo, &weight, &depth, rim) {
+                m.data_mut()[i] = z;
+            }
+            m
+        };
+        let m = moved(4, &photo);
+        for y in 0..h {
+            for x in 0..w {
+                let want = if (10..=12).contains(&x) {
+                    2.0
+                } else {
+                    f32::INFINITY
+                };
+                assert_eq!(m.at(x, y), want, "({x}, {y})");
+            }
+        }
+        // A rim of one ring does not reach past the object's colour into the card's own:
+        // there is nothing to tell the outline from, and nothing moves.
+        assert!(moved(1, &photo).data().iter().all(|z| z.is_infinite()));
+        // No colour edge across the border (the object the wall's colour): nothing moves.
+        let flat = Raster::new(w, h, grey(0.9));
+        assert!(rim_outline(&flat, &weight, &depth, 4).is_empty());
+    }
+
+    /// A dark disc with a soft outline (a ramp of 4 pixels) on a pale wall; the estimate puts
+    /// what holds a fifth of the disc's colour or more at 2 and the wall at 40. A facing card
+    /// on the wall at 30: the wall goes to 30, and the outline's pixels that the segmentation
+    /// gave the wall's region (part of its paler half) stay with the disc.
+    #[test]
+    fn a_wall_card_leaves_the_outline_of_what_stands_in_front() {
+        let (w, h) = (160, 100);
+        let intrinsics = Intrinsics::from_hfov(w, h, 60.0);
+        let share = |x: usize, y: usize| {
+            let r = ((x as f32 - 80.0).powi(2) + (y as f32 - 50.0).powi(2)).sqrt();
+            ((22.0 - r) / 4.0).clamp(0.0, 1.0)
+        };
+        let image = Raster::from_fn(w, h, |x, y| {
+            let a = share(x, y);
+            [0.9 - 0.8 * a, 0.88 - 0.8 * a, 0.85 - 0.75 * a]
+        });
+        let estimate = Raster::from_fn(w, h, |x, y| if share(x, y) >= 0.2 { 2.0 } else { 40.0 });
+        let mut depth = estimate.clone();
+        let ground = GroundPlane {
+            horizon: 0.5,
+            camera_height: 1.6,
+        };
+        // Every region of the wall (seeds on a grid, away from the disc).
+        let seeds = (0..10)
+            .flat_map(|i| (0..10).map(move |j| [0.05 + 0.1 * i as f32, 0.05 + 0.1 * j as f32]))
+            .filter(|s| share((s[0] * 159.0) as usize, (s[1] * 99.0) as usize) == 0.0)
+            .filter(|s| {
+                ((s[0] * 159.0 - 80.0).powi(2) + (s[1] * 99.0 - 50.0).powi(2)).sqrt() > 30.0
+            })
+            .collect();
+        let card = PopUp {
+            seeds,
+            shape: PopUpShape::Facing { depth: 30.0 },
+            hidden: false,
+        };
+        apply_popups(&image, &estimate, &mut depth, &[card], ground, &intrinsics).unwrap();
+        assert_eq!(depth.at(5, 5), 30.0);
+        assert_eq!(depth.at(80, 50), 2.0);
+        for y in 0..h {
+            for x in 0..w {
+                if share(x, y) >= 0.2 {
+                    assert_eq!(depth.at(x, y), 2.0, "({x}, {y}) share {}", share(x, y));
+                }
+            }
         }
     }
 
