@@ -550,7 +550,7 @@ pub fn apply_popups(
 
 /// A card's hard border and what lies across it are two surfaces when their depths differ by
 /// more than this ratio (the ratio `eval depth`'s δ<1.25 calls a wrong depth); then the mixed
-/// pixels of the outline between them go with the nearer one ([`rim_outline`]).
+/// pixels of the outline between them go with the nearer one ([`apply_popups`]).
 pub const RIM_DEPTH_RATIO: f32 = 1.25;
 
 /// A pixel of a card's rim is the outline of the nearer surface across the border when its
