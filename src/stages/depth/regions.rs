@@ -457,7 +457,8 @@ pub fn apply_popups(
     }
     let regions = Regions::find(image, estimate)?;
     let (w, h) = depth.size();
-    // The photo's edges, once for every card's feather.
+    // The photo at the depth's size (the rims read its colours) and its edges, once for every
+    // card's feather.
     let resized;
     let photo = if image.size() == (w, h) {
         image
@@ -554,8 +555,10 @@ pub fn apply_popups(
 pub const RIM_DEPTH_RATIO: f32 = 1.25;
 
 /// A pixel of a card's rim is the outline of the nearer surface across the border when its
-/// colour lies at least this share of the way from the farther side's colour to the nearer's
-/// (the split the layers use for mixed pixels, `stages::layers::edges::FOREGROUND_SPLIT`).
+/// colour lies at least this share of the way from the farther side's colour to the nearer's.
+/// Lower than the layers' split for mixed depths (`stages::layers::edges::FOREGROUND_SPLIT`,
+/// 0.3): a faint outline pixel left behind is a line apart from its object, taken along it is
+/// part of the object's edge (at 0.3 the portrait kept a faint ghost outline on the wall).
 pub const RIM_SPLIT: f32 = 0.1;
 
 /// Along a card's hard border (`weight` 1 inside, 0 outside), the photo's outline goes with
