@@ -410,6 +410,14 @@ impl ClassicalDepth {
                 }
             }
         }
+        if wo > 0.0 && wf > 0.0 {
+            // The defocus cue spreads the blur of a figure's own outline (a bud in front of
+            // the focus is the blurriest edge in the picture) over the backdrop beside it;
+            // the object cue lifts the figure's inside but not that backdrop, so a far ring
+            // would be left around the figure, and parallax opens it as a line.
+            let reach = ((MOAT_REACH * ww.max(wh) as f32).round() as usize).max(1);
+            fused = fill_moats(&fused, &figure_mask(&object_work), reach);
+        }
         // Parsimony: relief that no confident cue vouches for is texture, not shape. Near the
         // edges a confident cue draws (the skyline, a figure's outline, the border of what is
         // in focus, a pop-up's contact) the fused relief stays; elsewhere the depth is the
@@ -705,6 +713,36 @@ fn flatten_unvouched(
         .count();
     let share = moved as f32 / out.len().max(1) as f32;
     (out, share)
+}
+
+/// How far from a figure [`fill_moats`] looks for a far ring around it, a share of the working
+/// copy's long side (8 px at 384; half the defocus cue's spreading σ, `DefocusParams::spread`).
+pub const MOAT_REACH: f32 = 0.02;
+
+/// `nearness` with the far moats around `figures` filled: outside the figures and within
+/// `reach` pixels of one (a `2·reach + 1` square), each pixel takes the greater of its nearness
+/// and the grey closing of the nearness by a `2·reach + 1` square (the dilation's maximum,
+/// then the erosion's minimum), which fills a valley narrower than the square between a figure
+/// and what lies beyond the valley — no higher than the lower rim. A slope falling away from
+/// a figure and the figures themselves are left as they are.
+pub fn fill_moats(nearness: &GrayRaster, figures: &MaskRaster, reach: usize) -> GrayRaster {
+    use crate::raster::morph::{dilate, sliding_extreme};
+    if nearness.is_empty() || !nearness.same_size(figures) {
+        return nearness.clone();
+    }
+    let k = 2 * reach + 1;
+    let up = sliding_extreme(nearness, k, k, f32::NEG_INFINITY, f32::max);
+    let closed = sliding_extreme(&up, k, k, f32::INFINITY, f32::min);
+    let near = dilate(figures, k);
+    let (w, h) = nearness.size();
+    Raster::from_fn(w, h, |x, y| {
+        let v = nearness.at(x, y);
+        if near.at(x, y) && !figures.at(x, y) {
+            v.max(closed.at(x, y))
+        } else {
+            v
+        }
+    })
 }
 
 /// Smallest share of the picture an object-cue region must cover to be a figure: smaller ones
@@ -1425,6 +1463,58 @@ mod tests {
             out.at(4, 4),
             0.0,
             "outside every region the cue is unchanged"
+        );
+    }
+
+    #[test]
+    fn a_far_moat_around_a_figure_is_filled_and_nothing_else() {
+        // A figure (columns 0–9, 0.9, with a dip inside it); beside it a moat 4 px wide
+        // (0.2), then the backdrop (0.5) with a valley of its own far from the figure
+        // (columns 30–33, 0.2). Reach 4: a 9 px square.
+        let (w, h) = (40, 5);
+        let figures = Raster::from_fn(w, h, |x, _| x < 10);
+        let moat = Raster::from_fn(w, h, |x, _| match x {
+            3 => 0.7,
+            0..=9 => 0.9,
+            10..=13 => 0.2,
+            30..=33 => 0.2,
+            _ => 0.5,
+        });
+        let out = fill_moats(&moat, &figures, 4);
+        for y in 0..h {
+            for x in 0..w {
+                let want = match x {
+                    10..=13 => 0.5, // filled to the lower rim, the backdrop
+                    _ => moat.at(x, y),
+                };
+                assert!(
+                    (out.at(x, y) - want).abs() < 1e-6,
+                    "({x}, {y}): {}",
+                    out.at(x, y)
+                );
+            }
+        }
+        // A backdrop falling away from the figure keeps its slope.
+        let slope = Raster::from_fn(w, h, |x, _| {
+            if x < 10 {
+                0.9
+            } else {
+                0.6 - 0.01 * (x - 10) as f32
+            }
+        });
+        let out = fill_moats(&slope, &figures, 4);
+        assert!(
+            out.data()
+                .iter()
+                .zip(slope.data())
+                .all(|(a, b)| (a - b).abs() < 1e-6)
+        );
+        // No figure, or a raster of another size: unchanged.
+        let none = Raster::new(w, h, false);
+        assert_eq!(fill_moats(&moat, &none, 4).data(), moat.data());
+        assert_eq!(
+            fill_moats(&moat, &Raster::new(3, 3, true), 4).data(),
+            moat.data()
         );
     }
 
