@@ -1516,6 +1516,17 @@ mod tests {
             fill_moats(&moat, &Raster::new(3, 3, true), 4).data(),
             moat.data()
         );
+        // One pixel, a reach far beyond the raster, and a non-finite value: finite out.
+        let one = Raster::new(1, 1, 0.4f32);
+        assert_eq!(
+            fill_moats(&one, &Raster::new(1, 1, false), 50).at(0, 0),
+            0.4
+        );
+        let mut holed = moat.clone();
+        holed.set(12, 2, f32::NAN);
+        let out = fill_moats(&holed, &figures, 4);
+        assert!((out.at(12, 2) - 0.5).abs() < 1e-6, "{}", out.at(12, 2));
+        assert!(out.data().iter().all(|v| v.is_finite()));
     }
 
     #[test]
