@@ -410,24 +410,23 @@ impl ClassicalDepth {
                 }
             }
         }
+        let figure = figure_mask(&object_work);
         if wo > 0.0 && wf > 0.0 {
             // The defocus cue spreads the blur of a figure's own outline (a bud in front of
             // the focus is the blurriest edge in the picture) over the backdrop beside it;
             // the object cue lifts the figure's inside but not that backdrop, so a far ring
             // would be left around the figure, and parallax opens it as a line.
             let reach = ((MOAT_REACH * ww.max(wh) as f32).round() as usize).max(1);
-            fused = fill_moats(&fused, &figure_mask(&object_work), reach);
+            fused = fill_moats(&fused, &figure, reach);
         }
         // Parsimony: relief that no confident cue vouches for is texture, not shape. Near the
         // edges a confident cue draws (the skyline, a figure's outline, the border of what is
         // in focus, a pop-up's contact) the fused relief stays; elsewhere the depth is the
         // smooth surface through it, which bends freely but does not cross those edges.
         let close = 2 * ((0.03 * ww.max(wh) as f32).round() as usize).max(1) + 1;
-        let figures = crate::raster::morph::erode(
-            &crate::raster::morph::dilate(&figure_mask(&object_work), close),
-            close,
-        )
-        .map(|f| if f { 1.0 } else { 0.0 });
+        let figures =
+            crate::raster::morph::erode(&crate::raster::morph::dilate(&figure, close), close)
+                .map(|f| if f { 1.0 } else { 0.0 });
         let mut sure_cues = vec![
             (&sky_work, 1.0),
             (&figures, wo / total),
