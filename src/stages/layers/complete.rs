@@ -272,6 +272,18 @@ fn complete_layers(
         if let (Some(g), Some((_, _, _, kept))) = (grown, &kept) {
             feather_into_kept(&mut image, &mut depth, kept, region, k, g);
         }
+        // Behind a smooth seam the surface continues itself (see `smooth_seam_band`).
+        let near = region.interval[0];
+        let seam =
+            super::smooth_seam_band((&plan.labels, &plan.depth, canvas), (k, near), &plan.seam);
+        for &(i, weight) in &seam {
+            if i < canvas.len() && region.hidden.data()[i] {
+                let (c, f) = (canvas.data()[i], &mut image.data_mut()[i]);
+                for (v, cv) in f.iter_mut().zip(c) {
+                    *v = weight * cv + (1.0 - weight) * *v;
+                }
+            }
+        }
         for i in 0..canvas.len() {
             if region.mask.data()[i] {
                 image.data_mut()[i] = canvas.data()[i];

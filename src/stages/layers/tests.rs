@@ -1185,3 +1185,117 @@ fn a_grown_canvas_keeps_the_earlier_fill_away_from_the_new_margin() {
     let holes: usize = moved_plan.regions.iter().map(|r| count(&r.hole)).sum();
     assert_eq!(asked, holes);
 }
+
+/// A ground plane below its horizon, as the estimator gives a misty lake: disparity grows
+/// linearly down the picture (Z = 400 / (y − 2) for rows y ≥ 3, so the depth changes by a ratio of
+/// 2 in a few rows near the horizon), one uniform grey with a faint row-to-row shading.
+fn lake(w: usize, h: usize) -> (RgbRaster, GrayRaster) {
+    let canvas = Raster::from_fn(w, h, |_, y| {
+        let g = 0.6 - 0.001 * y as f32;
+        [g, g, g]
+    });
+    let depth = Raster::from_fn(w, h, |_, y| 400.0 / (y as f32 - 2.0).max(1.0));
+    (canvas, depth)
+}
+
+#[test]
+fn a_cut_through_a_ground_plane_is_not_snapped_and_its_seam_stays_closed() {
+    let (w, h) = (24, 60);
+    let (canvas, depth) = lake(w, h);
+    let plan = plan_layers(&depth, &count_params(2), &Progress::none()).expect("plan");
+    assert_eq!(plan.regions.len(), 2);
+    // One plane: the refinement leaves every depth as it was (no step at the cut).
+    assert_eq!(plan.depth, depth);
+    // The fill is red; behind the seam the far layer continues the lake itself.
+    let inpainter = MeanInpainter {
+        forced_colour: Some([1.0, 0.0, 0.0]),
+        ..MeanInpainter::default()
+    };
+    let scene = inpaint_layers(&canvas, &plan, &inpainter, 1, &Progress::none()).expect("ok");
+    check_scene(&scene, &canvas, &plan.depth);
+    let far = &scene.layers[1];
+    // The far layer holds the upper rows; the seam runs above the first near row.
+    let seam_row = (0..h).find(|&y| !far.mask.at(0, y)).expect("near rows");
+    assert!(
+        seam_row > 0 && far.mask.at(0, 0),
+        "the far layer holds the top"
+    );
+    assert!((seam_row..h).all(|y| !far.mask.at(0, y)));
+    let band = plan.seam.band;
+    assert_eq!(band, 3);
+    for x in 0..w {
+        // Weight 1 for the first band / 2 + 1 rows past the seam: the canvas colour exactly.
+        assert!(far.inpainted.at(x, seam_row));
+        assert_eq!(far.image.at(x, seam_row), canvas.at(x, seam_row), "x {x}");
+        assert_eq!(far.image.at(x, seam_row + 1), canvas.at(x, seam_row + 1));
+        // Then fading into the fill: 2/3, 1/3 of the canvas, then the fill alone.
+        let mix = |t: f32, y: usize| {
+            let c = canvas.at(x, y);
+            [t * c[0] + (1.0 - t), t * c[1], t * c[2]]
+        };
+        for (y, t) in [(seam_row + 2, 2.0 / 3.0), (seam_row + 3, 1.0 / 3.0)] {
+            let (got, want) = (far.image.at(x, y), mix(t, y));
+            for (g, v) in got.iter().zip(want) {
+                assert!((g - v).abs() < 1e-5, "x {x} y {y}: {got:?} vs {want:?}");
+            }
+        }
+        if far.inpainted.at(x, seam_row + 4) {
+            assert_eq!(far.image.at(x, seam_row + 4), [1.0, 0.0, 0.0]);
+        }
+    }
+}
+
+#[test]
+fn smooth_seams_known_answers() {
+    // One row: layer 0 (nearer) on x < 4, layer 1 from x = 4; depth 10, 10.2, … 11.4, one
+    // colour.
+    let labels = Raster::from_fn(8, 1, |x, _| u16::from(x >= 4));
+    let depth = Raster::from_fn(8, 1, |x, _| 10.0 + 0.2 * x as f32);
+    let grey = Raster::new(8, 1, [0.5f32; 3]);
+    let seam = SeamParams {
+        step_ratio: 1.15,
+        colour_step: SEAM_COLOUR_STEP,
+        band: 3,
+    };
+    let band = smooth_seam_band((&labels, &depth, &grey), (1, 10.8), &seam);
+    assert_eq!(
+        band,
+        vec![(0, 1.0 / 3.0), (1, 2.0 / 3.0), (2, 1.0), (3, 1.0)]
+    );
+    // Layer 0 has nothing behind it to continue.
+    assert!(smooth_seam_band((&labels, &depth, &grey), (0, 10.0), &seam).is_empty());
+    // An occlusion: the far side twice as deep.
+    let jump = Raster::from_fn(
+        8,
+        1,
+        |x, _| if x >= 4 { 30.0 } else { 10.0 + 0.2 * x as f32 },
+    );
+    assert!(smooth_seam_band((&labels, &jump, &grey), (1, 30.0), &seam).is_empty());
+    // An outline: the same depths, but the nearer thing is dark.
+    let outlined = Raster::from_fn(8, 1, |x, _| if x >= 4 { [0.5; 3] } else { [0.1; 3] });
+    assert!(smooth_seam_band((&labels, &depth, &outlined), (1, 10.8), &seam).is_empty());
+    // A texture edge inside the band stops the walk there.
+    let edge = Raster::from_fn(8, 1, |x, _| if x >= 2 { [0.5; 3] } else { [0.9; 3] });
+    let band = smooth_seam_band((&labels, &depth, &edge), (1, 10.8), &seam);
+    assert_eq!(band, vec![(2, 1.0), (3, 1.0)]);
+    // Pixels much nearer than the layer's near end are not its surface: a layer from 11.9 on
+    // reaches only down to 11.9 / 1.15 = 10.35.
+    let band = smooth_seam_band((&labels, &depth, &grey), (1, 11.9), &seam);
+    assert_eq!(band, vec![(2, 1.0), (3, 1.0)]);
+    // No band, a mismatched size, non-finite depth: nothing, no panic.
+    let none = SeamParams { band: 0, ..seam };
+    assert!(smooth_seam_band((&labels, &depth, &grey), (1, 10.8), &none).is_empty());
+    let small = Raster::new(2, 1, [0.5f32; 3]);
+    assert!(smooth_seam_band((&labels, &depth, &small), (1, 10.8), &seam).is_empty());
+    let nan = Raster::from_fn(8, 1, |x, _| {
+        if x == 3 {
+            f32::NAN
+        } else {
+            10.0 + 0.2 * x as f32
+        }
+    });
+    assert!(smooth_seam_band((&labels, &nan, &grey), (1, 10.8), &seam).is_empty());
+    // Known answers of the step ratio.
+    assert!((seam_step_ratio(1.3) - 1.15).abs() < 1e-6);
+    assert_eq!(seam_step_ratio(0.5), 1.0);
+}
