@@ -344,17 +344,7 @@ pub fn smooth_seam_band(
             && dc <= seam.colour_step
     };
     let nearer = |i: usize| usize::from(lab[i]) < k && z[i] * step_ratio >= near;
-    let neighbours = |i: usize| {
-        let (x, y) = (i % w, i / w);
-        [
-            (x > 0).then(|| i - 1),
-            (x + 1 < w).then(|| i + 1),
-            (y > 0).then(|| i - w),
-            (y + 1 < h).then(|| i + w),
-        ]
-        .into_iter()
-        .flatten()
-    };
+    let neighbours = |i: usize| crate::raster::neighbours4(i, w, h).into_iter().flatten();
     let mut steps: std::collections::HashMap<usize, usize> = std::collections::HashMap::new();
     let mut frontier: Vec<usize> = (0..w * h)
         .filter(|&i| nearer(i) && neighbours(i).any(|j| usize::from(lab[j]) == k && smooth(i, j)))

@@ -50,17 +50,7 @@ fn blend_seam_band(
     // Steps from the photo through the hole (breadth first, 4-neighbours), up to `band`.
     let mut steps = vec![u32::MAX; w * h];
     let mut queue = std::collections::VecDeque::new();
-    let neighbours = |i: usize| {
-        let (x, y) = (i % w, i / w);
-        [
-            (x > 0).then(|| i - 1),
-            (x + 1 < w).then(|| i + 1),
-            (y > 0).then(|| i - w),
-            (y + 1 < h).then(|| i + w),
-        ]
-        .into_iter()
-        .flatten()
-    };
+    let neighbours = |i: usize| crate::raster::neighbours4(i, w, h).into_iter().flatten();
     // The correction: Dirichlet values on the photo's edge pixels, 0 elsewhere.
     let mut correction = vec![[0.0f32; 3]; w * h];
     for i in 0..w * h {
