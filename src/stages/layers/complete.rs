@@ -277,7 +277,7 @@ fn complete_layers(
         let seam =
             super::smooth_seam_band((&plan.labels, &plan.depth, canvas), (k, near), &plan.seam);
         for &(i, weight) in &seam {
-            if i < canvas.len() && region.hidden.data()[i] {
+            if region.hidden.data()[i] {
                 let (c, f) = (canvas.data()[i], &mut image.data_mut()[i]);
                 for (v, cv) in f.iter_mut().zip(c) {
                     *v = weight * cv + (1.0 - weight) * *v;

@@ -161,10 +161,10 @@ pub fn fill_invalid_depth(depth: &GrayRaster) -> Option<(GrayRaster, usize)> {
 /// A pixel is on a discontinuity when its `window × window` neighbourhood holds more than one
 /// layer, its depths span a ratio `max Z / min Z > min_ratio` (a gentle surface crossing a
 /// threshold is left alone) *and* its disparity is not one plane ([`window_is_planar`]: a
-/// ground plane near its horizon, however steep in depth, is left alone too). There, for every layer `l` present in the window, the masked median
-/// `m_l` of the depths of that layer's pixels is taken; the pixel joins the nearest layer whose
-/// split against the next farther one (see [`FOREGROUND_SPLIT`]) its disparity reaches, and its
-/// depth becomes that layer's median `m_l` (an actual depth of that layer, so it lies in the
+/// ground plane near its horizon, however steep in depth, is left alone too). There, for every
+/// layer `l` present in the window, the masked median `m_l` of the depths of that layer's
+/// pixels is taken; the pixel joins the nearest layer whose split against the next farther one
+/// (see [`FOREGROUND_SPLIT`]) its disparity reaches, and its depth becomes that layer's median `m_l` (an actual depth of that layer, so it lies in the
 /// layer's interval). Mixed pixels thus snap onto one surface: no points float between layers.
 /// A pixel that stays in its own layer and already lies on its surface (within
 /// [`SURFACE_BAND`] of the gap) keeps its depth.

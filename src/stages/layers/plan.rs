@@ -319,7 +319,8 @@ pub fn seam_step_ratio(edge_depth_ratio: f32) -> f32 {
 /// the inpainter fills them from a context eroded away from the cut (so as not to copy mixed
 /// pixels at an occlusion), which leaves its fill free to differ from the surface right at the
 /// cut, and the first pixel of a gap that parallax opens along the seam would show that
-/// difference as a line. Sorted by index; each pixel once. O(pixels reached).
+/// difference as a line. Sorted by index; each pixel once. O(pixels); empty for the nearest
+/// layer (nothing is nearer).
 pub fn smooth_seam_band(
     (labels, depth, colour): (&Raster<u16>, &GrayRaster, &RgbRaster),
     (k, near): (usize, f32),
@@ -327,7 +328,7 @@ pub fn smooth_seam_band(
 ) -> Vec<(usize, f32)> {
     let (w, h) = labels.size();
     let (step_ratio, band) = (seam.step_ratio, seam.band);
-    if band == 0 || !depth.same_size(labels) || !colour.same_size(labels) {
+    if k == 0 || band == 0 || !depth.same_size(labels) || !colour.same_size(labels) {
         return Vec::new();
     }
     let lab = labels.data();

@@ -343,7 +343,6 @@ impl ClassicalDepth {
         progress.report(0.6, "depth: cues");
         progress.check()?;
 
-        // Detail cue.
         // Detail is the fallback's figure/ground where the border is many things. Where the
         // border is one background, figure/ground against it is the object cue's to find;
         // when that finds only texture (a forest floor, a canopy), there is no figure there.
@@ -1224,8 +1223,8 @@ mod tests {
         // A studio portrait: a pale, smooth wall from the top, two dark figures rising from a
         // dark table across the bottom, the wall showing between and beside them down to the
         // table; the wall lit from above. Its outline's horizon (the median column bottom) lies
-        // at the figures' tops,
-        // and most of the "sky" lies below it: a backdrop, not a sky over a horizon.
+        // at the figures' tops, and most of the "sky" lies below it: a backdrop, not a sky over
+        // a horizon.
         let (w, h) = (120, 120);
         let img = Raster::from_fn(w, h, |x, y| {
             let n = 0.01 * hash(x, y);
