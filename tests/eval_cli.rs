@@ -331,11 +331,36 @@ fn eval_ordinal_scores_the_estimator_against_the_ramp() {
 #[test]
 fn eval_scribbles_strokes_improve_the_depth() {
     let run = |extra: &[&str]| on_aloe_q("scribbles").args(extra).output().unwrap();
-    let o = run(&["--strokes", "0,5,15", "--no-nvs", "--json"]);
+    let dir = tempfile::tempdir().unwrap();
+    let save = dir.path().join("maps");
+    let o = on_aloe_q("scribbles")
+        .args(["--strokes", "0,5,15", "--no-nvs", "--json", "--save"])
+        .arg(&save)
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let rows = v["rows"].as_array().unwrap();
     assert_eq!(rows.len(), 3);
+    // --save: one depth map per row and the strokes drawn.
+    let map = |k: usize| std::fs::read(save.join(format!("depth_{k}.npy"))).unwrap();
+    assert!(map(0).starts_with(b"\x93NUMPY"));
+    assert_eq!(map(0).len(), map(15).len());
+    assert_ne!(map(0), map(15), "fifteen strokes changed nothing");
+    let strokes: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(save.join("strokes.json")).unwrap()).unwrap();
+    assert_eq!(strokes.as_array().map(Vec::len), Some(15));
+    // A folder that cannot be made is one line naming it.
+    let blocked = dir.path().join("a-file");
+    std::fs::write(&blocked, b"x").unwrap();
+    let o = on_aloe_q("scribbles")
+        .args(["--strokes", "0", "--no-nvs", "--save"])
+        .arg(blocked.join("maps"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("a-file") && err.lines().count() == 1, "{err}");
     let d = |i: usize, k: &str| rows[i][k].as_f64().unwrap();
     assert!(d(2, "delta1") > d(0, "delta1") + 0.03, "{v}");
     assert!(d(2, "absrel") < d(0, "absrel"), "{v}");

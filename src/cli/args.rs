@@ -413,6 +413,10 @@ pub(crate) struct EvalScribblesArgs {
     /// pixels of the pair (default: where its ratio to the truth is over 1.25).
     #[arg(long)]
     pub(crate) tolerance_px: Option<f64>,
+    /// Also write each reported row's depth (`depth_N.npy`, the estimate's units; N = strokes)
+    /// and the strokes drawn (`strokes.json`) into this folder.
+    #[arg(long)]
+    pub(crate) save: Option<PathBuf>,
     /// Print JSON instead of a markdown table.
     #[arg(long)]
     pub(crate) json: bool,

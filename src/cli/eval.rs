@@ -177,6 +177,7 @@ pub(crate) fn eval_scribbles(
     let mut options = ScribbleOptions {
         strokes: args.strokes.clone(),
         nvs: !args.no_nvs,
+        save: args.save.clone(),
         ..ScribbleOptions::default()
     };
     if let Some(px) = args.tolerance_px {

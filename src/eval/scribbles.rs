@@ -37,6 +37,9 @@ pub struct ScribbleOptions {
     pub nvs: bool,
     /// The novel-view evaluation's settings (its methods are replaced by the full pipeline).
     pub nvs_options: NvsOptions,
+    /// Also write each reported row's depth (`depth_N.npy`) and the strokes (`strokes.json`)
+    /// into this folder (created if missing).
+    pub save: Option<std::path::PathBuf>,
 }
 
 impl Default for ScribbleOptions {
@@ -48,6 +51,7 @@ impl Default for ScribbleOptions {
             params: PropagateParams::default(),
             nvs: true,
             nvs_options: NvsOptions::default(),
+            save: None,
         }
     }
 }
@@ -308,6 +312,13 @@ pub fn eval_scribbles(
             warm = applied.correction;
         }
         if options.strokes.contains(&k) {
+            if let Some(dir) = &options.save {
+                std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e))?;
+                crate::stages::depth::io::export_depth_npy(
+                    &current,
+                    &dir.join(format!("depth_{k}.npy")),
+                )?;
+            }
             let m = depth_metrics(&current, &known, 0.0)?;
             let sub = progress.sub(
                 0.05 + 0.95 * reported as f32 / steps,
@@ -336,6 +347,11 @@ pub fn eval_scribbles(
     } else {
         None
     };
+    if let Some(dir) = &options.save {
+        let json = serde_json::to_string_pretty(&targets)
+            .map_err(|e| Error::invalid(format!("eval scribbles: {e}")))?;
+        crate::image_io::write_atomic(&dir.join("strokes.json"), json.as_bytes())?;
+    }
     Ok(ScribbleTable {
         rows,
         oracle,
