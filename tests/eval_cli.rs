@@ -379,6 +379,25 @@ fn eval_scribbles_strokes_improve_the_depth() {
         text.contains("| oracle depth |") && text.contains("of the PSNR gap"),
         "{text}"
     );
+    // Nothing off by more than the tolerance: every row is reported, the same, and the table
+    // says the artist had nothing left to do.
+    let o = run(&[
+        "--strokes",
+        "0,3",
+        "--no-nvs",
+        "--json",
+        "--tolerance-px",
+        "10000",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let rows = v["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 2, "{v}");
+    assert_eq!(rows[0]["delta1"], rows[1]["delta1"], "{v}");
+    assert_eq!(v["settled_after"], 0, "{v}");
+    assert_eq!(v["far_strokes"], 0, "{v}");
+    let o = run(&["--strokes", "0,3", "--no-nvs", "--tolerance-px", "10000"]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("After 0 strokes nothing was off"));
     // Counts out of order are refused in one line.
     let o = run(&["--strokes", "5,1", "--no-nvs"]);
     assert_eq!(o.status.code(), Some(2));

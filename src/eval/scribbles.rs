@@ -89,6 +89,12 @@ pub struct ScribbleTable {
     pub rows: Vec<ScribbleRow>,
     /// The oracle depth's row (`None` without `nvs`).
     pub oracle: Option<OracleRow>,
+    /// Strokes whose truth lay beyond what the estimate's alignment can express (a disparity
+    /// at or under its shift, or farther than the estimate's farthest depth): drawn at the
+    /// estimate's farthest depth.
+    pub far_strokes: usize,
+    /// The stroke count after which nothing was wrong any more (later rows repeat it).
+    pub settled_after: Option<usize>,
     /// The strokes drawn, in order.
     #[serde(skip)]
     pub targets: Vec<TargetStroke>,
@@ -134,6 +140,17 @@ impl ScribbleTable {
                 out.push('\n');
             }
         }
+        if self.far_strokes > 0 {
+            out.push_str(&format!(
+                "\n{} of the strokes carried a truth farther than the estimate's alignment reaches: drawn at the estimate's farthest depth.\n",
+                self.far_strokes
+            ));
+        }
+        if let Some(n) = self.settled_after {
+            out.push_str(&format!(
+                "\nAfter {n} strokes nothing was off by more than the tolerance; later rows repeat that depth.\n"
+            ));
+        }
         out
     }
 }
@@ -154,6 +171,19 @@ impl Tolerance {
             Tolerance::Ratio(r) => (a / g).max(g / a) > r,
             Tolerance::Pixels(px) => (a - g).abs() > px,
         }
+    }
+}
+
+/// The depth, in an estimate's units, of a stroke carrying the true disparity `g`, through the
+/// estimate's alignment `a = scale·(1/Z) + shift` (so `Z = scale/(g − shift)`), and whether it
+/// lay beyond the estimate's reach (a disparity at or under the shift, or farther than `far`,
+/// the estimate's farthest depth): then `far`.
+pub fn stroke_depth(g: f64, (scale, shift): (f64, f64), far: f32) -> (f32, bool) {
+    let inv = (g - shift) / scale;
+    if inv.is_finite() && inv > 0.0 && inv * f64::from(far) > 1.0 {
+        ((1.0 / inv) as f32, false)
+    } else {
+        (far, true)
     }
 }
 
@@ -244,8 +274,18 @@ pub fn eval_scribbles(
     let (w, h) = pair.left.size();
     let steps = options.strokes.len() as f32 + 1.0;
     let mut reported = 0usize;
+    // The estimate's farthest depth: where a stroke's truth lies beyond what the estimate's
+    // alignment can express (a disparity at or under its shift), the stroke goes there.
+    let far = estimate
+        .data()
+        .iter()
+        .copied()
+        .filter(|z| z.is_finite() && *z > 0.0)
+        .fold(0.0f32, f32::max);
+    let mut clamped = 0usize;
+    let mut settled = false;
     for k in 0..=max {
-        if k > 0 {
+        if k > 0 && !settled {
             progress.check()?;
             // Where the current depth is most wrong, seen through the estimate's alignment
             // (the scene units every stroke is drawn in; a re-fit after each stroke would
@@ -259,57 +299,57 @@ pub fn eval_scribbles(
                 let a = (m.scale / current.at(x, y) as f64 + m.shift).max(1e-9);
                 options.tolerance.is_wrong(a, g)
             });
-            let Some((cx, cy, dist)) = simulated_click(&wrong) else {
-                break; // Nothing left to correct.
-            };
-            let r = options.radius_px.min(dist).max(1.0);
-            // The ground truth's median disparity in the dab, in the estimate's units.
-            let mut d: Vec<f32> = Vec::new();
-            let ri = r.ceil() as i64;
-            for dy in -ri..=ri {
-                for dx in -ri..=ri {
-                    let (x, y) = (cx as i64 + dx, cy as i64 + dy);
-                    if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
-                        continue;
-                    }
-                    if ((dx * dx + dy * dy) as f32) <= r * r {
-                        let g = known.at(x as usize, y as usize);
-                        if g > 0.0 {
-                            d.push(g);
+            // Nothing left to correct: the remaining rows repeat the last depth.
+            let click = simulated_click(&wrong).and_then(|(cx, cy, dist)| {
+                let r = options.radius_px.min(dist).max(1.0);
+                // The ground truth's median disparity in the dab.
+                let mut d: Vec<f32> = Vec::new();
+                let ri = r.ceil() as i64;
+                for dy in -ri..=ri {
+                    for dx in -ri..=ri {
+                        let (x, y) = (cx as i64 + dx, cy as i64 + dy);
+                        if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
+                            continue;
+                        }
+                        if ((dx * dx + dy * dy) as f32) <= r * r {
+                            let g = known.at(x as usize, y as usize);
+                            if g > 0.0 {
+                                d.push(g);
+                            }
                         }
                     }
                 }
-            }
-            let Some(g) = crate::raster::quantile(&d, 0.5) else {
-                break;
-            };
-            let g = g as f64;
-            // a = s·(1/Z) + t  ⇒  Z = s/(g − t).
-            let inv = (g - m0.shift) / m0.scale;
-            if !(inv.is_finite() && inv > 0.0) {
-                break;
-            }
-            // The stroke as the editor stores it (image-relative), through the editor's path.
-            targets.push(TargetStroke {
-                points: vec![crate::geometry::pixels_to_relative(
-                    [cx as f32, cy as f32],
-                    (w, h),
-                )],
-                radius: r / w as f32,
-                depth: (1.0 / inv) as f32,
-                hidden: false,
-                same_as: None,
+                crate::raster::quantile(&d, 0.5).map(|g| (cx, cy, r, g as f64))
             });
-            let (depth, applied) = apply_target_strokes(
-                &pair.left,
-                &estimate,
-                &targets,
-                &options.params,
-                warm.as_ref(),
-            )?;
-            solve_s = applied.seconds;
-            current = depth;
-            warm = applied.correction;
+            match click {
+                None => settled = true,
+                Some((cx, cy, r, g)) => {
+                    let (depth, beyond) = stroke_depth(g, (m0.scale, m0.shift), far);
+                    clamped += usize::from(beyond);
+                    // The stroke as the editor stores it (image-relative), through the
+                    // editor's path.
+                    targets.push(TargetStroke {
+                        points: vec![crate::geometry::pixels_to_relative(
+                            [cx as f32, cy as f32],
+                            (w, h),
+                        )],
+                        radius: r / w as f32,
+                        depth,
+                        hidden: false,
+                        same_as: None,
+                    });
+                    let (depth, applied) = apply_target_strokes(
+                        &pair.left,
+                        &estimate,
+                        &targets,
+                        &options.params,
+                        warm.as_ref(),
+                    )?;
+                    solve_s = applied.seconds;
+                    current = depth;
+                    warm = applied.correction;
+                }
+            }
         }
         if options.strokes.contains(&k) {
             if let Some(dir) = &options.save {
@@ -355,6 +395,8 @@ pub fn eval_scribbles(
     Ok(ScribbleTable {
         rows,
         oracle,
+        far_strokes: clamped,
+        settled_after: settled.then_some(targets.len()),
         targets,
     })
 }
@@ -375,6 +417,20 @@ mod tests {
         // Far away a pixel of error is a large ratio; near, a small one.
         assert!(Ratio(1.25).is_wrong(1.0, 2.5));
         assert!(!Pixels(2.0).is_wrong(1.0, 2.5));
+    }
+
+    #[test]
+    fn a_strokes_depth_through_the_alignment_known_answers() {
+        // a = 100/Z + 40: a truth of 50 px is Z = 100/10 = 10.
+        assert_eq!(stroke_depth(50.0, (100.0, 40.0), 500.0), (10.0, false));
+        // At or under the shift the estimate cannot express it: its farthest depth.
+        assert_eq!(stroke_depth(40.0, (100.0, 40.0), 500.0), (500.0, true));
+        assert_eq!(stroke_depth(30.0, (100.0, 40.0), 500.0), (500.0, true));
+        // Just past the shift: farther than the farthest depth (100/0.1 = 1000 > 500).
+        assert_eq!(stroke_depth(40.1, (100.0, 40.0), 500.0), (500.0, true));
+        // A NaN disparity or a zero scale is beyond reach too, never a NaN depth.
+        assert_eq!(stroke_depth(f64::NAN, (100.0, 40.0), 500.0), (500.0, true));
+        assert_eq!(stroke_depth(50.0, (0.0, 40.0), 500.0), (500.0, true));
     }
 
     #[test]
