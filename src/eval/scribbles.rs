@@ -276,12 +276,7 @@ pub fn eval_scribbles(
     let mut reported = 0usize;
     // The estimate's farthest depth: where a stroke's truth lies beyond what the estimate's
     // alignment can express (a disparity at or under its shift), the stroke goes there.
-    let far = estimate
-        .data()
-        .iter()
-        .copied()
-        .filter(|z| z.is_finite() && *z > 0.0)
-        .fold(0.0f32, f32::max);
+    let far = crate::stages::depth::propagate::farthest_depth(&estimate);
     let mut clamped = 0usize;
     let mut settled = false;
     for k in 0..=max {
@@ -431,6 +426,11 @@ mod tests {
         // A NaN disparity or a zero scale is beyond reach too, never a NaN depth.
         assert_eq!(stroke_depth(f64::NAN, (100.0, 40.0), 500.0), (500.0, true));
         assert_eq!(stroke_depth(50.0, (0.0, 40.0), 500.0), (500.0, true));
+        // The far plane: the largest finite positive depth.
+        use crate::stages::depth::propagate::farthest_depth;
+        let d = GrayRaster::from_vec(5, 1, vec![1.0, f32::NAN, f32::INFINITY, -3.0, 5.0]).unwrap();
+        assert_eq!(farthest_depth(&d), 5.0);
+        assert_eq!(farthest_depth(&GrayRaster::new(2, 2, f32::NAN)), 0.0);
     }
 
     #[test]

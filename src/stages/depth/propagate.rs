@@ -168,6 +168,17 @@ pub struct TargetsApplied {
     pub correction: Option<GrayRaster>,
 }
 
+/// The largest finite positive depth of `depth` (0 when it has none): the far plane a target
+/// stroke is clamped to.
+pub fn farthest_depth(depth: &GrayRaster) -> f32 {
+    depth
+        .data()
+        .iter()
+        .copied()
+        .filter(|z| z.is_finite() && *z > 0.0)
+        .fold(0.0f32, f32::max)
+}
+
 /// Spreads the visible `strokes` over `depth` (the estimate, the photo's size) guided by
 /// `image`: the one path the editor, the command line and `eval scribbles` take. A target
 /// beyond the far plane (the estimate's largest depth) is brought back to it; more dabs than
@@ -254,12 +265,7 @@ fn apply_resolved(
         return Ok((depth.clone(), applied));
     }
     let (w, h) = image.size();
-    let far = depth
-        .data()
-        .iter()
-        .copied()
-        .filter(|z| z.is_finite() && *z > 0.0)
-        .fold(0.0f32, f32::max);
+    let far = farthest_depth(depth);
     let mut clamped = 0;
     let mut spacing = 0.5f32;
     let mut dabs = Vec::new();
