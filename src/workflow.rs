@@ -136,6 +136,11 @@ pub fn render_project(
     let path_warnings = path_warnings(&project, &scene, job.diagnostics, progress, note)?;
     crate::image_io::prepare_output_dir(out)?;
     if let Some(path) = &job.save_project {
+        if project.depth.has_edits() && project.depth.edited_on.is_none() {
+            // Edits written by hand or by a script: record the estimate they now sit on. A
+            // digest already there stays (the line above said if it no longer matches).
+            project.depth.edited_on = scene.depth.edited_on.clone();
+        }
         project
             .save(path)
             .map_err(|e| Error::invalid(format!("saving the project: {e}")))?;

@@ -963,3 +963,79 @@ fn bench_diffusion_splits_a_window_into_fixed_and_per_step_seconds() {
         &["1 steps", "at least 2"],
     );
 }
+
+/// Depth edits carry absolute depths: a project records the estimate they sit on, and a render
+/// whose estimate differs says so in one line (another version of the estimator, other depth
+/// settings); the same estimate says nothing.
+#[test]
+fn depth_edits_remember_the_estimate_they_were_made_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let img = data("evening_glow_320.jpg");
+    let plain = d.join("plain.json");
+    let o = render(
+        &img,
+        &d.join("a"),
+        &["--frames", "2", "--save-project", plain.to_str().unwrap()],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // A project without edits records nothing.
+    let text = std::fs::read_to_string(&plain).unwrap();
+    assert!(!text.contains("edited_on"), "{text}");
+    // A target stroke added by hand (as a script would): saving records the estimate.
+    let mut p: serde_json::Value = serde_json::from_str(&text).unwrap();
+    p["depth"]["targets"] = serde_json::json!([
+        {"points": [[0.5, 0.8]], "radius": 0.03, "depth": 4.0, "hidden": false}
+    ]);
+    let edited = d.join("edited.json");
+    std::fs::write(&edited, serde_json::to_string(&p).unwrap()).unwrap();
+    let recorded = d.join("recorded.json");
+    let rerender = |project: &Path, out: &str, save: Option<&Path>| {
+        let mut c = exe();
+        c.arg("render")
+            .arg("--project")
+            .arg(project)
+            .arg("--out")
+            .arg(d.join(out));
+        if let Some(s) = save {
+            c.arg("--save-project").arg(s);
+        }
+        c.output().unwrap()
+    };
+    let moved =
+        |o: &Output| String::from_utf8_lossy(&o.stderr).contains("not the one these depth edits");
+    let o = rerender(&edited, "b", Some(&recorded));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(!moved(&o));
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&recorded).unwrap()).unwrap();
+    let digest = saved["depth"]["edited_on"].as_str().unwrap().to_string();
+    assert_eq!(digest.len(), 16, "{digest}");
+    // The same estimate: quiet.
+    let o = rerender(&recorded, "c", None);
+    assert!(
+        o.status.success() && !moved(&o),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    // Edits made on another estimate: one line says so, the render still runs, and saving
+    // keeps the old digest (the artist has not looked yet).
+    let mut other = saved.clone();
+    other["depth"]["edited_on"] = serde_json::json!("0123456789abcdef");
+    let other_path = d.join("other.json");
+    std::fs::write(&other_path, serde_json::to_string(&other).unwrap()).unwrap();
+    let kept = d.join("kept.json");
+    let o = rerender(&other_path, "e", Some(&kept));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(
+        err.lines()
+            .filter(|l| l.contains("not the one these depth edits"))
+            .count(),
+        1,
+        "{err}"
+    );
+    let kept: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&kept).unwrap()).unwrap();
+    assert_eq!(kept["depth"]["edited_on"], "0123456789abcdef");
+}

@@ -1299,6 +1299,13 @@ fn a_region_pops_up_as_a_card() {
         (0.85 * (hgt - 1) as f32) as usize,
     );
     assert_eq!(z, want);
+    // Saved, the project records the estimate the card was made on.
+    let built_on = snapshot.scene.depth.edited_on.clone();
+    let saved = dir.path().join("saved.json");
+    assert!(h.state_mut().save_to(&saved));
+    let digest = Project::load(&saved).unwrap().depth.edited_on;
+    assert!(digest.is_some());
+    assert_eq!(digest, built_on);
     h.state_mut().undo();
     wait_idle(&mut h, limit);
     assert!(h.state().project().unwrap().depth.popups.is_empty());

@@ -106,6 +106,18 @@ impl EditorApp {
         let Some(doc) = &mut self.doc else {
             return false;
         };
+        // The depth edits are saved with the estimate the artist sees them on (the scene built
+        // from exactly this project), so a later estimate that differs is told on reopening.
+        if let Some(snapshot) = &self.snapshot
+            && snapshot.generation == doc.generation
+        {
+            doc.project.depth.edited_on = doc
+                .project
+                .depth
+                .has_edits()
+                .then(|| snapshot.scene.depth.edited_on.clone())
+                .flatten();
+        }
         match doc.project.save(path) {
             Ok(()) => {
                 doc.file = Some(path.to_path_buf());

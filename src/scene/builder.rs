@@ -437,7 +437,7 @@ impl SceneBuilder {
             strokes: Vec::new(),
             targets: Vec::new(),
             popups: Vec::new(),
-            ..project.depth.clone()
+            ..project.depth.without_digest()
         };
         let edited = !strokes.is_empty()
             || !project.depth.targets.is_empty()
@@ -446,7 +446,7 @@ impl SceneBuilder {
         let key = key_of(
             key,
             &(
-                &project.depth,
+                &project.depth.without_digest(),
                 project.camera.hfov_deg,
                 project.working.coordinates_size,
             ),
@@ -535,6 +535,7 @@ impl SceneBuilder {
             };
         let (w, h) = input.rgb.size();
         warnings.extend(depth.warnings.iter().cloned());
+        warnings.extend(depth.edits_moved(&project.depth));
         // The depth's statistics, once per depth (every build and dry run needs them).
         let (scale, depth_range) = remembered(&mut self.depth_stats, key, CACHE_ENTRIES, || {
             Ok((

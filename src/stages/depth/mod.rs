@@ -91,6 +91,64 @@ pub struct DepthSettings {
     /// Regions made planes (cards facing the camera, standing on the ground, tilted), applied
     /// after the targets; image-relative clicks.
     pub popups: Vec<regions::PopUp>,
+    /// A digest of the estimate the edits above were made on ([`estimate_digest`]), written
+    /// when a project with edits is saved. Edits carry absolute depths: when the estimate under
+    /// them changes (another version of the estimator, other depth settings), the build warns
+    /// that they may no longer fit. Not part of any cache key.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub edited_on: Option<String>,
+}
+
+impl DepthSettings {
+    /// These settings without [`DepthSettings::edited_on`] (what a cache key should see).
+    pub fn without_digest(&self) -> Self {
+        Self {
+            edited_on: None,
+            ..self.clone()
+        }
+    }
+
+    /// Whether the artist edited the depth (target strokes, pop-ups or brush strokes).
+    pub fn has_edits(&self) -> bool {
+        !(self.targets.is_empty() && self.popups.is_empty() && self.strokes.is_empty())
+    }
+}
+
+/// A digest of a depth map that survives float noise but not a change of shape: the log
+/// depth averaged over a grid of at most 32 × 32 cells, each cell's mean rounded to steps of
+/// 0.05 (5 %), hashed with FNV-1a (64 bit) together with the size; 16 hex digits. Empty and
+/// non-finite maps hash their size alone.
+pub fn estimate_digest(depth: &GrayRaster) -> String {
+    let (w, h) = depth.size();
+    let (gw, gh) = (w.clamp(1, 32), h.clamp(1, 32));
+    let mut sums = vec![(0.0f64, 0usize); gw * gh];
+    for y in 0..h {
+        for x in 0..w {
+            let z = depth.at(x, y);
+            if z.is_finite() && z > 0.0 {
+                let cell = (y * gh / h) * gw + x * gw / w;
+                sums[cell].0 += f64::from(z).ln();
+                sums[cell].1 += 1;
+            }
+        }
+    }
+    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut feed = |v: i64| {
+        for b in v.to_le_bytes() {
+            hash ^= u64::from(b);
+            hash = hash.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    };
+    feed(w as i64);
+    feed(h as i64);
+    for (sum, n) in sums {
+        feed(if n == 0 {
+            i64::MIN
+        } else {
+            (sum / n as f64 / 0.05).round() as i64
+        });
+    }
+    format!("{hash:016x}")
 }
 
 /// The depth stage's output plus what the user should be told about it.
@@ -107,6 +165,25 @@ pub struct DepthStageOutput {
     /// The depth before the artist's edits (targets, pop-ups, brushes), when there were any:
     /// what the editor's regions are found on, so they match the stage's.
     pub unedited: Option<std::sync::Arc<GrayRaster>>,
+    /// [`estimate_digest`] of that depth before the edits, when there were any: what a saved
+    /// project records in [`DepthSettings::edited_on`].
+    pub edited_on: Option<String>,
+}
+
+impl DepthStageOutput {
+    /// The line to tell the user when `settings`' edits were made on another estimate than
+    /// this output's (`None` when they were not, or nothing says).
+    pub fn edits_moved(&self, settings: &DepthSettings) -> Option<String> {
+        let (Some(then), Some(now)) = (&settings.edited_on, &self.edited_on) else {
+            return None;
+        };
+        (then != now).then(|| {
+            "depth: the estimate is not the one these depth edits were made on (another makeit4d \
+             version or other depth settings); their depths may no longer fit it — check the \
+             targets and pop-ups in the Depth tab"
+                .to_string()
+        })
+    }
 }
 
 /// The classical estimator's account of a depth map, for the editor.
@@ -226,6 +303,7 @@ pub fn run_depth_stage(
         warnings,
         cues,
         unedited: None,
+        edited_on: None,
     };
     apply_depth_edits(&mut out, image, intrinsics, settings, &settings.strokes)?;
     Ok(out)
@@ -248,6 +326,7 @@ pub fn apply_depth_edits(
     }
     let before = std::sync::Arc::new(out.estimate.depth.clone());
     let before_edits = before.clone();
+    out.edited_on = Some(estimate_digest(&before));
     out.unedited = Some(before.clone());
     let estimate = (!settings.popups.is_empty()).then_some(before);
     if !settings.targets.is_empty() {
@@ -298,6 +377,55 @@ pub fn apply_depth_edits(
 mod tests {
     use super::classical::DepthCue;
     use super::*;
+
+    #[test]
+    fn an_estimates_digest_and_whether_edits_moved() {
+        // A depth of e^(0.05·k) sits in the middle of a digest step: a thousandth off keeps
+        // the digest, 50 % more or another size does not, and nothing non-finite panics.
+        let base = GrayRaster::from_fn(40, 30, |x, _| (0.05 * (x / 4) as f32).exp());
+        let d = estimate_digest(&base);
+        assert_eq!(d.len(), 16);
+        assert_eq!(estimate_digest(&base.map(|z| z * 1.001)), d);
+        assert_ne!(estimate_digest(&base.map(|z| z * 1.5)), d);
+        assert_ne!(
+            estimate_digest(&GrayRaster::new(40, 31, 1.0)),
+            estimate_digest(&GrayRaster::new(40, 30, 1.0))
+        );
+        let odd = GrayRaster::from_vec(2, 1, vec![f32::NAN, -1.0]).unwrap();
+        assert_eq!(estimate_digest(&odd), estimate_digest(&odd));
+        assert_eq!(estimate_digest(&GrayRaster::new(0, 0, 1.0)).len(), 16);
+        // Edits moved: only when both digests are known and differ.
+        let out = DepthStageOutput {
+            estimate: DepthEstimate {
+                depth: base.clone(),
+                sky: GrayRaster::new(40, 30, 0.0),
+                confidence: GrayRaster::new(40, 30, 1.0),
+            },
+            estimator: "test".into(),
+            warnings: Vec::new(),
+            cues: None,
+            unedited: None,
+            edited_on: Some(d.clone()),
+        };
+        let with = |digest: Option<&str>| DepthSettings {
+            edited_on: digest.map(str::to_string),
+            ..DepthSettings::default()
+        };
+        assert!(out.edits_moved(&with(None)).is_none());
+        assert!(out.edits_moved(&with(Some(&d))).is_none());
+        assert!(out.edits_moved(&with(Some("0000000000000000"))).is_some());
+        let unedited = DepthStageOutput {
+            edited_on: None,
+            ..out.clone()
+        };
+        assert!(
+            unedited
+                .edits_moved(&with(Some("0000000000000000")))
+                .is_none()
+        );
+        // The digest is no part of what a cache sees.
+        assert_eq!(with(Some(&d)).without_digest(), with(None));
+    }
     use crate::raster::Raster;
 
     #[test]
