@@ -1311,6 +1311,38 @@ fn a_region_pops_up_as_a_card() {
     assert!(h.state().project().unwrap().depth.popups.is_empty());
 }
 
+/// Depth edits made on another estimate (another version, other settings): the Depth tab says
+/// so above the targets, and saving records the estimate on screen, which quiets it.
+#[test]
+fn the_depth_tab_says_when_edits_were_made_on_another_estimate() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = fast_project(dir.path());
+    let mut p = Project::load(&file).unwrap();
+    p.depth.popups = vec![makeit4d::stages::depth::regions::PopUp {
+        seeds: vec![[0.5, 0.85]],
+        shape: makeit4d::stages::depth::regions::PopUpShape::Facing { depth: 5.0 },
+        hidden: false,
+    }];
+    p.depth.edited_on = Some("0123456789abcdef".into());
+    p.save(&file).unwrap();
+    let Some(mut h) = on_depth_tab(file.clone()) else {
+        return;
+    };
+    let says = "not the one these depth edits were made on";
+    wait_idle(&mut h, Duration::from_secs(600));
+    h.step();
+    assert!(
+        h.query_by_label_contains(says).is_some(),
+        "the Depth tab warns"
+    );
+    assert!(h.state_mut().save_to(&file));
+    h.step();
+    h.step();
+    assert!(h.query_by_label_contains(says).is_none(), "saved: quiet");
+    let saved = Project::load(&file).unwrap().depth.edited_on.unwrap();
+    assert_ne!(saved, "0123456789abcdef");
+}
+
 /// The Input tab's generative fill: a project with the diffusion fixture builds with it (the
 /// inspector names it), a typed prompt is one edit kept in the project and undone in one step,
 /// and "none" turns it off.

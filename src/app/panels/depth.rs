@@ -1084,6 +1084,14 @@ impl DepthPanel {
     fn targets_ui(&mut self, ui: &mut Ui, cx: &mut PanelContext<'_>) {
         ui.separator();
         ui.heading("Depth targets");
+        // Targets and cards carry absolute depths: say when the estimate under them is not
+        // the one they were made on (saving records this one).
+        if let Some(line) = cx
+            .snapshot
+            .and_then(|s| s.scene.depth.edits_moved(&cx.project.depth))
+        {
+            ui.colored_label(ui.visuals().warn_fg_color, line);
+        }
         let range = match (cx.early_depth, cx.snapshot) {
             (Some(e), _) => e.view.depth_range,
             (None, Some(s)) => s.display.depth.depth_range,
