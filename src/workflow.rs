@@ -138,7 +138,7 @@ pub fn render_project(
     if let Some(path) = &job.save_project {
         if project.depth.has_edits() && project.depth.edited_on.is_none() {
             // Edits written by hand or by a script: record the estimate they now sit on. A
-            // digest already there stays (the line above said if it no longer matches).
+            // signature already there stays (the line above said if it no longer matches).
             project.depth.edited_on = scene.depth.edited_on.clone();
         }
         project

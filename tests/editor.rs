@@ -1303,9 +1303,9 @@ fn a_region_pops_up_as_a_card() {
     let built_on = snapshot.scene.depth.edited_on.clone();
     let saved = dir.path().join("saved.json");
     assert!(h.state_mut().save_to(&saved));
-    let digest = Project::load(&saved).unwrap().depth.edited_on;
-    assert!(digest.is_some());
-    assert_eq!(digest, built_on);
+    let signature = Project::load(&saved).unwrap().depth.edited_on;
+    assert!(signature.is_some());
+    assert_eq!(signature, built_on);
     h.state_mut().undo();
     wait_idle(&mut h, limit);
     assert!(h.state().project().unwrap().depth.popups.is_empty());

@@ -437,16 +437,14 @@ impl SceneBuilder {
             strokes: Vec::new(),
             targets: Vec::new(),
             popups: Vec::new(),
-            ..project.depth.without_digest()
+            ..project.depth.without_signature()
         };
-        let edited = !strokes.is_empty()
-            || !project.depth.targets.is_empty()
-            || !project.depth.popups.is_empty();
+        let edited = project.depth.has_edits();
         let unpainted_key = key_of(key, &(&unpainted_settings, project.camera.hfov_deg));
         let key = key_of(
             key,
             &(
-                &project.depth.without_digest(),
+                &project.depth.without_signature(),
                 project.camera.hfov_deg,
                 project.working.coordinates_size,
             ),

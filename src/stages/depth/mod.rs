@@ -91,8 +91,8 @@ pub struct DepthSettings {
     /// Regions made planes (cards facing the camera, standing on the ground, tilted), applied
     /// after the targets; image-relative clicks.
     pub popups: Vec<regions::PopUp>,
-    /// A digest of the estimate the edits above were made on ([`estimate_digest`]), written
-    /// when a project with edits is saved. Edits carry absolute depths: when the estimate under
+    /// The signature of the estimate the edits above were made on ([`estimate_signature`]),
+    /// written when a project with edits is saved. Edits carry absolute depths: when the estimate under
     /// them changes (another version of the estimator, other depth settings), the build warns
     /// that they may no longer fit. Not part of any cache key.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -101,7 +101,7 @@ pub struct DepthSettings {
 
 impl DepthSettings {
     /// These settings without [`DepthSettings::edited_on`] (what a cache key should see).
-    pub fn without_digest(&self) -> Self {
+    pub fn without_signature(&self) -> Self {
         Self {
             edited_on: None,
             ..self.clone()
@@ -114,41 +114,75 @@ impl DepthSettings {
     }
 }
 
-/// A digest of a depth map that survives float noise but not a change of shape: the log
-/// depth averaged over a grid of at most 32 × 32 cells, each cell's mean rounded to steps of
-/// 0.05 (5 %), hashed with FNV-1a (64 bit) together with the size; 16 hex digits. Empty and
-/// non-finite maps hash their size alone.
-pub fn estimate_digest(depth: &GrayRaster) -> String {
+/// Cells per side of an [`estimate_signature`].
+pub const SIGNATURE_CELLS: usize = 8;
+
+/// Largest difference of a cell's mean log depth between two [`estimate_signature`]s of one
+/// estimate (a factor of about 1.1): resampling the estimate to another working size or float
+/// noise moves a cell's mean far less; an estimator change that matters to absolute-depth
+/// edits (the portrait's wall from 415 to 20 units: 3.0) far more.
+pub const SIGNATURE_TOLERANCE: f32 = 0.1;
+
+/// What an estimate looked like, small enough for a project file: its log depth averaged over
+/// [`SIGNATURE_CELLS`]² cells of equal share of the picture (whatever its size), each mean in
+/// hundredths as a 16-bit hex number (`8000`: a cell with no finite positive depth), after
+/// `ln8x8:`. Compared with [`signatures_differ`].
+pub fn estimate_signature(depth: &GrayRaster) -> String {
     let (w, h) = depth.size();
-    let (gw, gh) = (w.clamp(1, 32), h.clamp(1, 32));
-    let mut sums = vec![(0.0f64, 0usize); gw * gh];
+    let n = SIGNATURE_CELLS;
+    let mut sums = vec![(0.0f64, 0usize); n * n];
     for y in 0..h {
         for x in 0..w {
             let z = depth.at(x, y);
             if z.is_finite() && z > 0.0 {
-                let cell = (y * gh / h) * gw + x * gw / w;
+                let cell = (y * n / h) * n + x * n / w;
                 sums[cell].0 += f64::from(z).ln();
                 sums[cell].1 += 1;
             }
         }
     }
-    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut feed = |v: i64| {
-        for b in v.to_le_bytes() {
-            hash ^= u64::from(b);
-            hash = hash.wrapping_mul(0x0000_0100_0000_01b3);
-        }
-    };
-    feed(w as i64);
-    feed(h as i64);
-    for (sum, n) in sums {
-        feed(if n == 0 {
-            i64::MIN
+    let mut out = String::from("ln8x8:");
+    for (sum, count) in sums {
+        let v = if count == 0 {
+            i16::MIN
         } else {
-            (sum / n as f64 / 0.05).round() as i64
-        });
+            (100.0 * sum / count as f64)
+                .round()
+                .clamp(f64::from(i16::MIN + 1), f64::from(i16::MAX)) as i16
+        };
+        out.push_str(&format!("{:04x}", v as u16));
     }
-    format!("{hash:016x}")
+    out
+}
+
+/// The cells of an [`estimate_signature`] (mean log depth, `None` for an empty cell); `None`
+/// when `s` is not one.
+fn signature_cells(s: &str) -> Option<Vec<Option<f32>>> {
+    let hex = s.strip_prefix("ln8x8:")?;
+    if hex.len() != 4 * SIGNATURE_CELLS * SIGNATURE_CELLS || !hex.is_ascii() {
+        return None;
+    }
+    (0..hex.len())
+        .step_by(4)
+        .map(|i| {
+            let v = u16::from_str_radix(&hex[i..i + 4], 16).ok()? as i16;
+            Some((v != i16::MIN).then_some(f32::from(v) / 100.0))
+        })
+        .collect()
+}
+
+/// Whether two [`estimate_signature`]s are of different estimates: a cell's mean log depth
+/// differs by more than [`SIGNATURE_TOLERANCE`], a cell is empty in one only, or either is not
+/// a signature.
+pub fn signatures_differ(a: &str, b: &str) -> bool {
+    match (signature_cells(a), signature_cells(b)) {
+        (Some(a), Some(b)) => a.iter().zip(&b).any(|(p, q)| match (p, q) {
+            (Some(p), Some(q)) => (p - q).abs() > SIGNATURE_TOLERANCE,
+            (None, None) => false,
+            _ => true,
+        }),
+        _ => true,
+    }
 }
 
 /// The depth stage's output plus what the user should be told about it.
@@ -165,8 +199,8 @@ pub struct DepthStageOutput {
     /// The depth before the artist's edits (targets, pop-ups, brushes), when there were any:
     /// what the editor's regions are found on, so they match the stage's.
     pub unedited: Option<std::sync::Arc<GrayRaster>>,
-    /// [`estimate_digest`] of that depth before the edits, when there were any: what a saved
-    /// project records in [`DepthSettings::edited_on`].
+    /// [`estimate_signature`] of that depth before the edits, when there were any: what a
+    /// saved project records in [`DepthSettings::edited_on`].
     pub edited_on: Option<String>,
 }
 
@@ -177,7 +211,7 @@ impl DepthStageOutput {
         let (Some(then), Some(now)) = (&settings.edited_on, &self.edited_on) else {
             return None;
         };
-        (then != now).then(|| {
+        signatures_differ(then, now).then(|| {
             "depth: the estimate is not the one these depth edits were made on (another makeit4d \
              version or other depth settings); their depths may no longer fit it — check the \
              targets and pop-ups in the Depth tab"
@@ -326,7 +360,7 @@ pub fn apply_depth_edits(
     }
     let before = std::sync::Arc::new(out.estimate.depth.clone());
     let before_edits = before.clone();
-    out.edited_on = Some(estimate_digest(&before));
+    out.edited_on = Some(estimate_signature(&before));
     out.unedited = Some(before.clone());
     let estimate = (!settings.popups.is_empty()).then_some(before);
     if !settings.targets.is_empty() {
@@ -379,22 +413,41 @@ mod tests {
     use super::*;
 
     #[test]
-    fn an_estimates_digest_and_whether_edits_moved() {
-        // A depth of e^(0.05·k) sits in the middle of a digest step: a thousandth off keeps
-        // the digest, 50 % more or another size does not, and nothing non-finite panics.
-        let base = GrayRaster::from_fn(40, 30, |x, _| (0.05 * (x / 4) as f32).exp());
-        let d = estimate_digest(&base);
-        assert_eq!(d.len(), 16);
-        assert_eq!(estimate_digest(&base.map(|z| z * 1.001)), d);
-        assert_ne!(estimate_digest(&base.map(|z| z * 1.5)), d);
-        assert_ne!(
-            estimate_digest(&GrayRaster::new(40, 31, 1.0)),
-            estimate_digest(&GrayRaster::new(40, 30, 1.0))
-        );
+    fn an_estimates_signature_and_whether_edits_moved() {
+        // Cell means of ln z = 0.05·(x / 5) over 8 × 8 cells of a 40 × 30 map: the first
+        // column of cells 0, the last 0.35.
+        let base = GrayRaster::from_fn(40, 30, |x, _| (0.05 * (x / 5) as f32).exp());
+        let d = estimate_signature(&base);
+        assert_eq!(d.len(), 6 + 4 * 64);
+        let cells = signature_cells(&d).unwrap();
+        assert_eq!(cells[0], Some(0.0));
+        assert_eq!(cells[7], Some(0.35));
+        // The same estimate at another size, or 5 % off: the same; 20 % off: another.
+        let bigger = GrayRaster::from_fn(80, 60, |x, _| (0.05 * (x / 10) as f32).exp());
+        assert!(!signatures_differ(&d, &estimate_signature(&bigger)));
+        assert!(!signatures_differ(
+            &d,
+            &estimate_signature(&base.map(|z| z * 1.05))
+        ));
+        assert!(signatures_differ(
+            &d,
+            &estimate_signature(&base.map(|z| z * 1.2))
+        ));
+        // Empty cells, non-finite depth, a tiny map and garbage never panic.
         let odd = GrayRaster::from_vec(2, 1, vec![f32::NAN, -1.0]).unwrap();
-        assert_eq!(estimate_digest(&odd), estimate_digest(&odd));
-        assert_eq!(estimate_digest(&GrayRaster::new(0, 0, 1.0)).len(), 16);
-        // Edits moved: only when both digests are known and differ.
+        assert!(!signatures_differ(
+            &estimate_signature(&odd),
+            &estimate_signature(&odd)
+        ));
+        assert!(signatures_differ(&estimate_signature(&odd), &d));
+        assert_eq!(
+            estimate_signature(&GrayRaster::new(0, 0, 1.0)).len(),
+            6 + 4 * 64
+        );
+        for bad in ["", "ln8x8:", "0123456789abcdef", "ln8x8:zz"] {
+            assert!(signatures_differ(bad, &d), "{bad}");
+        }
+        // Edits moved: only when both signatures are known and differ.
         let out = DepthStageOutput {
             estimate: DepthEstimate {
                 depth: base.clone(),
@@ -407,13 +460,15 @@ mod tests {
             unedited: None,
             edited_on: Some(d.clone()),
         };
-        let with = |digest: Option<&str>| DepthSettings {
-            edited_on: digest.map(str::to_string),
+        let with = |signature: Option<&str>| DepthSettings {
+            edited_on: signature.map(str::to_string),
             ..DepthSettings::default()
         };
         assert!(out.edits_moved(&with(None)).is_none());
         assert!(out.edits_moved(&with(Some(&d))).is_none());
         assert!(out.edits_moved(&with(Some("0000000000000000"))).is_some());
+        let near = estimate_signature(&base.map(|z| z * 1.02));
+        assert!(out.edits_moved(&with(Some(&near))).is_none());
         let unedited = DepthStageOutput {
             edited_on: None,
             ..out.clone()
@@ -423,8 +478,8 @@ mod tests {
                 .edits_moved(&with(Some("0000000000000000")))
                 .is_none()
         );
-        // The digest is no part of what a cache sees.
-        assert_eq!(with(Some(&d)).without_digest(), with(None));
+        // The signature is no part of what a cache sees.
+        assert_eq!(with(Some(&d)).without_signature(), with(None));
     }
     use crate::raster::Raster;
 
