@@ -384,6 +384,39 @@ fn a_depth_stroke_paints_over_the_cached_estimate() {
 }
 
 #[test]
+fn a_depth_edit_rebuilds_the_canvas_as_a_fresh_builder_would() {
+    // The canvas's sources (its hole and the photo without its unique objects) are kept across
+    // depth edits; the canvas rebuilt over the new depth is the one a fresh builder makes, and
+    // so is a sketch's after it.
+    use makeit4d::stages::depth::paint::{DepthStroke, DepthStrokeKind};
+    let mut p = project("evening_glow_320.jpg", PresetKind::Orbit, 4);
+    let mut builder = SceneBuilder::new();
+    builder.build(&p, &Progress::none()).expect("bare");
+    p.depth.strokes.push(DepthStroke {
+        kind: DepthStrokeKind::Pull,
+        points: vec![[100.0, 150.0], [160.0, 150.0]],
+        radius_px: 20.0,
+        strength: 0.5,
+    });
+    let sketch = builder.build_sketch(&p, &Progress::none()).expect("sketch");
+    let edited = builder.build(&p, &Progress::none()).expect("stroke");
+    assert_eq!(
+        builder.runs()[&Stage::Canvas],
+        3,
+        "bare, the sketch, the stroke"
+    );
+    let mut fresh = SceneBuilder::new();
+    let direct = fresh.build(&p, &Progress::none()).expect("fresh");
+    assert!(!edited.canvas.layout.is_identity(edited.input.rgb.size()));
+    assert_eq!(edited.canvas.image, direct.canvas.image);
+    assert_eq!(edited.canvas.depth, direct.canvas.depth);
+    let fresh_sketch = SceneBuilder::new()
+        .build_sketch(&p, &Progress::none())
+        .expect("fresh sketch");
+    assert_eq!(sketch.canvas.image, fresh_sketch.canvas.image);
+}
+
+#[test]
 fn presets_are_sized_to_what_the_scene_supports() {
     use makeit4d::scene::{MIN_SIZED_AMPLITUDE, SIZING_MARGIN, size_preset};
     let mut p = project("evening_glow_320.jpg", PresetKind::Orbit, 12);

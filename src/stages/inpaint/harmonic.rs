@@ -99,6 +99,10 @@ impl Inpainter for SketchInpainter {
     fn runs_several_at_once(&self) -> bool {
         true
     }
+
+    fn is_draft(&self) -> bool {
+        true
+    }
 }
 
 /// Replaces every `unknown` pixel of `pixels` (`w × h`, row-major) by the harmonic interpolant
@@ -111,6 +115,18 @@ pub(crate) fn membrane_fill<const N: usize>(
     progress: &Progress,
 ) -> Result<()> {
     membrane_fill_with(pixels, w, h, unknown, Sweeps::FULL, progress)
+}
+
+/// [`membrane_fill`] with the sketch's sweeps ([`SketchInpainter`]'s: the coarse solution
+/// prolonged, the full resolution its bilinear prolongation): for a draft.
+pub(crate) fn membrane_fill_sketch<const N: usize>(
+    pixels: &mut [[f32; N]],
+    w: usize,
+    h: usize,
+    unknown: &[bool],
+    progress: &Progress,
+) -> Result<()> {
+    membrane_fill_with(pixels, w, h, unknown, Sweeps::SKETCH, progress)
 }
 
 /// [`membrane_fill`] with `sweeps`.

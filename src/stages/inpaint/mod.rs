@@ -73,6 +73,14 @@ pub trait Inpainter: Send + Sync {
         false
     }
 
+    /// Whether this is a draft fill (the editor's first answer to an edit, refined by the
+    /// project's inpainter right after): the work around it may be a draft too — the canvas's
+    /// seam blended with few sweeps, the layers' sources not cleared of unique objects (a fill
+    /// that copies no texture cannot show one twice).
+    fn is_draft(&self) -> bool {
+        false
+    }
+
     /// What happened since the last call that the user should hear once (a fill that fell
     /// back to another inpainter, and why).
     fn take_notes(&self) -> Vec<String> {

@@ -242,7 +242,13 @@ fn complete_layers(
         let (completed_image, completed_depth) = if has_hole {
             // The context's unique objects (a boat on the water) are no source for what the
             // nearer layers hide: they would show twice.
-            let allowed = without_unique_objects(canvas, &region.context);
+            // (Not for a draft: it copies no texture, and what a layer's membrane takes from
+            // an object beside its hole stays within the hole.)
+            let allowed = if inpainter.is_draft() {
+                region.context.clone()
+            } else {
+                without_unique_objects(canvas, &region.context)
+            };
             let request = InpaintRequest {
                 image: known_image,
                 hole,

@@ -26,11 +26,17 @@ pub struct MeanInpainter {
     pub forced_guide: Option<f32>,
     /// When set, the completed colour is this everywhere in the hole.
     pub forced_colour: Option<[f32; 3]>,
+    /// Says it is a draft fill ([`Inpainter::is_draft`]).
+    pub draft: bool,
 }
 
 impl Inpainter for MeanInpainter {
     fn name(&self) -> &str {
         "mean (test)"
+    }
+
+    fn is_draft(&self) -> bool {
+        self.draft
     }
 
     fn inpaint(&self, request: &InpaintRequest<'_>, progress: &Progress) -> Result<InpaintResult> {

@@ -101,6 +101,37 @@ fn check_scene(scene: &LayeredScene, canvas: &RgbRaster, plan_depth: &GrayRaster
 }
 
 #[test]
+fn a_draft_fill_takes_the_whole_context_as_its_source() {
+    // The wall holds a small yellow sign, a unique object: the project's inpainter may not copy
+    // it behind the square (it would show twice); a draft (the editor's sketch, a membrane that
+    // copies no texture) skips the search and takes the layer's whole context.
+    let (mut canvas, depth) = two_planes();
+    for y in 40..45 {
+        for x in 45..50 {
+            canvas.set(x, y, [1.0, 1.0, 0.0]);
+        }
+    }
+    let plan = plan_layers(&depth, &count_params(2), &Progress::none()).expect("plan");
+    let context = plan.regions[1].context.clone();
+    assert!(context.at(47, 42));
+    for draft in [false, true] {
+        let inpainter = MeanInpainter {
+            draft,
+            ..MeanInpainter::default()
+        };
+        inpaint_layers(&canvas, &plan, &inpainter, 7, &Progress::none()).expect("inpaint");
+        let requests = inpainter.requests.lock().expect("lock");
+        let allowed = requests[0].allowed.as_ref().expect("allowed source");
+        if draft {
+            assert_eq!(allowed, &context);
+        } else {
+            assert!(!allowed.at(47, 42), "the sign is no source");
+            assert!(allowed.at(5, 5));
+        }
+    }
+}
+
+#[test]
 fn two_planes_known_thresholds_masks_and_holes() {
     let (canvas, depth) = two_planes();
     let plan = plan_layers(&depth, &count_params(2), &Progress::none()).expect("plan");
@@ -974,7 +1005,7 @@ fn density_strides_known_answers() {
     assert_eq!(strides(&[]), vec![1, 1]);
 }
 
-/// The harmonic fill, reporting that it must run one request at a time.
+/// The sketch fill (a draft), reporting that it must run one request at a time.
 struct OneAtATime;
 
 impl crate::stages::inpaint::Inpainter for OneAtATime {
@@ -988,6 +1019,10 @@ impl crate::stages::inpaint::Inpainter for OneAtATime {
         progress: &Progress,
     ) -> Result<crate::stages::inpaint::InpaintResult> {
         crate::stages::inpaint::SketchInpainter.inpaint(request, progress)
+    }
+
+    fn is_draft(&self) -> bool {
+        true
     }
 }
 
