@@ -61,21 +61,21 @@ fn fill_request(
 /// SOR sweeps on the levels finer than the coarsest: at full resolution, and on each coarser
 /// one.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct Sweeps {
+pub(crate) struct Sweeps {
     finest: usize,
     coarser: usize,
 }
 
 impl Sweeps {
     /// The harmonic fill: [`SWEEPS_PER_LEVEL`] everywhere.
-    const FULL: Sweeps = Sweeps {
+    pub(crate) const FULL: Sweeps = Sweeps {
         finest: SWEEPS_PER_LEVEL,
         coarser: SWEEPS_PER_LEVEL,
     };
     /// [`SketchInpainter`]'s: the coarse solution, prolonged, is already within a few percent
     /// of the harmonic one, so the levels between only smooth the prolongation's seams (12
     /// sweeps each) and the full resolution is the bilinear prolongation of the half one.
-    const SKETCH: Sweeps = Sweeps {
+    pub(crate) const SKETCH: Sweeps = Sweeps {
         finest: 0,
         coarser: 12,
     };
@@ -117,20 +117,8 @@ pub(crate) fn membrane_fill<const N: usize>(
     membrane_fill_with(pixels, w, h, unknown, Sweeps::FULL, progress)
 }
 
-/// [`membrane_fill`] with the sketch's sweeps ([`SketchInpainter`]'s: the coarse solution
-/// prolonged, the full resolution its bilinear prolongation): for a draft.
-pub(crate) fn membrane_fill_sketch<const N: usize>(
-    pixels: &mut [[f32; N]],
-    w: usize,
-    h: usize,
-    unknown: &[bool],
-    progress: &Progress,
-) -> Result<()> {
-    membrane_fill_with(pixels, w, h, unknown, Sweeps::SKETCH, progress)
-}
-
-/// [`membrane_fill`] with `sweeps`.
-fn membrane_fill_with<const N: usize>(
+/// [`membrane_fill`] with `sweeps` ([`Sweeps::SKETCH`] for a draft).
+pub(crate) fn membrane_fill_with<const N: usize>(
     pixels: &mut [[f32; N]],
     w: usize,
     h: usize,

@@ -4,7 +4,7 @@
 use crate::error::Result;
 use crate::progress::Progress;
 use crate::raster::{MaskRaster, RgbRaster};
-use crate::stages::inpaint::harmonic::{membrane_fill, membrane_fill_sketch};
+use crate::stages::inpaint::harmonic::{Sweeps, membrane_fill_with};
 
 /// The seam band of [`blend_seam`] is the canvas's smaller side divided by this, pixels.
 pub(super) const SEAM_BAND_DIVISOR: usize = 16;
@@ -112,11 +112,8 @@ fn blend_seam_band(
             }
         })
         .collect();
-    if sketch {
-        membrane_fill_sketch(&mut correction, w, h, &unknown, progress)?;
-    } else {
-        membrane_fill(&mut correction, w, h, &unknown, progress)?;
-    }
+    let sweeps = if sketch { Sweeps::SKETCH } else { Sweeps::FULL };
+    membrane_fill_with(&mut correction, w, h, &unknown, sweeps, progress)?;
     for (i, px) in filled.data_mut().iter_mut().enumerate() {
         if !is_hole[i] || !unknown[i] || !correction[i].iter().all(|v| v.is_finite()) {
             continue;
@@ -175,12 +172,11 @@ pub fn seam_step(image: &RgbRaster, hole: &MaskRaster) -> Option<f32> {
 mod tests {
     use super::*;
 
-    #[test]
-    fn the_seam_blend_removes_a_constant_step_and_fades_over_the_band() {
-        // A photo (x ≥ 30) with a gentle ramp; the margin (x < 30) filled with the photo's left
-        // column plus 0.1: a step of 0.1 all along the edge.
-        let (w, h, m, band) = (90, 24, 30, 10);
-        let photo = |x: usize, y: usize| [0.3 + 0.002 * x as f32, 0.5, 0.4 + 0.003 * y as f32];
+    /// A photo (x ≥ `m`) with gentle ramps of `slope` per pixel along x and y; the margin
+    /// (x < `m`) filled with the photo's left column plus 0.1: a step of 0.1 all along the edge.
+    fn stepped_margin(w: usize, h: usize, m: usize, slope: [f32; 2]) -> (MaskRaster, RgbRaster) {
+        let photo =
+            |x: usize, y: usize| [0.3 + slope[0] * x as f32, 0.5, 0.4 + slope[1] * y as f32];
         let hole = MaskRaster::from_fn(w, h, |x, _| x < m);
         let image = RgbRaster::from_fn(w, h, |x, y| {
             if x < m {
@@ -189,6 +185,14 @@ mod tests {
                 photo(x, y)
             }
         });
+        (hole, image)
+    }
+
+    #[test]
+    fn the_seam_blend_removes_a_constant_step_and_fades_over_the_band() {
+        // A step of 0.1 along the photo's edge at x = 30.
+        let (w, h, m, band) = (90, 24, 30, 10);
+        let (hole, image) = stepped_margin(w, h, m, [0.002, 0.003]);
         let before = seam_step(&image, &hole).unwrap();
         assert!((before - 0.1).abs() < 1e-5, "{before}");
         let mut blended = image.clone();
@@ -230,15 +234,7 @@ mod tests {
         // The step of the test above on a canvas the size of a sketch's margin (a band of
         // 62 px): the draft's correction is the coarse solution prolonged, close to the full one.
         let (w, h, m) = (400, 250, 100);
-        let photo = |x: usize, y: usize| [0.3 + 0.0005 * x as f32, 0.5, 0.4 + 0.001 * y as f32];
-        let hole = MaskRaster::from_fn(w, h, |x, _| x < m);
-        let image = RgbRaster::from_fn(w, h, |x, y| {
-            if x < m {
-                photo(m, y).map(|v| v + 0.1)
-            } else {
-                photo(x, y)
-            }
-        });
+        let (hole, image) = stepped_margin(w, h, m, [0.0005, 0.001]);
         let (mut full, mut sketch) = (image.clone(), image.clone());
         blend_seam(&mut full, &hole, &Progress::none()).unwrap();
         blend_seam_sketch(&mut sketch, &hole, &Progress::none()).unwrap();
