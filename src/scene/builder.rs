@@ -70,7 +70,8 @@ pub struct SceneBuilder {
     /// canvas's layers ([`crate::stages::layers::inpaint_grown_layers`]).
     grown_from: Vec<(u64, GrownCanvas)>,
     /// The canvas's hole and sources by photo and layout ([`super::canvas::canvas_sources`]):
-    /// a depth edit rebuilds the canvas but not these.
+    /// the full build after a sketch, or a depth edit that keeps the layout, rebuilds the
+    /// canvas but not these.
     #[allow(clippy::type_complexity)]
     canvas_sources: Vec<(
         u64,
