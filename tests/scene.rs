@@ -385,9 +385,8 @@ fn a_depth_stroke_paints_over_the_cached_estimate() {
 
 #[test]
 fn a_depth_edit_rebuilds_the_canvas_as_a_fresh_builder_would() {
-    // The canvas's sources (its hole and the photo without its unique objects) are kept across
-    // depth edits; the canvas rebuilt over the new depth is the one a fresh builder makes, and
-    // so is a sketch's after it.
+    // After a sketch (its seam a draft) and a depth edit, the canvas rebuilt over the new depth
+    // is the one a fresh builder makes, and so is the sketch's.
     use makeit4d::stages::depth::paint::{DepthStroke, DepthStrokeKind};
     let mut p = project("evening_glow_320.jpg", PresetKind::Orbit, 4);
     let mut builder = SceneBuilder::new();

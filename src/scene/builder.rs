@@ -6,9 +6,7 @@ use super::cache::{
     spare_budget, trim,
 };
 use super::camera::{OutputCamera, scene_scale};
-use super::canvas::{
-    build_canvas, canvas_layout, canvas_sources, grow_canvas, layout_covers, layout_union,
-};
+use super::canvas::{build_canvas, canvas_layout, grow_canvas, layout_covers, layout_union};
 use super::cloud::{make_cloud, uninpainted_layers};
 use super::tools::{layer_depth_estimator, make_inpainter};
 use super::working::{
@@ -69,14 +67,6 @@ pub struct SceneBuilder {
     /// Grown canvases by key, newest last; the layer inpainting keeps what it can of the smaller
     /// canvas's layers ([`crate::stages::layers::inpaint_grown_layers`]).
     grown_from: Vec<(u64, GrownCanvas)>,
-    /// The canvas's hole and sources by photo and layout ([`super::canvas::canvas_sources`]):
-    /// the full build after a sketch, or a depth edit that keeps the layout, rebuilds the
-    /// canvas but not these.
-    #[allow(clippy::type_complexity)]
-    canvas_sources: Vec<(
-        u64,
-        Arc<(crate::raster::MaskRaster, crate::raster::MaskRaster)>,
-    )>,
     /// The inpainters of the last build (the canvas's and the layers') with their names, by
     /// the settings and region they were made for (a model's session loads once, not on every
     /// build and dry run).
@@ -177,8 +167,7 @@ impl SceneBuilder {
     /// times faster; the canvas's seam is blended with the same few sweeps and the layers'
     /// sources are their whole contexts (no search for unique objects, which a membrane cannot
     /// copy: [`crate::stages::inpaint::Inpainter::is_draft`]); the layers skip the few-pixel
-    /// refinement of their depth edges, and the
-    /// cloud keeps one point per 4 × 4 block ([`SKETCH_STRIDE`]). The editor shows it first
+    /// refinement of their depth edges, and the cloud keeps one point per 4 × 4 block ([`SKETCH_STRIDE`]). The editor shows it first
     /// while the project's inpainter refines the scene. Sketch outputs are cached apart from
     /// the others.
     pub fn build_sketch(&mut self, project: &Project, progress: &Progress) -> Result<Scene> {
@@ -627,30 +616,19 @@ impl SceneBuilder {
                         })?;
                         (k, v)
                     }
-                    None => {
-                        let sources = remembered(
-                            &mut self.canvas_sources,
-                            // The photo as the load stage knows it (its path, at this
-                            // size), not the depth: a depth edit finds it.
-                            key_of(key_of(0, &project.input), &(input.rgb.size(), needed)),
-                            CACHE_ENTRIES,
-                            || Ok(Arc::new(canvas_sources(&input.rgb, needed))),
-                        )?;
-                        (
-                            exact_key,
-                            build_canvas(
-                                project,
-                                needed,
-                                &input.rgb,
-                                &intrinsics,
-                                &depth.estimate.depth,
-                                &depth.estimate.sky,
-                                &sources,
-                                inpainter.as_ref(),
-                                &p,
-                            )?,
-                        )
-                    }
+                    None => (
+                        exact_key,
+                        build_canvas(
+                            project,
+                            needed,
+                            &input.rgb,
+                            &intrinsics,
+                            &depth.estimate.depth,
+                            &depth.estimate.sky,
+                            inpainter.as_ref(),
+                            &p,
+                        )?,
+                    ),
                 };
                 let v = Arc::new(v);
                 stats.ran(Stage::Canvas, started);

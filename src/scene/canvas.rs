@@ -98,10 +98,10 @@ fn placed<T: Copy>(
 /// colour and disparity together (disparity is bounded and smooth across the horizon, so the
 /// fill copies the sky's far plane and the ground's slope sensibly); hole pixels at the far
 /// plane (`far`) join `sky`. The known pixels' unique objects
-/// ([`crate::stages::inpaint::unique_objects`]) are left out of the sources (`allowed`, found
-/// here when `None`), even for a draft: a harmonic margin carries a flag at the photo's border
-/// far into the margin as a tint. A draft inpainter ([`Inpainter::is_draft`], the editor's sketch) gets its seam blended with
-/// the sketch's sweeps.
+/// ([`crate::stages::inpaint::unique_objects`]) are left out of the sources, even for a draft
+/// (a harmonic margin carries a flag at the photo's border far into the margin as a tint); a
+/// draft inpainter ([`Inpainter::is_draft`], the editor's sketch) gets its seam blended with the
+/// sketch's sweeps.
 #[allow(clippy::too_many_arguments)]
 fn complete_canvas(
     layout: CanvasLayout,
@@ -110,7 +110,6 @@ fn complete_canvas(
     disparity: GrayRaster,
     mut sky: GrayRaster,
     hole: &MaskRaster,
-    allowed: Option<&MaskRaster>,
     synthesised: MaskRaster,
     far: f32,
     inpainter: &dyn Inpainter,
@@ -118,20 +117,13 @@ fn complete_canvas(
     progress: &Progress,
 ) -> Result<Canvas> {
     // The photo's unique objects (a kite, a boat) are no source: the margin would show them a
-    // second time (`allowed` when the caller has them already).
-    let found;
-    let allowed = match allowed {
-        Some(a) => a,
-        None => {
-            found = crate::stages::inpaint::without_unique_objects(&image, &hole.map(|h| !h));
-            &found
-        }
-    };
+    // second time.
+    let allowed = crate::stages::inpaint::without_unique_objects(&image, &hole.map(|h| !h));
     let result = inpainter.inpaint(
         &InpaintRequest {
             image: &image,
             hole,
-            allowed_source: Some(allowed),
+            allowed_source: Some(&allowed),
             guide: Some(&disparity),
             seed,
         },
@@ -171,38 +163,7 @@ fn complete_canvas(
     })
 }
 
-/// What the margin of a canvas at `layout` fills (the pixels beyond the photo, and a flat
-/// black or white frame around the photo with two pixels more), and the pixels its fill may
-/// take from: the photo without that frame and without its unique objects
-/// ([`crate::stages::inpaint::unique_objects`]: the margin would show them a second time).
-/// It depends on the photo and the layout alone, so the builder keeps it across depth edits.
-pub(super) fn canvas_sources(image: &RgbRaster, layout: CanvasLayout) -> (MaskRaster, MaskRaster) {
-    let (w, h) = image.size();
-    let synthesised = layout.synthesised_mask((w, h));
-    // A flat black or white frame around the photo is re-filled with the margin, so that it
-    // does not continue as a seam around the photo.
-    // Two more pixels on each framed side take the JPEG ringing and anti-aliasing along it.
-    let bleed = |b: usize| if b > 0 { b + 2 } else { 0 };
-    let [fl, ft, fr, fb] = crate::stages::outpaint::frame_border(image).map(bleed);
-    let (fl, fr) = (fl.min(w / 4), fr.min(w / 4));
-    let (ft, fb) = (ft.min(h / 4), fb.min(h / 4));
-    let hole = if fl + ft + fr + fb == 0 {
-        synthesised
-    } else {
-        let (x0, y0) = (layout.left_pad + fl, layout.top_pad + ft);
-        let (x1, y1) = (layout.left_pad + w - fr, layout.top_pad + h - fb);
-        MaskRaster::from_fn(layout.width, layout.height, |x, y| {
-            synthesised.at(x, y) || !((x0..x1).contains(&x) && (y0..y1).contains(&y))
-        })
-    };
-    let at = (layout.left_pad, layout.top_pad);
-    let placed_image = placed(image, layout.width, layout.height, at, [0.0; 3]);
-    let allowed = crate::stages::inpaint::without_unique_objects(&placed_image, &hole.map(|h| !h));
-    (hole, allowed)
-}
-
-/// The canvas at `layout`: the photo placed on it, colour and depth completed beyond it, the
-/// margin filled from `sources` ([`canvas_sources`] of the photo and `layout`).
+/// The canvas at `layout`: the photo placed on it, colour and depth completed beyond it.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn build_canvas(
     project: &Project,
@@ -211,12 +172,12 @@ pub(super) fn build_canvas(
     intrinsics: &Intrinsics,
     depth: &GrayRaster,
     sky: &GrayRaster,
-    sources: &(MaskRaster, MaskRaster),
     inpainter: &dyn Inpainter,
     progress: &Progress,
 ) -> Result<Canvas> {
     let (w, h) = image.size();
     let canvas_k = layout.intrinsics(intrinsics);
+    let synthesised = layout.synthesised_mask((w, h));
     if layout.is_identity((w, h)) {
         return Ok(Canvas {
             layout,
@@ -224,15 +185,25 @@ pub(super) fn build_canvas(
             image: image.clone(),
             depth: depth.clone(),
             sky: sky.clone(),
-            synthesised: layout.synthesised_mask((w, h)),
+            synthesised,
         });
     }
-    let (hole, allowed) = sources;
-    if !(hole.size() == (layout.width, layout.height) && allowed.size() == hole.size()) {
-        return Err(crate::Error::invalid(
-            "internal: the canvas's sources were made for another layout",
-        ));
-    }
+    // A flat black or white frame around the photo is re-filled with the margin, so that it
+    // does not continue as a seam around the photo.
+    // Two more pixels on each framed side take the JPEG ringing and anti-aliasing along it.
+    let bleed = |b: usize| if b > 0 { b + 2 } else { 0 };
+    let [fl, ft, fr, fb] = crate::stages::outpaint::frame_border(image).map(bleed);
+    let (fl, fr) = (fl.min(w / 4), fr.min(w / 4));
+    let (ft, fb) = (ft.min(h / 4), fb.min(h / 4));
+    let synthesised = if fl + ft + fr + fb == 0 {
+        synthesised
+    } else {
+        let (x0, y0) = (layout.left_pad + fl, layout.top_pad + ft);
+        let (x1, y1) = (layout.left_pad + w - fr, layout.top_pad + h - fb);
+        MaskRaster::from_fn(layout.width, layout.height, |x, y| {
+            synthesised.at(x, y) || !((x0..x1).contains(&x) && (y0..y1).contains(&y))
+        })
+    };
     let at = (layout.left_pad, layout.top_pad);
     let far = depth
         .data()
@@ -252,9 +223,8 @@ pub(super) fn build_canvas(
             0.0,
         ),
         placed(sky, layout.width, layout.height, at, 0.0),
-        hole,
-        Some(allowed),
-        hole.clone(),
+        &synthesised,
+        synthesised.clone(),
         far,
         inpainter,
         project.inpaint.seed,
@@ -302,7 +272,6 @@ pub(super) fn grow_canvas(
         ),
         placed(&parent.sky, layout.width, layout.height, at, 0.0),
         &hole,
-        None,
         synthesised,
         far,
         inpainter,
