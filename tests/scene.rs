@@ -416,6 +416,38 @@ fn a_depth_edit_rebuilds_the_canvas_as_a_fresh_builder_would() {
 }
 
 #[test]
+fn the_editors_sketch_finds_each_photos_unique_objects_as_a_fresh_builder_does() {
+    // The editor's builder keeps the photo's unique objects for its sketches: after a final
+    // build, a depth edit's sketch and another photo's sketch have the canvas a fresh
+    // builder's sketch has (the objects of the photo shown, never of the one before).
+    use makeit4d::stages::depth::paint::{DepthStroke, DepthStrokeKind};
+    let mut p = project("evening_glow_320.jpg", PresetKind::Orbit, 4);
+    let mut builder = SceneBuilder::growing();
+    builder.build(&p, &Progress::none()).expect("bare");
+    p.depth.strokes.push(DepthStroke {
+        kind: DepthStrokeKind::Pull,
+        points: vec![[100.0, 150.0], [160.0, 150.0]],
+        radius_px: 20.0,
+        strength: 0.5,
+    });
+    let sketch = builder.build_sketch(&p, &Progress::none()).expect("sketch");
+    assert!(!sketch.canvas.layout.is_identity(sketch.input.rgb.size()));
+    let fresh = SceneBuilder::growing()
+        .build_sketch(&p, &Progress::none())
+        .expect("fresh sketch");
+    assert_eq!(sketch.canvas.image, fresh.canvas.image);
+    let other = project("forest_path_320.jpg", PresetKind::Orbit, 4);
+    let sketch = builder
+        .build_sketch(&other, &Progress::none())
+        .expect("other");
+    assert!(!sketch.canvas.layout.is_identity(sketch.input.rgb.size()));
+    let fresh = SceneBuilder::growing()
+        .build_sketch(&other, &Progress::none())
+        .expect("fresh other");
+    assert_eq!(sketch.canvas.image, fresh.canvas.image);
+}
+
+#[test]
 fn presets_are_sized_to_what_the_scene_supports() {
     use makeit4d::scene::{MIN_SIZED_AMPLITUDE, SIZING_MARGIN, size_preset};
     let mut p = project("evening_glow_320.jpg", PresetKind::Orbit, 12);

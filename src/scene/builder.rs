@@ -6,7 +6,9 @@ use super::cache::{
     spare_budget, trim,
 };
 use super::camera::{OutputCamera, scene_scale};
-use super::canvas::{build_canvas, canvas_layout, grow_canvas, layout_covers, layout_union};
+use super::canvas::{
+    build_canvas, canvas_layout, grow_canvas, layout_covers, layout_union, photo_unique_objects,
+};
 use super::cloud::{make_cloud, uninpainted_layers};
 use super::tools::{layer_depth_estimator, make_inpainter};
 use super::working::{
@@ -19,6 +21,7 @@ use crate::image_io::{LoadedImage, decode_image, load_at_size, load_image, read_
 use crate::path::SceneScale;
 use crate::progress::Progress;
 use crate::project::Project;
+use crate::raster::MaskRaster;
 use crate::stages::depth::{DepthStageOutput, run_depth_stage};
 use crate::stages::inpaint::Inpainter;
 use crate::stages::layers::{
@@ -77,6 +80,26 @@ pub struct SceneBuilder {
         Arc<dyn Inpainter>,
         String,
     )>,
+    /// The unique objects of the last photo a sketch's canvas was built for (the photo they
+    /// were found on, and the mask in its coordinates): a depth edit moves the canvas layout
+    /// but not the photo, so the sketch does not search them again.
+    sketch_objects: Option<(Arc<LoadedImage>, Arc<MaskRaster>)>,
+}
+
+/// The unique objects of `photo` for a sketch's canvas ([`photo_unique_objects`]), from `kept`
+/// when they were found on this photo, else found now and kept.
+fn sketch_objects(
+    kept: &mut Option<(Arc<LoadedImage>, Arc<MaskRaster>)>,
+    photo: &Arc<LoadedImage>,
+) -> Arc<MaskRaster> {
+    match kept {
+        Some((p, objects)) if Arc::ptr_eq(p, photo) => objects.clone(),
+        _ => {
+            let objects = Arc::new(photo_unique_objects(&photo.rgb));
+            *kept = Some((photo.clone(), objects.clone()));
+            objects
+        }
+    }
 }
 
 impl SceneBuilder {
@@ -164,9 +187,11 @@ impl SceneBuilder {
     /// (membrane) fill solved down to half resolution and prolonged
     /// ([`crate::stages::inpaint::SketchInpainter`], every layer at once) instead of the
     /// project's inpainter: blurred where the inpainter would synthesise texture, but many
-    /// times faster; the canvas's seam is blended with the same few sweeps and the layers'
-    /// sources are their whole contexts (no search for unique objects, which a membrane cannot
-    /// copy: [`crate::stages::inpaint::Inpainter::is_draft`]); the layers skip the few-pixel
+    /// times faster; the canvas's seam is blended with the same few sweeps, its sources leave
+    /// out the photo's unique objects found once per photo (not on every canvas layout a depth
+    /// edit brings), and the layers' sources are their whole contexts (no search for unique
+    /// objects, which a membrane cannot copy:
+    /// [`crate::stages::inpaint::Inpainter::is_draft`]); the layers skip the few-pixel
     /// refinement of their depth edges, and the cloud keeps one point per 4 × 4 block ([`SKETCH_STRIDE`]). The editor shows it first
     /// while the project's inpainter refines the scene. Sketch outputs are cached apart from
     /// the others.
@@ -570,6 +595,11 @@ impl SceneBuilder {
             depth_range,
             &scale,
         )?;
+        if grow && !sketch && !dry && !needed.is_identity((w, h)) {
+            // The editor's builder (the one that sketches) finds the photo's unique objects in
+            // its final build, so that a depth edit's sketch has them at once.
+            sketch_objects(&mut self.sketch_objects, &input);
+        }
         let base = key_of(key, &(&project.canvas, &project.inpaint, sketch));
         let exact_key = key_of(base, &(needed, 0u64));
         let reused = match self.canvas.get(exact_key) {
@@ -616,19 +646,24 @@ impl SceneBuilder {
                         })?;
                         (k, v)
                     }
-                    None => (
-                        exact_key,
-                        build_canvas(
-                            project,
-                            needed,
-                            &input.rgb,
-                            &intrinsics,
-                            &depth.estimate.depth,
-                            &depth.estimate.sky,
-                            inpainter.as_ref(),
-                            &p,
-                        )?,
-                    ),
+                    None => {
+                        let objects = (sketch && !needed.is_identity((w, h)))
+                            .then(|| sketch_objects(&mut self.sketch_objects, &input));
+                        (
+                            exact_key,
+                            build_canvas(
+                                project,
+                                needed,
+                                &input.rgb,
+                                &intrinsics,
+                                &depth.estimate.depth,
+                                &depth.estimate.sky,
+                                inpainter.as_ref(),
+                                objects.as_deref(),
+                                &p,
+                            )?,
+                        )
+                    }
                 };
                 let v = Arc::new(v);
                 stats.ran(Stage::Canvas, started);

@@ -97,8 +97,8 @@ fn placed<T: Copy>(
 /// Completes the `hole` of a canvas whose known pixels are `image` and `disparity` (`1/Z`),
 /// colour and disparity together (disparity is bounded and smooth across the horizon, so the
 /// fill copies the sky's far plane and the ground's slope sensibly); hole pixels at the far
-/// plane (`far`) join `sky`. The known pixels' unique objects
-/// ([`crate::stages::inpaint::unique_objects`]) are left out of the sources, even for a draft
+/// plane (`far`) join `sky`. The sources are `allowed`, or else the known pixels without their
+/// unique objects ([`crate::stages::inpaint::unique_objects`]) — left out even for a draft
 /// (a harmonic margin carries a flag at the photo's border far into the margin as a tint); a
 /// draft inpainter ([`Inpainter::is_draft`], the editor's sketch) gets its seam blended with the
 /// sketch's sweeps.
@@ -113,12 +113,15 @@ fn complete_canvas(
     synthesised: MaskRaster,
     far: f32,
     inpainter: &dyn Inpainter,
+    allowed: Option<MaskRaster>,
     seed: u64,
     progress: &Progress,
 ) -> Result<Canvas> {
     // The photo's unique objects (a kite, a boat) are no source: the margin would show them a
     // second time.
-    let allowed = crate::stages::inpaint::without_unique_objects(&image, &hole.map(|h| !h));
+    let allowed = allowed.unwrap_or_else(|| {
+        crate::stages::inpaint::without_unique_objects(&image, &hole.map(|h| !h))
+    });
     let result = inpainter.inpaint(
         &InpaintRequest {
             image: &image,
@@ -173,6 +176,7 @@ pub(super) fn build_canvas(
     depth: &GrayRaster,
     sky: &GrayRaster,
     inpainter: &dyn Inpainter,
+    photo_objects: Option<&MaskRaster>,
     progress: &Progress,
 ) -> Result<Canvas> {
     let (w, h) = image.size();
@@ -188,13 +192,7 @@ pub(super) fn build_canvas(
             synthesised,
         });
     }
-    // A flat black or white frame around the photo is re-filled with the margin, so that it
-    // does not continue as a seam around the photo.
-    // Two more pixels on each framed side take the JPEG ringing and anti-aliasing along it.
-    let bleed = |b: usize| if b > 0 { b + 2 } else { 0 };
-    let [fl, ft, fr, fb] = crate::stages::outpaint::frame_border(image).map(bleed);
-    let (fl, fr) = (fl.min(w / 4), fr.min(w / 4));
-    let (ft, fb) = (ft.min(h / 4), fb.min(h / 4));
+    let [fl, ft, fr, fb] = frame_bleed(image);
     let synthesised = if fl + ft + fr + fb == 0 {
         synthesised
     } else {
@@ -211,6 +209,15 @@ pub(super) fn build_canvas(
         .copied()
         .fold(0.0f32, f32::max)
         .max(1e-6);
+    // The sources: what is known but the photo's unique objects, found on the photo itself
+    // when the caller has them (the editor's sketch keeps them across depth edits, which move
+    // the layout but not the photo), else on the canvas.
+    let allowed = photo_objects.map(|objects| {
+        let objects = placed(objects, layout.width, layout.height, at, false);
+        MaskRaster::from_fn(layout.width, layout.height, |x, y| {
+            !synthesised.at(x, y) && !objects.at(x, y)
+        })
+    });
     complete_canvas(
         layout,
         canvas_k,
@@ -227,9 +234,34 @@ pub(super) fn build_canvas(
         synthesised.clone(),
         far,
         inpainter,
+        allowed,
         project.inpaint.seed,
         progress,
     )
+}
+
+/// The width of a flat black or white frame around `image` on each side (left, top, right,
+/// bottom), with two more pixels on each framed side for the JPEG ringing and anti-aliasing
+/// along it, at most a quarter of the photo: a canvas re-fills it with the margin, so that it
+/// does not continue as a seam around the photo.
+fn frame_bleed(image: &RgbRaster) -> [usize; 4] {
+    let (w, h) = image.size();
+    let bleed = |b: usize| if b > 0 { b + 2 } else { 0 };
+    let [fl, ft, fr, fb] = crate::stages::outpaint::frame_border(image).map(bleed);
+    [fl.min(w / 4), ft.min(h / 4), fr.min(w / 4), fb.min(h / 4)]
+}
+
+/// The unique objects ([`crate::stages::inpaint::unique_objects`]) of the pixels of `image` a
+/// canvas keeps (all but a frame's bleed), in the photo's coordinates: the draft canvas's
+/// sources leave them out without searching every canvas again ([`build_canvas`]'s
+/// `photo_objects`).
+pub(super) fn photo_unique_objects(image: &RgbRaster) -> MaskRaster {
+    let (w, h) = image.size();
+    let [fl, ft, fr, fb] = frame_bleed(image);
+    let kept = MaskRaster::from_fn(w, h, |x, y| {
+        (fl..w.saturating_sub(fr)).contains(&x) && (ft..h.saturating_sub(fb)).contains(&y)
+    });
+    crate::stages::inpaint::unique_objects(image, Some(&kept))
 }
 
 /// `parent` grown to `layout` (which covers it): its pixels are kept as they are and only the
@@ -275,7 +307,72 @@ pub(super) fn grow_canvas(
         synthesised,
         far,
         inpainter,
+        None,
         seed,
         progress,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::stages::inpaint::SketchInpainter;
+
+    /// A grey gradient photo with a red square on its right border, its canvas 24 px wider on
+    /// every side, filled by the sketch's membrane with the photo's objects as given.
+    fn sketch_canvas(objects: Option<&MaskRaster>) -> (Canvas, RgbRaster) {
+        let (w, h) = (96, 64);
+        let photo = RgbRaster::from_fn(w, h, |x, y| {
+            if x >= 84 && (26..38).contains(&y) {
+                [0.9, 0.1, 0.1]
+            } else {
+                let g = 0.3 + 0.3 * (x + y) as f32 / (w + h) as f32;
+                [g, g, g]
+            }
+        });
+        let pad = 24;
+        let layout = CanvasLayout {
+            left_pad: pad,
+            top_pad: pad,
+            width: w + 2 * pad,
+            height: h + 2 * pad,
+        };
+        let canvas = build_canvas(
+            &Project::new("photo.png"),
+            layout,
+            &photo,
+            &Intrinsics::from_hfov(w, h, 60.0),
+            &GrayRaster::new(w, h, 5.0),
+            &GrayRaster::new(w, h, 0.0),
+            &SketchInpainter,
+            objects,
+            &Progress::none(),
+        )
+        .expect("canvas");
+        (canvas, photo)
+    }
+
+    /// How red the margin is 12 px right of the square, past the seam's blend (red minus
+    /// green, 0 for grey).
+    fn redness(canvas: &Canvas) -> f32 {
+        let (x, y) = (24 + 96 + 11, 24 + 32);
+        let [r, g, _] = canvas.image.at(x, y);
+        r - g
+    }
+
+    #[test]
+    fn the_photos_own_unique_objects_keep_the_sketch_margin_as_the_canvas_search_does() {
+        let photo_objects = photo_unique_objects(&sketch_canvas(None).1);
+        assert!(
+            photo_objects.at(90, 32),
+            "the red square is a unique object"
+        );
+        assert!(!photo_objects.at(20, 10), "the grey is not");
+        let searched = redness(&sketch_canvas(None).0);
+        let given = redness(&sketch_canvas(Some(&photo_objects)).0);
+        let nothing = redness(&sketch_canvas(Some(&MaskRaster::new(96, 64, false))).0);
+        assert!(searched < 0.05 && given < 0.05, "{searched} {given}");
+        // Without them the membrane carries the square into the margin.
+        assert!(nothing > 0.15, "{nothing}");
+    }
 }

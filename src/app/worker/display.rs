@@ -215,14 +215,16 @@ pub struct SceneSnapshot {
 
 /// Makes every display image of `scene`.
 pub fn display_images(scene: &Scene) -> DisplayImages {
-    display_images_reusing(scene, None)
+    display_images_reusing(scene, None, None)
 }
 
 /// [`display_images`], copying the images of `previous` whose stage output `scene` shares (a
-/// camera edit remakes none; a threshold drag only the layers').
+/// camera edit remakes none; a threshold drag only the layers'), and the depth view's images
+/// of `early_depth` when it is `scene`'s depth (made while the scene was built).
 pub fn display_images_reusing(
     scene: &Scene,
     previous: Option<(&Scene, &DisplayImages)>,
+    early_depth: Option<(&Arc<crate::stages::depth::DepthStageOutput>, &DepthImages)>,
 ) -> DisplayImages {
     let reuse = |same: &dyn Fn(&Scene) -> bool| previous.filter(|(old, _)| same(old)).map(|p| p.1);
     let canvas = &scene.canvas;
@@ -230,9 +232,11 @@ pub fn display_images_reusing(
         Some(d) => d.input.clone(),
         None => rgb_image(&scene.input.rgb, DISPLAY_MAX_SIDE),
     };
-    let depth_images = match reuse(&|old| Arc::ptr_eq(&old.depth, &scene.depth)) {
-        Some(d) => d.depth.clone(),
-        None => DepthImages::new(&scene.depth),
+    let early = early_depth.filter(|(depth, _)| Arc::ptr_eq(depth, &scene.depth));
+    let depth_images = match (reuse(&|old| Arc::ptr_eq(&old.depth, &scene.depth)), early) {
+        (Some(d), _) => d.depth.clone(),
+        (None, Some((_, view))) => view.clone(),
+        (None, None) => DepthImages::new(&scene.depth),
     };
     let (canvas_image, synthesised, histogram) =
         match reuse(&|old| Arc::ptr_eq(&old.canvas, &scene.canvas)) {

@@ -500,7 +500,11 @@ fn run_build(
         let mut final_part = progress.sub(0.0, 1.0);
         let mut before = builder.runs().clone();
         let depth_edit = stale.is_some_and(|stage| stage <= Stage::Depth);
+        // The depth view's images of a depth edit, made while the sketch builds: the scenes
+        // published with that depth show them without making them again.
+        let mut early: Option<EarlyView> = None;
         if depth_edit || refine {
+            let early_view = Mutex::new(None);
             // The first answer, on every core: a depth edit's new depth as soon as it exists
             // (its display images made while the sketch builds), then the sketch.
             let sketch = on_pool(sketch_pool, || {
@@ -520,11 +524,11 @@ fn run_build(
                 let mut sketch = None;
                 rayon::scope(|s| {
                     if let Some(depth) = &depth {
-                        let project = &project;
+                        let (project, early_view) = (&project, &early_view);
                         s.spawn(move |_| {
-                            send(Event::DepthReady(Box::new(EarlyDepth::new(
-                                generation, project, depth,
-                            ))));
+                            let early = EarlyDepth::new(generation, project, depth);
+                            *lock(early_view) = Some((depth.clone(), early.view.clone()));
+                            send(Event::DepthReady(Box::new(early)));
                         });
                     }
                     if refine {
@@ -533,6 +537,7 @@ fn run_build(
                 });
                 sketch.transpose()
             })?;
+            early = early_view.into_inner().unwrap_or_else(|e| e.into_inner());
             if let Some(scene) = sketch {
                 let builder_now = &*builder;
                 on_pool(sketch_pool, || {
@@ -543,7 +548,7 @@ fn run_build(
                         generation,
                         &project,
                         scene,
-                        true,
+                        (true, early.as_ref()),
                         start,
                         send,
                     )
@@ -554,7 +559,15 @@ fn run_build(
         }
         let scene = builder.build(&project, &final_part)?;
         Ok::<_, crate::Error>(publish(
-            shared, builder, &before, generation, &project, scene, false, start, send,
+            shared,
+            builder,
+            &before,
+            generation,
+            &project,
+            scene,
+            (false, early.as_ref()),
+            start,
+            send,
         ))
     });
     match result {
@@ -567,7 +580,11 @@ fn run_build(
     }
 }
 
-/// Puts `scene` with its display images into the slot and says so.
+/// A depth and the depth view's images of it.
+type EarlyView = (Arc<crate::stages::depth::DepthStageOutput>, DepthImages);
+
+/// Puts `scene` with its display images into the slot and says so (the depth view's images
+/// from `early_view` when they are of its depth).
 #[allow(clippy::too_many_arguments)]
 fn publish(
     shared: &Arc<Shared>,
@@ -576,7 +593,7 @@ fn publish(
     generation: u64,
     project: &Project,
     scene: Scene,
-    draft: bool,
+    (draft, early_view): (bool, Option<&EarlyView>),
     start: Instant,
     send: &impl Fn(Event) -> bool,
 ) -> bool {
@@ -590,6 +607,7 @@ fn publish(
         Arc::new(display_images_reusing(
             &scene,
             previous.as_deref().map(|s| (&s.scene, &*s.display)),
+            early_view.map(|(depth, view)| (depth, view)),
         ))
     });
     let stages_run = builder

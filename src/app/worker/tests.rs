@@ -81,7 +81,11 @@ fn a_depth_edit_shows_its_depth_then_a_sketch_then_the_final_scene() {
             strength: 0.5,
         });
     worker.build(2, &project);
+    let mut early = None;
     let second = events_until(&worker, |e| {
+        if let Event::DepthReady(d) = e {
+            early = Some(d.view.depth.clone());
+        }
         matches!(
             e,
             Event::SceneReady {
@@ -98,6 +102,10 @@ fn a_depth_edit_shows_its_depth_then_a_sketch_then_the_final_scene() {
     let s = worker.scene().unwrap();
     assert_eq!(s.project.depth.strokes.len(), 1);
     assert!(!s.draft);
+    // The scene shows the depth view the early depth showed (made once, while the sketch
+    // built), and it is the view of the scene's own depth.
+    let own = DepthImages::new(&s.scene.depth).depth;
+    assert!(early.as_ref() == Some(&own) && s.display.depth.depth == own);
     // Back to no stroke: every stage cached, so only the final scene, at once.
     project.depth.strokes.clear();
     worker.build(3, &project);
