@@ -383,13 +383,11 @@ fn a_depth_stroke_paints_over_the_cached_estimate() {
     assert_eq!(builder.runs()[&Stage::Depth], 2);
 }
 
-#[test]
-fn a_depth_edit_rebuilds_the_canvas_as_a_fresh_builder_would() {
-    // After a sketch (its seam a draft) and a depth edit, the canvas rebuilt over the new depth
-    // is the one a fresh builder makes, and so is the sketch's.
+/// An orbit of `evening_glow_320.jpg` built by `builder`, then a depth stroke pulling part of
+/// it nearer (the project with the stroke, not built).
+fn stroked_after_a_build(builder: &mut SceneBuilder) -> Project {
     use makeit4d::stages::depth::paint::{DepthStroke, DepthStrokeKind};
     let mut p = project("evening_glow_320.jpg", PresetKind::Orbit, 4);
-    let mut builder = SceneBuilder::new();
     builder.build(&p, &Progress::none()).expect("bare");
     p.depth.strokes.push(DepthStroke {
         kind: DepthStrokeKind::Pull,
@@ -397,6 +395,15 @@ fn a_depth_edit_rebuilds_the_canvas_as_a_fresh_builder_would() {
         radius_px: 20.0,
         strength: 0.5,
     });
+    p
+}
+
+#[test]
+fn a_depth_edit_rebuilds_the_canvas_as_a_fresh_builder_would() {
+    // After a sketch (its seam a draft) and a depth edit, the canvas rebuilt over the new depth
+    // is the one a fresh builder makes, and so is the sketch's.
+    let mut builder = SceneBuilder::new();
+    let p = stroked_after_a_build(&mut builder);
     let sketch = builder.build_sketch(&p, &Progress::none()).expect("sketch");
     let edited = builder.build(&p, &Progress::none()).expect("stroke");
     assert_eq!(
@@ -420,16 +427,8 @@ fn the_editors_sketch_finds_each_photos_unique_objects_as_a_fresh_builder_does()
     // The editor's builder keeps the photo's unique objects for its sketches: after a final
     // build, a depth edit's sketch and another photo's sketch have the canvas a fresh
     // builder's sketch has (the objects of the photo shown, never of the one before).
-    use makeit4d::stages::depth::paint::{DepthStroke, DepthStrokeKind};
-    let mut p = project("evening_glow_320.jpg", PresetKind::Orbit, 4);
     let mut builder = SceneBuilder::growing();
-    builder.build(&p, &Progress::none()).expect("bare");
-    p.depth.strokes.push(DepthStroke {
-        kind: DepthStrokeKind::Pull,
-        points: vec![[100.0, 150.0], [160.0, 150.0]],
-        radius_px: 20.0,
-        strength: 0.5,
-    });
+    let p = stroked_after_a_build(&mut builder);
     let sketch = builder.build_sketch(&p, &Progress::none()).expect("sketch");
     assert!(!sketch.canvas.layout.is_identity(sketch.input.rgb.size()));
     let fresh = SceneBuilder::growing()
