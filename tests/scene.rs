@@ -428,22 +428,16 @@ fn the_editors_sketch_finds_each_photos_unique_objects_as_a_fresh_builder_does()
     // build, a depth edit's sketch and another photo's sketch have the canvas a fresh
     // builder's sketch has (the objects of the photo shown, never of the one before).
     let mut builder = SceneBuilder::growing();
-    let p = stroked_after_a_build(&mut builder);
-    let sketch = builder.build_sketch(&p, &Progress::none()).expect("sketch");
-    assert!(!sketch.canvas.layout.is_identity(sketch.input.rgb.size()));
-    let fresh = SceneBuilder::growing()
-        .build_sketch(&p, &Progress::none())
-        .expect("fresh sketch");
-    assert_eq!(sketch.canvas.image, fresh.canvas.image);
+    let edited = stroked_after_a_build(&mut builder);
     let other = project("forest_path_320.jpg", PresetKind::Orbit, 4);
-    let sketch = builder
-        .build_sketch(&other, &Progress::none())
-        .expect("other");
-    assert!(!sketch.canvas.layout.is_identity(sketch.input.rgb.size()));
-    let fresh = SceneBuilder::growing()
-        .build_sketch(&other, &Progress::none())
-        .expect("fresh other");
-    assert_eq!(sketch.canvas.image, fresh.canvas.image);
+    for p in [edited, other] {
+        let sketch = builder.build_sketch(&p, &Progress::none()).expect("sketch");
+        assert!(!sketch.canvas.layout.is_identity(sketch.input.rgb.size()));
+        let fresh = SceneBuilder::growing()
+            .build_sketch(&p, &Progress::none())
+            .expect("fresh sketch");
+        assert_eq!(sketch.canvas.image, fresh.canvas.image, "{:?}", p.input);
+    }
 }
 
 #[test]

@@ -31,7 +31,7 @@ use crate::stages::layers::{
 use crate::stages::motion::prepare_motion;
 use crate::stages::outpaint::DepthRange;
 use crate::stages::points::PointCloud;
-use std::sync::Arc;
+use std::sync::{Arc, Weak};
 
 /// Builds scenes and keeps each stage's recent outputs for reuse ([`CACHE_ENTRIES`] per stage).
 #[derive(Default)]
@@ -81,22 +81,24 @@ pub struct SceneBuilder {
         String,
     )>,
     /// The unique objects of the last photo a sketch's canvas was built for (the photo they
-    /// were found on, and the mask in its coordinates): a depth edit moves the canvas layout
-    /// but not the photo, so the sketch does not search them again.
-    sketch_objects: Option<(Arc<LoadedImage>, Arc<MaskRaster>)>,
+    /// were found on, weakly: the cache alone decides how long a photo is held; and the mask
+    /// in its coordinates): a depth edit moves the canvas layout but not the photo, so the
+    /// sketch does not search them again.
+    sketch_objects: Option<(Weak<LoadedImage>, Arc<MaskRaster>)>,
 }
 
 /// The unique objects of `photo` for a sketch's canvas ([`photo_unique_objects`]), from `kept`
 /// when they were found on this photo, else found now and kept.
 fn sketch_objects(
-    kept: &mut Option<(Arc<LoadedImage>, Arc<MaskRaster>)>,
+    kept: &mut Option<(Weak<LoadedImage>, Arc<MaskRaster>)>,
     photo: &Arc<LoadedImage>,
 ) -> Arc<MaskRaster> {
+    // A live weak reference keeps its allocation, so no other photo can share its address.
     match kept {
-        Some((p, objects)) if Arc::ptr_eq(p, photo) => objects.clone(),
+        Some((p, objects)) if p.ptr_eq(&Arc::downgrade(photo)) => objects.clone(),
         _ => {
             let objects = Arc::new(photo_unique_objects(&photo.rgb));
-            *kept = Some((photo.clone(), objects.clone()));
+            *kept = Some((Arc::downgrade(photo), objects.clone()));
             objects
         }
     }
