@@ -858,12 +858,12 @@ fn solve_level(
 /// an unreached patch is enclosed by reached ones: patches up to about half its size follow.
 const ENCLOSURE_REACH: f32 = 0.05;
 
-/// Most groups of targets the geodesic mode measures distances from; beyond it, targets are
-/// grouped by the rank of their depth (each group one distance transform).
+/// Most groups of targets the geodesic mode measures distances from (each group one distance
+/// transform); beyond it, targets are grouped by their depth, or the rank of their depth.
 pub const MAX_GEODESIC_GROUPS: usize = 64;
 
 /// The geodesic correction on a solve grid (`colour`, `log_grid`: the photo and the estimate's
-/// log depth at the grid's size) of a `w × h` photo. The targets are grouped by their depth (a
+/// log depth at the grid's size) of a `w × h` photo. The targets are grouped by stroke (a
 /// stroke's dabs share one; at most [`MAX_GEODESIC_GROUPS`]); from each group's cells
 /// (correction `ln T − e` there) a geodesic distance transform (8-neighbour raster scans to
 /// convergence) gives every cell its distance `D_k` to the group, the correction `c_k` of its
@@ -896,20 +896,18 @@ pub fn geodesic_correction(
     if n == 0 || targets.is_empty() {
         return vec![0.0; n];
     }
-    // Groups: the distinct target depths, or their rank quantiles when there are too many.
-    let mut distinct: Vec<f32> = targets.iter().map(|t| t.depth).collect();
-    distinct.sort_by(f32::total_cmp);
-    distinct.dedup();
-    let groups = distinct.len().min(MAX_GEODESIC_GROUPS);
-    let group_of = |depth: f32| -> usize {
-        let rank = distinct.partition_point(|&d| d < depth);
-        (rank * groups / distinct.len()).min(groups - 1)
-    };
+    // Groups: each stroke (a run of touching dabs of one depth, as a stroke's dabs come) is
+    // its own, so that two strokes of one depth on parts the estimate puts at different depths
+    // blend by distance between them, as strokes of two depths do; a group carries its nearest
+    // cell's correction, which between two such strokes would jump along the straight line
+    // halfway (a seam through a smooth region). With more strokes than
+    // [`MAX_GEODESIC_GROUPS`], the distinct depths are the groups, or their rank quantiles.
+    let (groups, group_of) = geodesic_groups(targets);
     // Each group's source cells and their corrections (cells a group's dabs share average).
     let mut sources: Vec<Vec<(usize, [f32; 2])>> = vec![Vec::new(); groups];
-    for t in targets {
+    for (t, &g) in targets.iter().zip(&group_of) {
         let lt = t.depth.ln();
-        let list = &mut sources[group_of(t.depth)];
+        let list = &mut sources[g];
         for (x, y) in dab_cells(t, (w, h), (gw, gh)) {
             let e = log_grid.at(x, y);
             list.push((y * gw + x, [lt - e, e]));
@@ -1071,6 +1069,42 @@ pub fn geodesic_correction(
             reach[i] * blend[i] + (1.0 - joined[i]) * enclosed * follow
         })
         .collect()
+}
+
+/// The groups of [`geodesic_correction`]: their count and each target's. Consecutive targets
+/// of one depth whose dabs touch (within a pixel) are one stroke; when there are more strokes
+/// than [`MAX_GEODESIC_GROUPS`], the targets are grouped by depth (the distinct depths, or their
+/// rank quantiles when there are too many).
+fn geodesic_groups(targets: &[DepthTarget]) -> (usize, Vec<usize>) {
+    let mut of = Vec::with_capacity(targets.len());
+    let mut runs = 0usize;
+    for (i, t) in targets.iter().enumerate() {
+        let joins = i > 0 && {
+            let p = &targets[i - 1];
+            let reach = p.radius_px.max(0.0) + t.radius_px.max(0.0) + 1.0;
+            p.depth.to_bits() == t.depth.to_bits()
+                && (p.x - t.x).powi(2) + (p.y - t.y).powi(2) <= reach * reach
+        };
+        if !joins {
+            runs += 1;
+        }
+        of.push(runs - 1);
+    }
+    if runs <= MAX_GEODESIC_GROUPS {
+        return (runs, of);
+    }
+    let mut distinct: Vec<f32> = targets.iter().map(|t| t.depth).collect();
+    distinct.sort_by(f32::total_cmp);
+    distinct.dedup();
+    let groups = distinct.len().min(MAX_GEODESIC_GROUPS);
+    let of = targets
+        .iter()
+        .map(|t| {
+            let rank = distinct.partition_point(|&d| d < t.depth);
+            (rank * groups / distinct.len()).min(groups - 1)
+        })
+        .collect();
+    (groups, of)
 }
 
 /// Geodesic distance from `sources` (cell, [correction, log estimate]) over a `gw × gh` grid
@@ -1489,6 +1523,68 @@ mod tests {
         )
         .unwrap();
         assert_eq!(again.depth, p.depth);
+    }
+
+    #[test]
+    fn two_strokes_of_one_depth_blend_without_a_seam() {
+        // One colour; the estimate rises log-linearly from 10 to 40 across the picture. Two
+        // short strokes both say 8, on parts the estimate puts at 12 and 33: between them the
+        // depth must pass smoothly from one correction to the other (each stroke's nearest
+        // cells carrying its own correction would jump by ln(33/12) ≈ 1 halfway, along a
+        // straight line through a region where the photo has no edge).
+        let (w, h) = (160, 60);
+        let image = Raster::new(w, h, [0.5f32; 3]);
+        let estimate = Raster::from_fn(w, h, |x, _| 10.0 * 4f32.powf(x as f32 / (w - 1) as f32));
+        let stroke = |x: f32| -> Vec<DepthTarget> {
+            (0..5)
+                .map(|k| DepthTarget {
+                    x,
+                    y: 24.0 + 3.0 * k as f32,
+                    radius_px: 2.0,
+                    depth: 8.0,
+                })
+                .collect()
+        };
+        let targets: Vec<DepthTarget> = stroke(20.0).into_iter().chain(stroke(138.0)).collect();
+        assert_eq!(
+            geodesic_groups(&targets),
+            (2, vec![0, 0, 0, 0, 0, 1, 1, 1, 1, 1])
+        );
+        let params = PropagateParams {
+            mode: PropagateMode::Geodesic,
+            geodesic_depth_reach: f32::INFINITY,
+            ..PropagateParams::default()
+        };
+        let p = propagate(&image, &estimate, &targets, &params, None).unwrap();
+        assert_depth(&p.depth, 20, 30, 8.0, 0.02);
+        assert_depth(&p.depth, 138, 30, 8.0, 0.02);
+        // The steepest step between neighbours along three rows, in log depth: the estimate's
+        // own is ln 4 / 159 ≈ 0.009; the blend adds a few hundredths at most.
+        for y in [5usize, 30, 55] {
+            let steepest = (1..w)
+                .map(|x| (p.depth.at(x, y).ln() - p.depth.at(x - 1, y).ln()).abs())
+                .fold(0.0f32, f32::max);
+            assert!(
+                steepest < 0.06,
+                "row {y}: a step of {steepest} in log depth"
+            );
+        }
+        // Strokes of one depth that are many are grouped by depth (bounded work).
+        let many: Vec<DepthTarget> = (0..3 * MAX_GEODESIC_GROUPS)
+            .map(|k| DepthTarget {
+                x: (k * 10) as f32,
+                y: 5.0,
+                radius_px: 1.0,
+                depth: if k % 2 == 0 { 3.0 } else { 5.0 },
+            })
+            .collect();
+        let (groups, of) = geodesic_groups(&many);
+        assert_eq!(groups, 2);
+        assert!(
+            of.iter()
+                .zip(&many)
+                .all(|(&g, t)| g == usize::from(t.depth > 4.0))
+        );
     }
 
     #[test]
