@@ -381,6 +381,8 @@ fn a_depth_stroke_paints_over_the_cached_estimate() {
     let again = builder.depth_output(&p, &Progress::none()).expect("undo");
     assert_eq!(again.estimate.depth, bare.estimate.depth);
     assert_eq!(builder.runs()[&Stage::Depth], 2);
+    // The estimator ran once: the stroke painted over the depth the unedited project cached.
+    assert_eq!(builder.estimates(), 1);
 }
 
 /// An orbit of `evening_glow_320.jpg` built by `builder`, then a depth stroke pulling part of

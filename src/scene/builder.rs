@@ -85,6 +85,9 @@ pub struct SceneBuilder {
     /// in its coordinates): a depth edit moves the canvas layout but not the photo, so the
     /// sketch does not search them again.
     sketch_objects: Option<(Weak<LoadedImage>, Arc<MaskRaster>)>,
+    /// How many times the depth estimator itself ran (a depth edit paints over the cached
+    /// estimate; [`Self::runs`] counts the depth stage, edits included).
+    estimates: usize,
 }
 
 /// The unique objects of `photo` for a sketch's canvas ([`photo_unique_objects`]), from `kept`
@@ -128,6 +131,12 @@ impl SceneBuilder {
             budget_frame: true,
             ..Self::default()
         }
+    }
+
+    /// How many times the depth estimator ran in this builder, for an edited project's
+    /// estimate to paint over or an unedited one's depth (a depth edit finds it cached).
+    pub fn estimates(&self) -> usize {
+        self.estimates
     }
 
     /// How many times each stage has run in this builder (stages that never ran are absent).
@@ -470,20 +479,27 @@ impl SceneBuilder {
         };
         let edited = project.depth.has_edits();
         let unpainted_key = key_of(key, &(&unpainted_settings, project.camera.hfov_deg));
-        let key = key_of(
-            key,
-            &(
-                &project.depth.without_signature(),
-                project.camera.hfov_deg,
-                project.working.coordinates_size,
-            ),
-        );
+        // A project without edits caches its depth under the unpainted key, where its first
+        // edit looks for the estimate to paint over (not estimating it a second time).
+        let key = if edited {
+            key_of(
+                key,
+                &(
+                    &project.depth.without_signature(),
+                    project.camera.hfov_deg,
+                    project.working.coordinates_size,
+                ),
+            )
+        } else {
+            unpainted_key
+        };
         let unpainted = if edited {
             self.depth.get(unpainted_key)
         } else {
             None
         };
         let mut estimated = None;
+        let mut estimates = 0;
         let depth = match cached(
             &mut self.depth,
             &mut self.stats,
@@ -493,11 +509,13 @@ impl SceneBuilder {
             p_depth,
             |p| {
                 if !edited {
+                    estimates += 1;
                     return run_depth_stage(&project.depth, &input.rgb, &intrinsics, p);
                 }
                 let bare = match unpainted {
                     Some(v) => v,
                     None => {
+                        estimates += 1;
                         let v = Arc::new(run_depth_stage(
                             &unpainted_settings,
                             &input.rgb,
@@ -522,6 +540,7 @@ impl SceneBuilder {
             Ok(v) => v,
             Err(stage) => return Ok(Err(stage)),
         };
+        self.estimates += estimates;
         if let Some(bare) = estimated {
             self.depth.put(unpainted_key, 0, bare);
         }
