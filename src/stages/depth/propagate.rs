@@ -371,6 +371,12 @@ pub struct PropagateParams {
     /// along with it, whatever soft edges join them. Infinite: off.
     #[serde(default = "default_geodesic_depth_reach")]
     pub geodesic_depth_reach: f32,
+    /// Geodesic mode: the scale `σ_H` of the edge-aware smoothing of the correction, a share
+    /// of the solve grid's long side (0: off): seams of the distance transforms inside a
+    /// region (where the nearest stroke cell or the strongest edge on the way changes) spread
+    /// over about that many cells, edges keep their steps.
+    #[serde(default = "default_geodesic_smoothing")]
+    pub geodesic_smoothing: f32,
 }
 
 /// Longest [`PropagateParams::geodesic_edge_span`].
@@ -384,6 +390,10 @@ fn default_geodesic_edge_span() -> usize {
 /// than under the stroke, and is a tenth at 8.6 times.
 fn default_geodesic_depth_reach() -> f32 {
     1.0
+}
+
+fn default_geodesic_smoothing() -> f32 {
+    0.05
 }
 
 fn default_geodesic_fade() -> f32 {
@@ -448,6 +458,7 @@ impl Default for PropagateParams {
             geodesic_edge_cost: default_geodesic_edge_cost(),
             geodesic_edge_span: default_geodesic_edge_span(),
             geodesic_depth_reach: default_geodesic_depth_reach(),
+            geodesic_smoothing: default_geodesic_smoothing(),
         }
     }
 }
@@ -1056,7 +1067,7 @@ pub fn geodesic_correction(
     .unwrap_or_else(|| Raster::new(gw, gh, 0.0));
     let around = crate::raster::box_mean(&joined_r, radius);
     let moved_around = crate::raster::box_mean(&moved, radius);
-    (0..n)
+    let corrected = (0..n)
         .map(|i| {
             let share = around.data()[i] as f64;
             let t = ((share - 0.6) / 0.3).clamp(0.0, 1.0);
@@ -1068,7 +1079,85 @@ pub fn geodesic_correction(
             };
             reach[i] * blend[i] + (1.0 - joined[i]) * enclosed * follow
         })
-        .collect()
+        .collect();
+    // The strokes' own cells keep their answer (a stroke decides its pixels).
+    let mut anchored = vec![false; n];
+    for list in &sources {
+        for &(i, _) in list {
+            anchored[i] = true;
+        }
+    }
+    smooth_within_edges(
+        corrected,
+        &anchored,
+        &cost,
+        (gw, gh),
+        params.geodesic_smoothing,
+    )
+}
+
+/// Edge-aware smoothing of a correction on the solve grid: the recursive filter of the domain
+/// transform (Gastal and Oliveira, "Domain transform for edge-aware image and video
+/// processing", SIGGRAPH 2011), three iterations of a left-right, right-left, top-down and
+/// bottom-up pass with the paper's shrinking scales, where a step between neighbours whose
+/// change is `s` (in `σ_c` / `σ_z` units, the step strength of `cost`) counts as a distance of
+/// `1 + σ_H·s` cells. Inside a region the geodesic answer has seams where no edge is (where the
+/// nearest stroke cell or the strongest edge on the shortest path changes between neighbours:
+/// straight lines and teeth along a leaky edge); the filter spreads them over about `σ_H` cells,
+/// while an edge of a few `σ` keeps its step. The `anchored` cells (the strokes' own) take
+/// their value back after every pass, so the filter only fills in between them. `σ_H` is
+/// `share` × the grid's long side (0: off).
+fn smooth_within_edges(
+    mut c: Vec<f64>,
+    anchored: &[bool],
+    cost: &[[(f32, f32); 4]],
+    (gw, gh): (usize, usize),
+    share: f32,
+) -> Vec<f64> {
+    let sigma_h = f64::from(share.max(0.0)) * gw.max(gh) as f64;
+    if sigma_h < 0.5 || c.len() != gw * gh || anchored.len() != c.len() {
+        return c;
+    }
+    let raw = c.clone();
+    let restore = |c: &mut Vec<f64>| {
+        for (i, v) in c.iter_mut().enumerate() {
+            if anchored[i] {
+                *v = raw[i];
+            }
+        }
+    };
+    const ITERATIONS: i32 = 3;
+    // Distances of the step right of and below each cell.
+    let step = |i: usize, k: usize| 1.0 + sigma_h * f64::from(cost[i][k].1);
+    for it in 0..ITERATIONS {
+        let sigma = sigma_h * 3f64.sqrt() * 2f64.powi(ITERATIONS - 1 - it)
+            / (4f64.powi(ITERATIONS) - 1.0).sqrt();
+        let a = (-(2f64.sqrt()) / sigma).exp();
+        for y in 0..gh {
+            let row = y * gw;
+            for x in 1..gw {
+                let w = a.powf(step(row + x - 1, 0));
+                c[row + x] += w * (c[row + x - 1] - c[row + x]);
+            }
+            for x in (0..gw.saturating_sub(1)).rev() {
+                let w = a.powf(step(row + x, 0));
+                c[row + x] += w * (c[row + x + 1] - c[row + x]);
+            }
+        }
+        restore(&mut c);
+        for x in 0..gw {
+            for y in 1..gh {
+                let w = a.powf(step((y - 1) * gw + x, 2));
+                c[y * gw + x] += w * (c[(y - 1) * gw + x] - c[y * gw + x]);
+            }
+            for y in (0..gh.saturating_sub(1)).rev() {
+                let w = a.powf(step(y * gw + x, 2));
+                c[y * gw + x] += w * (c[(y + 1) * gw + x] - c[y * gw + x]);
+            }
+        }
+        restore(&mut c);
+    }
+    c
 }
 
 /// The groups of [`geodesic_correction`]: their count and each target's. Consecutive targets
@@ -1523,6 +1612,54 @@ mod tests {
         )
         .unwrap();
         assert_eq!(again.depth, p.depth);
+    }
+
+    #[test]
+    fn the_smoothing_spreads_a_seam_keeps_an_edge_and_its_anchors() {
+        // A 60 × 20 grid whose correction steps from 0 to 1 at x = 30; without an edge there
+        // (every step's strength 0) the filter spreads the step, with an edge of 3 σ at that
+        // step it stays; two anchored cells keep their values.
+        let (gw, gh) = (60usize, 20usize);
+        let c: Vec<f64> = (0..gw * gh)
+            .map(|i| if i % gw < 30 { 0.0 } else { 1.0 })
+            .collect();
+        let mut anchored = vec![false; gw * gh];
+        anchored[10 * gw + 5] = true;
+        anchored[10 * gw + 50] = true;
+        let flat = vec![[(1.0f32, 0.0f32); 4]; gw * gh];
+        let mut edged = flat.clone();
+        for y in 0..gh {
+            edged[y * gw + 29][0].1 = 3.0;
+        }
+        let steepest = |c: &[f64]| {
+            (0..gh)
+                .flat_map(|y| (1..gw).map(move |x| (y, x)))
+                .map(|(y, x)| (c[y * gw + x] - c[y * gw + x - 1]).abs())
+                .fold(0.0f64, f64::max)
+        };
+        let spread = smooth_within_edges(c.clone(), &anchored, &flat, (gw, gh), 0.1);
+        assert!(steepest(&spread) < 0.2, "{}", steepest(&spread));
+        // About symmetric: the middle pair straddles one half.
+        let mid = 0.5 * (spread[10 * gw + 29] + spread[10 * gw + 30]);
+        assert!((mid - 0.5).abs() < 0.05, "{mid}");
+        let kept = smooth_within_edges(c.clone(), &anchored, &edged, (gw, gh), 0.1);
+        for y in 0..gh {
+            assert!(
+                kept[y * gw + 29] < 0.01 && kept[y * gw + 30] > 0.99,
+                "row {y}"
+            );
+        }
+        for out in [&spread, &kept] {
+            assert_eq!(out[10 * gw + 5], 0.0);
+            assert_eq!(out[10 * gw + 50], 1.0);
+        }
+        // Off (a scale of 0) is the identity; a constant stays constant.
+        assert_eq!(
+            smooth_within_edges(c.clone(), &anchored, &flat, (gw, gh), 0.0),
+            c
+        );
+        let one = smooth_within_edges(vec![0.3; gw * gh], &anchored, &flat, (gw, gh), 0.1);
+        assert!(one.iter().all(|v| (v - 0.3).abs() < 1e-12));
     }
 
     #[test]
