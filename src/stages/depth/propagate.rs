@@ -1127,8 +1127,15 @@ fn smooth_within_edges(
         }
     };
     const ITERATIONS: i32 = 3;
-    // Distances of the step right of and below each cell.
-    let step = |i: usize, k: usize| 1.0 + sigma_h * f64::from(cost[i][k].1);
+    // Distances of the step right of and below each cell (a step of unknown strength parts).
+    let step = |i: usize, k: usize| {
+        let s = f64::from(cost[i][k].1);
+        if s.is_finite() {
+            1.0 + sigma_h * s
+        } else {
+            f64::INFINITY
+        }
+    };
     for it in 0..ITERATIONS {
         let sigma = sigma_h * 3f64.sqrt() * 2f64.powi(ITERATIONS - 1 - it)
             / (4f64.powi(ITERATIONS) - 1.0).sqrt();
@@ -1653,6 +1660,14 @@ mod tests {
             assert_eq!(out[10 * gw + 5], 0.0);
             assert_eq!(out[10 * gw + 50], 1.0);
         }
+        // A step of unknown strength (NaN) parts its two cells instead of spreading NaN.
+        let mut unknown = flat.clone();
+        for y in 0..gh {
+            unknown[y * gw + 29][0].1 = f32::NAN;
+        }
+        let parted = smooth_within_edges(c.clone(), &anchored, &unknown, (gw, gh), 0.1);
+        assert!(parted.iter().all(|v| v.is_finite()));
+        assert!(parted[10 * gw + 29] < 0.01 && parted[10 * gw + 30] > 0.99);
         // Off (a scale of 0) is the identity; a constant stays constant.
         assert_eq!(
             smooth_within_edges(c.clone(), &anchored, &flat, (gw, gh), 0.0),
