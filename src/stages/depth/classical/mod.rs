@@ -103,6 +103,10 @@ pub struct ClassicalAnalysis {
     pub flattened: f32,
 }
 
+/// How far (in nearness, 0–1) a cue must move a pixel from the ramp to count as what decided
+/// it in a photo without a landscape (the Depth tab's "which cue decided").
+const CUE_DECIDES: f32 = 0.05;
+
 /// The cue that decided a region's depth, for the editor's Depth tab.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -120,19 +124,22 @@ pub enum DepthCue {
     Object,
     /// Haze (the dark channel).
     Haze,
+    /// Focus (a photo in shallow focus): what is sharp is nearer than what is blurred.
+    Defocus,
     /// No landscape cue applies: a ramp with local detail and focus on top.
     Fallback,
 }
 
 impl DepthCue {
     /// Every cue, in legend order.
-    pub const ALL: [DepthCue; 7] = [
+    pub const ALL: [DepthCue; 8] = [
         DepthCue::Sky,
         DepthCue::Water,
         DepthCue::Ground,
         DepthCue::PopUp,
         DepthCue::Object,
         DepthCue::Haze,
+        DepthCue::Defocus,
         DepthCue::Fallback,
     ];
 
@@ -145,6 +152,7 @@ impl DepthCue {
             DepthCue::PopUp => "pop-up",
             DepthCue::Object => "object",
             DepthCue::Haze => "haze",
+            DepthCue::Defocus => "focus",
             DepthCue::Fallback => "fallback",
         }
     }
@@ -158,6 +166,7 @@ impl DepthCue {
             DepthCue::PopUp => [240, 200, 40],
             DepthCue::Object => [230, 60, 160],
             DepthCue::Haze => [200, 200, 200],
+            DepthCue::Defocus => [60, 210, 110],
             DepthCue::Fallback => [140, 90, 220],
         }
     }
@@ -463,7 +472,27 @@ impl ClassicalDepth {
             } else if plane(y) {
                 DepthCue::Water
             } else if !landscape {
-                DepthCue::Fallback
+                // Without a landscape the ramp is the base: the cue that moved the pixel's
+                // nearness furthest from it decided, once it moved it by 0.05 or more (as a
+                // pop-up must rise 0.05 above the prior); outside figures the object cue says
+                // what the ramp says, so only a figure counts as the object's.
+                let pos = position_work.at(x, y);
+                let moved = |w: f32, v: f32| w * (v - pos).abs() / total;
+                let o = moved(wo, object_work.at(x, y));
+                let z = moved(wz, haze_work.at(x, y));
+                let f = defocus
+                    .as_ref()
+                    .map_or(0.0, |d| moved(wf, d.nearness.at(x, y)));
+                let most = o.max(z).max(f);
+                if !(most >= CUE_DECIDES) {
+                    DepthCue::Fallback
+                } else if f == most {
+                    DepthCue::Defocus
+                } else if o == most {
+                    DepthCue::Object
+                } else {
+                    DepthCue::Haze
+                }
             } else {
                 let g = wg * position_work.at(x, y);
                 let o = wo * object_work.at(x, y);
@@ -1355,6 +1384,15 @@ mod tests {
                 z(x, y)
             );
         }
+        // "Which cue decided" says focus (or the object, a figure) on the subject, not the
+        // fallback: the ramp alone did not put it in front.
+        let (cw, ch) = a.cues.size();
+        let cue = a.cues.at(cw / 2, ch / 2);
+        assert!(
+            matches!(cue, DepthCue::Defocus | DepthCue::Object),
+            "{cue:?}"
+        );
+        assert!(a.cues.data().contains(&DepthCue::Defocus));
     }
 
     #[test]
@@ -2070,12 +2108,18 @@ mod tests {
         check_sane(&a.estimate, w, h);
         assert!(!a.landscape);
         assert_eq!(a.detail_weight, 0.5, "the border is many things");
+        // No landscape cue decides anything (no ground, pop-up or water without a horizon).
+        let found: Vec<DepthCue> = DepthCue::ALL
+            .into_iter()
+            .filter(|c| a.cues.data().contains(c))
+            .collect();
         assert!(
-            a.cues
-                .data()
+            found
                 .iter()
-                .all(|c| *c == DepthCue::Fallback || *c == DepthCue::Sky)
+                .all(|c| !matches!(c, DepthCue::Ground | DepthCue::PopUp | DepthCue::Water)),
+            "{found:?}"
         );
+        assert!(found.contains(&DepthCue::Fallback), "{found:?}");
         let d = &a.estimate.depth;
         // Lower is nearer, as the ramp says …
         let top = median_depth(d, [0.0, 0.02, 1.0, 0.15]);
