@@ -484,7 +484,7 @@ impl ClassicalDepth {
                     .as_ref()
                     .map_or(0.0, |d| moved(wf, d.nearness.at(x, y)));
                 let most = o.max(z).max(f);
-                if !(most >= CUE_DECIDES) {
+                if most.is_nan() || most < CUE_DECIDES {
                     DepthCue::Fallback
                 } else if f == most {
                     DepthCue::Defocus
