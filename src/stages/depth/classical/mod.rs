@@ -392,7 +392,14 @@ impl ClassicalDepth {
 
         // Position prior and pop-up.
         let prior = position_prior(ww, wh, v_horizon_work, p.background_ramp);
-        let position_work = popup(&work, &prior, p.popup_edge, p.popup_carry, plane);
+        // Nothing in a close-up in shallow focus stands on a ground in view: the pop-up walk
+        // up each column would only carry the blur's colour steps up the picture as columns
+        // (garden's bokeh: a vertical step at a third of its width), so the ramp stays plain.
+        let position_work = if shallow_focus {
+            prior.clone()
+        } else {
+            popup(&work, &prior, p.popup_edge, p.popup_carry, plane)
+        };
         progress.report(0.65, "depth: cues");
         progress.check()?;
 
@@ -1383,6 +1390,17 @@ mod tests {
                 z(160, 100),
                 z(x, y)
             );
+        }
+        // No pop-up walk in shallow focus: the position cue is the plain ramp, one value a row.
+        let pos = &a.position_work;
+        for y in 0..pos.height() {
+            let row = pos.row(y);
+            let (lo, hi) = row
+                .iter()
+                .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), v| {
+                    (l.min(*v), h.max(*v))
+                });
+            assert!(hi - lo < 1e-6, "row {y}: {lo}..{hi}");
         }
         // "Which cue decided" says focus (or the object, a figure) on the subject, not the
         // fallback: the ramp alone did not put it in front.
