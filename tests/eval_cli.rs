@@ -156,6 +156,62 @@ fn eval_nvs_on_quarter_aloe_with_oracle_depth() {
 }
 
 #[test]
+fn eval_nvs_scores_a_depth_file_as_the_same_depth_by_name() {
+    // The ramp written as a depth file scores what `--depth ramp` scores, to the digit: the
+    // file goes through the same alignment to the truth.
+    let dir = tempfile::tempdir().unwrap();
+    let ramp_file = dir.path().join("ramp.npy");
+    let ramp = makeit4d::eval::nvs::vertical_ramp(320, 277);
+    makeit4d::stages::depth::io::export_depth_npy(&ramp, &ramp_file).unwrap();
+    let only = ["--json"];
+    let by_name = nvs(&[&only[..], &["--depth", "ramp"]].concat());
+    let by_file = nvs(&[
+        &only[..],
+        &[
+            "--depth-file",
+            ramp_file.to_str().unwrap(),
+            "--depth-file-kind",
+            "depth",
+        ],
+    ]
+    .concat());
+    for out in [&by_name, &by_file] {
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let a: serde_json::Value = serde_json::from_slice(&by_name.stdout).unwrap();
+    let b: serde_json::Value = serde_json::from_slice(&by_file.stdout).unwrap();
+    assert_eq!(b["depth"], "file", "{b}");
+    assert_eq!(a["depth_metrics"], b["depth_metrics"]);
+    for name in ["full", "naive"] {
+        assert_eq!(row(&a, name)["psnr_db"], row(&b, name)["psnr_db"], "{name}");
+    }
+    // Read as disparity, the same file is the ramp upside down: another score.
+    let flipped = nvs(&[&only[..], &["--depth-file", ramp_file.to_str().unwrap()]].concat());
+    let c: serde_json::Value = serde_json::from_slice(&flipped.stdout).unwrap();
+    assert_ne!(row(&a, "full")["psnr_db"], row(&c, "full")["psnr_db"]);
+
+    // A missing file: one line naming it; with --depth or --depth-model: a usage error.
+    let missing = dir.path().join("nothing.npy");
+    let out = nvs(&["--depth-file", missing.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+    assert!(stderr.contains("nothing.npy"), "{stderr}");
+    let out = nvs(&[
+        "--depth",
+        "estimated",
+        "--depth-file",
+        ramp_file.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--depth-file"));
+}
+
+#[test]
 fn eval_nvs_refuses_bad_inputs_with_one_line() {
     // The disparity of another size than the images.
     let out = exe()

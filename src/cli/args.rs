@@ -552,6 +552,14 @@ pub(crate) struct EvalNvsArgs {
     /// An ONNX depth model manifest for --depth estimated (default: the classical estimator).
     #[arg(long)]
     pub(crate) depth_model: Option<PathBuf>,
+    /// Score this depth map instead (an edited depth, another program's): 8/16-bit PNG (a
+    /// `makeit4d depth` PNG through its sidecar) or float .npy of the left image, aligned to the
+    /// ground truth by scale and shift in disparity as the estimate is
+    #[arg(long, conflicts_with_all = ["depth", "depth_model"])]
+    pub(crate) depth_file: Option<PathBuf>,
+    /// What the values of --depth-file are (a PNG with a makeit4d sidecar says it itself).
+    #[arg(long, value_enum, default_value = "disparity", requires = "depth_file")]
+    pub(crate) depth_file_kind: DepthFileKindArg,
     /// Resample the pair by this factor first, in (0, 1].
     #[arg(long, default_value_t = 1.0)]
     pub(crate) scale: f32,
@@ -586,6 +594,23 @@ pub(crate) enum NvsDepthArg {
     Estimated,
     /// An aligned vertical ramp: the baseline of knowing nothing.
     Ramp,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum DepthFileKindArg {
+    /// Larger = nearer (∝ 1/Z): a stereo disparity, a MiDaS-style output.
+    Disparity,
+    /// Larger = farther (Z).
+    Depth,
+}
+
+impl From<DepthFileKindArg> for makeit4d::stages::depth::io::DepthFileKind {
+    fn from(k: DepthFileKindArg) -> Self {
+        match k {
+            DepthFileKindArg::Disparity => Self::Disparity,
+            DepthFileKindArg::Depth => Self::Depth,
+        }
+    }
 }
 
 #[derive(Args, Debug)]

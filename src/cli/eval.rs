@@ -90,6 +90,16 @@ pub(crate) fn eval_nvs(args: EvalNvsArgs, cancel: Arc<AtomicBool>) -> anyhow::Re
         options.depth_settings.method = makeit4d::stages::depth::DepthMethod::Onnx;
         options.depth_settings.model = Some(m.clone());
     }
+    if let Some(path) = &args.depth_file {
+        let (w, h) = pair.left.size();
+        let imported =
+            makeit4d::stages::depth::io::import_depth(path, args.depth_file_kind.into(), w, h)?;
+        for warning in &imported.warnings {
+            eprintln!("{}: {warning}", path.display());
+        }
+        options.depth = NvsDepth::File;
+        options.given_depth = Some(imported.depth);
+    }
     let (bar, progress) = progress_bar(cancel);
     let table = eval_nvs(&pair, &options, &progress);
     bar.finish_and_clear();

@@ -137,6 +137,9 @@ fn scene_depth(
                 aligned_depth(pair, &vertical_ramp(pair.left.width(), pair.left.height()))?;
             Ok((depth, Some(m), 0.0))
         }
+        NvsDepth::File => Err(Error::invalid(
+            "nvs eval: file depth needs the depth map (none was given)",
+        )),
     }
 }
 

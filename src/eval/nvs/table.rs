@@ -21,6 +21,9 @@ pub enum NvsDepth {
     /// Knowing nothing: a vertical ramp (disparity growing linearly toward the bottom row),
     /// aligned to the ground truth as the estimate is. The baseline a depth estimate must beat.
     Ramp,
+    /// A depth map read from a file ([`NvsOptions::given_depth`]: an edited or another
+    /// program's depth), aligned to the ground truth as the estimate is.
+    File,
 }
 
 impl NvsDepth {
@@ -30,6 +33,7 @@ impl NvsDepth {
             NvsDepth::Oracle => "oracle",
             NvsDepth::Estimated => "estimated",
             NvsDepth::Ramp => "ramp",
+            NvsDepth::File => "file",
         }
     }
 }
@@ -243,9 +247,13 @@ impl NvsTable {
             self.baseline,
             self.depth.name(),
             match &self.depth_metrics {
-                Some(m) => format!(
+                Some(m) if self.depth == NvsDepth::Estimated => format!(
                     " (aligned: AbsRel {:.3}, δ<1.25 {:.3}; estimated in {:.1} s)",
                     m.abs_rel, m.delta_1, self.depth_seconds
+                ),
+                Some(m) => format!(
+                    " (aligned: AbsRel {:.3}, δ<1.25 {:.3})",
+                    m.abs_rel, m.delta_1
                 ),
                 None => String::new(),
             },
