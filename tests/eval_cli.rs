@@ -201,6 +201,18 @@ fn eval_nvs_scores_a_depth_file_as_the_same_depth_by_name() {
     assert!(!out.status.success());
     assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
     assert!(stderr.contains("nothing.npy"), "{stderr}");
+    // A file with no usable value: one line naming it.
+    let zeros = dir.path().join("zeros.npy");
+    let blank = makeit4d::raster::GrayRaster::new(320, 277, 0.0);
+    makeit4d::stages::depth::io::export_depth_npy(&blank, &zeros).unwrap();
+    let out = nvs(&["--depth-file", zeros.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.contains("zeros.npy") && stderr.contains("no finite positive"),
+        "{stderr}"
+    );
     let out = nvs(&[
         "--depth",
         "estimated",

@@ -93,7 +93,16 @@ pub(crate) fn eval_nvs(args: EvalNvsArgs, cancel: Arc<AtomicBool>) -> anyhow::Re
     if let Some(path) = &args.depth_file {
         let (w, h) = pair.left.size();
         let imported =
-            makeit4d::stages::depth::io::import_depth(path, args.depth_file_kind.into(), w, h)?;
+            makeit4d::stages::depth::io::import_depth(path, args.depth_file_kind.into(), w, h)
+                .map_err(|e| {
+                    // One line that names the file, once.
+                    let (message, name) = (e.to_string(), path.display().to_string());
+                    if message.contains(&name) {
+                        anyhow::anyhow!(message)
+                    } else {
+                        anyhow::anyhow!("{name}: {message}")
+                    }
+                })?;
         for warning in &imported.warnings {
             eprintln!("{}: {warning}", path.display());
         }
