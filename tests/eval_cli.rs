@@ -194,25 +194,22 @@ fn eval_nvs_scores_a_depth_file_as_the_same_depth_by_name() {
     let c: serde_json::Value = serde_json::from_slice(&flipped.stdout).unwrap();
     assert_ne!(row(&a, "full")["psnr_db"], row(&c, "full")["psnr_db"]);
 
-    // A missing file: one line naming it; with --depth or --depth-model: a usage error.
-    let missing = dir.path().join("nothing.npy");
-    let out = nvs(&["--depth-file", missing.to_str().unwrap()]);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
-    assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
-    assert!(stderr.contains("nothing.npy"), "{stderr}");
-    // A file with no usable value: one line naming it.
+    // A missing file, and one with no usable value: one line naming it.
+    let fails_naming = |file: &Path, words: &[&str]| {
+        let out = nvs(&["--depth-file", file.to_str().unwrap()]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success());
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+        for w in words {
+            assert!(stderr.contains(w), "{w}: {stderr}");
+        }
+    };
+    fails_naming(&dir.path().join("nothing.npy"), &["nothing.npy"]);
     let zeros = dir.path().join("zeros.npy");
     let blank = makeit4d::raster::GrayRaster::new(320, 277, 0.0);
     makeit4d::stages::depth::io::export_depth_npy(&blank, &zeros).unwrap();
-    let out = nvs(&["--depth-file", zeros.to_str().unwrap()]);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
-    assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
-    assert!(
-        stderr.contains("zeros.npy") && stderr.contains("no finite positive"),
-        "{stderr}"
-    );
+    fails_naming(&zeros, &["zeros.npy", "no finite positive"]);
+    // With --depth beside it: a usage error.
     let out = nvs(&[
         "--depth",
         "estimated",
