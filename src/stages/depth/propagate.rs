@@ -1115,7 +1115,7 @@ fn smooth_within_edges(
     share: f32,
 ) -> Vec<f64> {
     let sigma_h = f64::from(share.max(0.0)) * gw.max(gh) as f64;
-    if sigma_h < 0.5 || c.len() != gw * gh || anchored.len() != c.len() {
+    if sigma_h < 0.5 || c.len() != gw * gh || anchored.len() != c.len() || cost.len() != c.len() {
         return c;
     }
     let raw = c.clone();
@@ -1127,15 +1127,21 @@ fn smooth_within_edges(
         }
     };
     const ITERATIONS: i32 = 3;
-    // Distances of the step right of and below each cell (a step of unknown strength parts).
-    let step = |i: usize, k: usize| {
-        let s = f64::from(cost[i][k].1);
-        if s.is_finite() {
-            1.0 + sigma_h * s
-        } else {
-            f64::INFINITY
-        }
+    // Distances of the step right of (`k` = 0) and below (`k` = 2) each cell, once for every
+    // pass (a step of unknown strength parts).
+    let distances = |k: usize| -> Vec<f64> {
+        cost.iter()
+            .map(|c| {
+                let s = f64::from(c[k].1);
+                if s.is_finite() {
+                    1.0 + sigma_h * s
+                } else {
+                    f64::INFINITY
+                }
+            })
+            .collect()
     };
+    let (right, below) = (distances(0), distances(2));
     for it in 0..ITERATIONS {
         let sigma = sigma_h * 3f64.sqrt() * 2f64.powi(ITERATIONS - 1 - it)
             / (4f64.powi(ITERATIONS) - 1.0).sqrt();
@@ -1143,22 +1149,22 @@ fn smooth_within_edges(
         for y in 0..gh {
             let row = y * gw;
             for x in 1..gw {
-                let w = a.powf(step(row + x - 1, 0));
+                let w = a.powf(right[row + x - 1]);
                 c[row + x] += w * (c[row + x - 1] - c[row + x]);
             }
             for x in (0..gw.saturating_sub(1)).rev() {
-                let w = a.powf(step(row + x, 0));
+                let w = a.powf(right[row + x]);
                 c[row + x] += w * (c[row + x + 1] - c[row + x]);
             }
         }
         restore(&mut c);
         for x in 0..gw {
             for y in 1..gh {
-                let w = a.powf(step((y - 1) * gw + x, 2));
+                let w = a.powf(below[(y - 1) * gw + x]);
                 c[y * gw + x] += w * (c[(y - 1) * gw + x] - c[y * gw + x]);
             }
             for y in (0..gh.saturating_sub(1)).rev() {
-                let w = a.powf(step(y * gw + x, 2));
+                let w = a.powf(below[y * gw + x]);
                 c[y * gw + x] += w * (c[(y + 1) * gw + x] - c[y * gw + x]);
             }
         }
