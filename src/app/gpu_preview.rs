@@ -692,7 +692,11 @@ mod tests {
         let holes = cpu_still.hole_fraction();
         assert!(holes > 0.001, "the scene must open holes: {holes}");
         let filled = |mut frame: crate::render::Frame| {
-            crate::render::fill::fill_holes(&mut frame, settings.hole_fill_px);
+            crate::render::fill::fill_holes(
+                &mut frame,
+                settings.hole_fill_px,
+                crate::render::fill::view_parallax(&view),
+            );
             frame
         };
         let (cpu_still, cpu_moving) = (filled(cpu_still), filled(cpu_moving));

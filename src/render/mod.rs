@@ -129,7 +129,7 @@ pub struct SplatSettings {
     /// The reconstruction kernel.
     pub kernel: SplatKernel,
     /// How far, in pixels, a hole pixel of an output frame looks for its hole's rim
-    /// ([`fill`]); 0 leaves holes black.
+    /// ([`fill`]); 0 leaves holes black and see-through cracks as rendered.
     pub hole_fill_px: u32,
 }
 
@@ -294,7 +294,11 @@ pub trait FrameRenderer {
         positions: &FramePositions,
     ) -> Result<Frame> {
         let mut frame = self.render_unfilled(view, width, height, positions)?;
-        fill::fill_holes(&mut frame, self.settings().hole_fill_px);
+        fill::fill_holes(
+            &mut frame,
+            self.settings().hole_fill_px,
+            fill::view_parallax(view),
+        );
         Ok(frame)
     }
 }

@@ -58,6 +58,9 @@ pub(super) struct SlotBuffers {
     pub(super) frame: Option<Grow>,
     /// Size of the frame last written into this slot.
     pub(super) size: (usize, usize),
+    /// [`crate::render::fill::view_parallax`] of the view last rendered into this slot (what
+    /// the present pass's crack fill needs).
+    pub(super) parallax: f32,
 }
 
 /// Bytes of one frame: colour (3 floats), coverage and depth per pixel.

@@ -677,14 +677,8 @@ pub(crate) mod tests {
         assert_eq!(bits(&g), bits(&again));
     }
 
-    #[test]
-    fn present_writes_colour_and_coverage_into_a_texture() {
-        let _lock = gpu_lock();
-        let Some(mut gpu) = splatter(SplatSettings::default()) else {
-            return;
-        };
-        let (cloud, k, w, h) = photo_scene();
-        gpu.set_cloud(&cloud).unwrap();
+    /// The present pass of `gpu`'s forward slot (`w`×`h`), read back as RGBA8 rows.
+    fn presented(gpu: &mut GpuSplatter, w: usize, h: usize) -> Vec<[u8; 4]> {
         let device = gpu.context().device.clone();
         let texture = device.create_texture(&wgpu::TextureDescriptor {
             label: Some("present target"),
@@ -701,11 +695,6 @@ pub(crate) mod tests {
             view_formats: &[],
         });
         let target = texture.create_view(&Default::default());
-        let v = view(k, fly_in());
-        let mut frame = gpu.render(&v, w, h, None).unwrap();
-        // The present pass fills holes from their rims as `fill_holes` does; the fly-in opens some.
-        assert!(frame.hole_fraction() > 0.0);
-        crate::render::fill::fill_holes(&mut frame, gpu.settings.hole_fill_px);
         let mut encoder = gpu.encoder();
         gpu.encode_present(&mut encoder, FrameSlot::Forward, &target)
             .unwrap();
@@ -738,15 +727,91 @@ pub(crate) mod tests {
             .map_async(wgpu::MapMode::Read, |r| r.unwrap());
         device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
         let data = readback.slice(..).get_mapped_range().unwrap();
-        for y in (0..h).step_by(7) {
-            for x in (0..w).step_by(5) {
-                let px = &data[y * row + x * 4..y * row + x * 4 + 4];
+        (0..w * h)
+            .map(|p| {
+                let i = (p / w) * row + (p % w) * 4;
+                [data[i], data[i + 1], data[i + 2], data[i + 3]]
+            })
+            .collect()
+    }
+
+    /// Asserts that presented pixels are `frame`'s colour and coverage, to the 8-bit rounding,
+    /// at every pixel `step` picks.
+    fn assert_presented(pixels: &[[u8; 4]], frame: &Frame, step: (usize, usize)) {
+        let (w, h) = frame.colour.size();
+        for y in (0..h).step_by(step.1) {
+            for x in (0..w).step_by(step.0) {
+                let px = pixels[y * w + x];
                 let c = frame.colour.at(x, y);
                 for ch in 0..3 {
-                    assert!((px[ch] as f32 / 255.0 - c[ch].clamp(0.0, 1.0)).abs() <= 0.6 / 255.0);
+                    let want = c[ch].clamp(0.0, 1.0);
+                    let got = px[ch] as f32 / 255.0;
+                    assert!(
+                        (got - want).abs() <= 0.6 / 255.0,
+                        "({x}, {y}): {px:?} vs {c:?}"
+                    );
                 }
                 assert!((px[3] as f32 / 255.0 - frame.coverage.at(x, y)).abs() <= 0.6 / 255.0);
             }
         }
+    }
+
+    #[test]
+    fn present_writes_colour_and_coverage_into_a_texture() {
+        let _lock = gpu_lock();
+        let Some(mut gpu) = splatter(SplatSettings::default()) else {
+            return;
+        };
+        let (cloud, k, w, h) = photo_scene();
+        gpu.set_cloud(&cloud).unwrap();
+        let v = view(k, fly_in());
+        let mut frame = gpu.render(&v, w, h, None).unwrap();
+        // The present pass fills holes from their rims as `fill_holes` does; the fly-in opens some.
+        assert!(frame.hole_fraction() > 0.0);
+        let parallax = crate::render::fill::view_parallax(&v);
+        crate::render::fill::fill_holes(&mut frame, gpu.settings.hole_fill_px, parallax);
+        let pixels = presented(&mut gpu, w, h);
+        assert_presented(&pixels, &frame, (5, 7));
+
+        // See-through cracks too, pixel for pixel: a frame written straight into the slot (a
+        // ramp with one- and two-pixel cracks, a far band, a hole; the slot keeps the fly-in's
+        // size and parallax) comes out as the CPU fill makes it.
+        let mut frame = Frame {
+            colour: Raster::from_fn(w, h, |x, y| {
+                [
+                    x as f32 / w as f32,
+                    y as f32 / h as f32,
+                    ((x * 7 + y * 3) % 11) as f32 / 11.0,
+                ]
+            }),
+            coverage: Raster::new(w, h, 1.0),
+            depth: Raster::from_fn(w, h, |x, y| 2.0 + 0.01 * (x + y) as f32),
+        };
+        let mut far = |x: usize, y: usize, z: f32| {
+            frame.depth.set(x, y, z);
+            frame.colour.set(x, y, [1.0, 0.0, 1.0]);
+        };
+        for (x, y) in [(10, 10), (20, 20), (20, 21), (30, 40), (31, 40), (32, 41)] {
+            far(x, y, 9.0);
+        }
+        for y in 0..h {
+            for x in 60..63 {
+                far(x, y, 9.0);
+            }
+        }
+        frame.coverage.set(40, 10, 0.0);
+        frame.depth.set(40, 10, 0.0);
+        let cracked = frame.clone();
+        let data = bits(&frame);
+        let slot = &gpu.slots[FrameSlot::Forward.index()];
+        let buffer = &slot.frame.as_ref().expect("rendered").buffer;
+        gpu.context()
+            .queue
+            .write_buffer(buffer, 0, bytemuck::cast_slice(&data));
+        crate::render::fill::fill_holes(&mut frame, gpu.settings.hole_fill_px, parallax);
+        assert_ne!(frame.colour.at(10, 10), cracked.colour.at(10, 10));
+        assert_eq!(frame.colour.at(61, 30), cracked.colour.at(61, 30));
+        let pixels = presented(&mut gpu, w, h);
+        assert_presented(&pixels, &frame, (1, 1));
     }
 }

@@ -74,6 +74,7 @@ impl GpuSplatter {
             frame_size,
         );
         self.slots[slot.index()].size = (width, height);
+        self.slots[slot.index()].parallax = crate::render::fill::view_parallax(view);
 
         let (groups_x, groups_y, threads_per_row) = self.point_dispatch(n);
         let w2c = WorldToCamera::new(&view.world_from_camera);
@@ -232,6 +233,7 @@ impl GpuSplatter {
             padded(frame_bytes(width, height)),
         );
         self.slots[2].size = size;
+        self.slots[2].parallax = self.slots[0].parallax.max(self.slots[1].parallax);
         let (groups_x, groups_y, threads_per_row) = self.point_dispatch(pixels);
         let t = t.clamp(0.0, 1.0);
         let params = BlendUniform {
@@ -305,6 +307,7 @@ impl GpuSplatter {
         target: &wgpu::TextureView,
     ) -> Result<()> {
         let (width, height) = self.slots[slot.index()].size;
+        let parallax = self.slots[slot.index()].parallax;
         let Some(frame) = &self.slots[slot.index()].frame else {
             return Err(Error::invalid("present: nothing rendered into this slot"));
         };
@@ -312,7 +315,7 @@ impl GpuSplatter {
             width: width as u32,
             height: height as u32,
             fill_radius: self.settings.hole_fill_px,
-            pad: 0,
+            parallax,
         };
         self.context
             .queue

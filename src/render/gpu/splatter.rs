@@ -100,6 +100,7 @@ impl GpuSplatter {
                 uploaded_points: 0,
                 frame: None,
                 size: (0, 0),
+                parallax: 0.0,
             };
             Ok(Self {
                 settings,

@@ -54,6 +54,7 @@ pub(super) struct PresentUniform {
     pub(super) height: u32,
     /// `SplatSettings::hole_fill_px` (the rim fill of holes, `render::fill`).
     pub(super) fill_radius: u32,
-    pub(super) pad: u32,
+    /// `render::fill::view_parallax` of the frame's view (its crack fill).
+    pub(super) parallax: f32,
 }
 const _: () = assert!(std::mem::size_of::<PresentUniform>() == 16);
