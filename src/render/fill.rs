@@ -416,12 +416,12 @@ mod tests {
         assert!(message.contains("hole_fill_px"), "{message}");
     }
 
-    /// A frame of a near surface at depth 2 whose colour is the linear ramp `(x + 2y) / 32` in
-    /// every channel.
     /// A `view_parallax` that opens every crack of these tests (sides at depth 2, runs at 5:
     /// `S·(½ − ⅕) = 0.3·S` pixels).
     const MOVED: f32 = 100.0;
 
+    /// A frame of a near surface at depth 2 whose colour is the linear ramp `(x + 2y) / 32` in
+    /// every channel.
     fn ramp(w: usize, h: usize) -> Frame {
         let mut f = frame(w, h, [0.0; 3], 2.0);
         for y in 0..h {
@@ -581,5 +581,18 @@ mod tests {
         assert_eq!(f.colour.data()[1], unfilled.colour.data()[1]);
         fill_holes(&mut f, 4, MOVED);
         assert!(f.colour.at(1, 0).iter().all(|v| v.is_finite()));
+        // A crack beside unusable samples: a NaN-coloured side and an infinitely deep one do not
+        // count, so only the diagonals block it (still the ramp's value), and a covered 1×1
+        // frame has no crack.
+        let mut f = ramp(7, 7);
+        far(&mut f, 3, 3, 5.0);
+        f.colour.set(2, 3, [f32::NAN, 0.0, 0.0]);
+        f.depth.set(3, 2, f32::INFINITY);
+        fill_holes(&mut f, 4, MOVED);
+        let c = f.colour.at(3, 3);
+        assert!(c.iter().all(|v| (v - 9.0 / 32.0).abs() < 1e-6), "{c:?}");
+        let mut one = frame(1, 1, [0.25; 3], 1.0);
+        fill_holes(&mut one, 4, MOVED);
+        assert_eq!(one.colour.at(0, 0), [0.25; 3]);
     }
 }
