@@ -33,8 +33,11 @@
 //!   between nearer pixels (sky through a canopy) stay in the input view and in small moves;
 //! - a pixel blocked along at least [`CRACK_MIN_AXES`] axes is a crack: its colour becomes the
 //!   mean, over every blocking run, of the two sides' colours interpolated linearly at its
-//!   place in the run. One blocked axis alone is an edge of a thin far structure (a gap between
-//!   two leaves that the photo shows) and stays.
+//!   place in the run. A pixel blocked along one axis only stays: a far region narrowing to a
+//!   neck between two nearer things, or a 2-px line blocked only across it. (A 1-px far line is
+//!   blocked along 3 axes, whatever made it; what keeps the photo's own is the parallax gate.
+//!   Tried with one axis enough, before the gate: safe_landing's painted crowns lost visibly
+//!   more of their sky gaps.)
 //!
 //! Coverage and depth stay as rendered, so hole statistics, the depth pass and the time blend's
 //! weights keep their meaning; a hole with no rim sample within `radius` in any direction (the
@@ -539,7 +542,7 @@ mod tests {
         f.depth
             .set(3, 3, 2.0 * (1.0 + FILL_DEPTH_TOLERANCE) * 0.999);
         check(&f, "within the tolerance");
-        // A far pixel with near pixels on one axis only (a gap between two leaves).
+        // A far pixel with near pixels on one axis only (a neck of a far region).
         let mut f = ramp(7, 7);
         for y in 0..7 {
             for x in 0..7 {
