@@ -226,6 +226,19 @@ impl StagePanel for PreviewPanel {
         }) {
             cx.edit("Splat surfaces", |p| p.render.k = v);
         }
+        if let Some(v) = committed(ui, "hole fill", r.hole_fill_px, |ui, v| {
+            ui.add(
+                egui::Slider::new(v, 0..=crate::render::MAX_HOLE_FILL_PX)
+                    .logarithmic(true)
+                    .text("hole and crack fill, px"),
+            )
+            .on_hover_text(
+                "How far a hole pixel looks for its hole's rim; see-through cracks a move opens \
+                 in a nearer surface take its colour. 0: holes black, cracks as rendered.",
+            )
+        }) {
+            cx.edit("Hole fill", |p| p.render.hole_fill_px = v);
+        }
         let mut kernel = r.kernel;
         egui::ComboBox::from_label("reconstruction kernel")
             .selected_text(kernel_name(kernel))
