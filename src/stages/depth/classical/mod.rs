@@ -1084,10 +1084,58 @@ fn depth_edge_strength(nearness: &GrayRaster) -> GrayRaster {
     })
 }
 
+/// Below this ratio of a pixel's non-sky disparity to the far plane's, the sky matte blends as
+/// it is ([`matte_sky_share`]).
+pub const MATTE_RATIO_SOFT: f32 = 32.0;
+/// From this ratio of a pixel's non-sky disparity to the far plane's, the sky matte's tails
+/// are dropped in full ([`matte_sky_share`]).
+pub const MATTE_RATIO_SHARP: f32 = 64.0;
+/// In front of a far plane [`MATTE_RATIO_SHARP`] times farther, a pixel at most this much sky
+/// stands with the figure ([`matte_sky_share`]).
+pub const MATTE_FIGURE_SHARE: f32 = 0.4;
+/// In front of a far plane [`MATTE_RATIO_SHARP`] times farther, a pixel at least this much sky
+/// is sky ([`matte_sky_share`]).
+pub const MATTE_SKY_SHARE: f32 = 0.95;
+
+/// The sky share a pixel's depth blends with, from the refined sky matte `s` and the ratio
+/// `r = d / d_far` of its non-sky disparity to the far plane's. The blend is in disparity,
+/// so a matte's small errors weigh `r` times more on depth in front of a near figure than in
+/// front of a far one: the guided refinement leaves `s ≈ 0.97–0.999` on sky 10–20 px around a
+/// figure (a leak of its window), and at `r = 140` a leak of 0.03 puts the sky at a fifth of
+/// the far plane, a cone of sky standing around the figure; the figure's outline, 5–40 % sky,
+/// lands at up to 1.7× the figure's depth, a ring that parallax shows as a ghost outline.
+/// So the matte's tails are dropped in proportion to how far the figure stands in front of
+/// the far plane: with `g = clamp(ln(r / MATTE_RATIO_SOFT) / ln(MATTE_RATIO_SHARP /
+/// MATTE_RATIO_SOFT), 0, 1)` (0 up to [`MATTE_RATIO_SOFT`], 1 from [`MATTE_RATIO_SHARP`]),
+/// `lo = g·MATTE_FIGURE_SHARE`,
+/// `hi = 1 − g·(1 − MATTE_SKY_SHARE)`, the share is `clamp((s − lo)/(hi − lo), 0, 1)`. A
+/// distant ridge or a sunlit cloud against the sky (`r` of 2–30) keeps its soft matte, whose
+/// ambiguous glow a hard cut would tear into specks. Non-finite inputs give `s` clamped.
+pub fn matte_sky_share(s: f32, r: f32) -> f32 {
+    let s = if s.is_finite() {
+        s.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    // Most pixels are wholly sky or not, or stand in front of a far surface: no logarithm.
+    if s == 0.0 || s == 1.0 || r.is_nan() || r <= MATTE_RATIO_SOFT {
+        return s;
+    }
+    let g = if r >= MATTE_RATIO_SHARP {
+        1.0
+    } else {
+        ((r / MATTE_RATIO_SOFT).ln() / (MATTE_RATIO_SHARP / MATTE_RATIO_SOFT).ln()).clamp(0.0, 1.0)
+    };
+    let lo = g * MATTE_FIGURE_SHARE;
+    let hi = 1.0 - g * (1.0 - MATTE_SKY_SHARE);
+    ((s - lo) / (hi - lo)).clamp(0.0, 1.0)
+}
+
 /// Nearness `n ∈ [0, 1]` → depth. Non-sky: disparity `(1/Z_near)·(1/R + (1 − 1/R)·n)`, so
 /// `n = 1` is the nearest ground depth and `n = 0` is `R·Z_near` (`R = max_depth_ratio`).
 /// Sky (soft mask `s`) blends in disparity toward the far plane
-/// `Z_far = max(far_plane_factor·median(Z), max(Z))` over non-sky pixels.
+/// `Z_far = max(far_plane_factor·median(Z), max(Z))` over non-sky pixels, with the share
+/// [`matte_sky_share`] (the matte's tails dropped in front of a near figure).
 fn nearness_to_depth(
     nearness: &GrayRaster,
     sky: &GrayRaster,
@@ -1117,6 +1165,7 @@ fn nearness_to_depth(
         .iter()
         .zip(sky.data())
         .map(|(d, s)| {
+            let s = matte_sky_share(*s, d / d_far);
             let blended = (1.0 - s) * d + s * d_far;
             let z = 1.0 / blended.max(d_far);
             if z.is_finite() && z > 0.0 { z } else { z_far }
@@ -2314,6 +2363,63 @@ mod tests {
             estimator().estimate(&img, &intrinsics(20, 20), &p),
             Err(Error::Cancelled)
         ));
+    }
+
+    #[test]
+    fn matte_sky_share_known_answers() {
+        let close = |a: f32, b: f32| (a - b).abs() < 1e-5;
+        // In front of a far figure (r ≤ 32) the matte blends as it is.
+        for s in [0.0, 0.03, 0.3, 0.5, 0.97, 1.0] {
+            assert_eq!(matte_sky_share(s, 10.0), s);
+            assert_eq!(matte_sky_share(s, MATTE_RATIO_SOFT), s);
+        }
+        // In front of a near one (r ≥ 64) its tails are dropped: [0.4, 0.95] → [0, 1].
+        for r in [MATTE_RATIO_SHARP, 140.0, 1e6, f32::INFINITY] {
+            assert_eq!(matte_sky_share(0.3, r), 0.0);
+            assert_eq!(matte_sky_share(0.4, r), 0.0);
+            assert_eq!(matte_sky_share(0.95, r), 1.0);
+            assert_eq!(matte_sky_share(0.99, r), 1.0);
+            assert!(close(matte_sky_share(0.675, r), 0.5));
+            assert!(close(matte_sky_share(0.5, r), 0.1 / 0.55));
+        }
+        // Halfway in log ratio (r = √(32·64)): lo = 0.2, hi = 0.975.
+        let r = (MATTE_RATIO_SOFT * MATTE_RATIO_SHARP).sqrt();
+        assert!(close(matte_sky_share(0.5875, r), 0.5));
+        assert!(close(matte_sky_share(0.2, r), 0.0));
+        assert!(close(matte_sky_share(0.975, r), 1.0));
+        // Out-of-range and non-finite inputs.
+        assert_eq!(matte_sky_share(f32::NAN, 100.0), 0.0);
+        assert_eq!(matte_sky_share(-1.0, 10.0), 0.0);
+        assert_eq!(matte_sky_share(2.0, 10.0), 1.0);
+        assert_eq!(matte_sky_share(0.97, f32::NAN), 0.97);
+        assert_eq!(matte_sky_share(0.97, 0.0), 0.97);
+    }
+
+    #[test]
+    fn nearness_to_depth_drops_the_mattes_tails_in_front_of_a_near_figure() {
+        // R = 100, far plane factor 100, z_near = 1. Non-sky pixels (s < ½): the figure (n = 1,
+        // z = 1) and its outline, so the median is 1 and Z_far = 100 (d_far = 0.01).
+        let p = ClassicalDepthParams::default();
+        assert_eq!((p.max_depth_ratio, p.far_plane_factor), (100.0, 100.0));
+        let n_far = (0.2 - 0.01) / 0.99; // d = 0.2: 20× the far plane's disparity
+        let nearness = Raster::from_vec(5, 1, vec![1.0, 1.0, 1.0, 0.0, n_far]).unwrap();
+        let sky = Raster::from_vec(5, 1, vec![0.0, 0.97, 0.3, 0.97, 0.97]).unwrap();
+        let z = nearness_to_depth(&nearness, &sky, 1.0, &p);
+        let close = |a: f32, b: f32| (a - b).abs() <= 1e-4 * b;
+        // The figure.
+        assert!(close(z.at(0, 0), 1.0));
+        // A 3 % leak of the matte beside it (r = 100): sky at the far plane, not at
+        // 1/(0.03 + 0.97·0.01) = 25.2.
+        assert!(close(z.at(1, 0), 100.0), "{}", z.at(1, 0));
+        // Its outline, 30 % sky: with the figure, not at 1/(0.7 + 0.003) = 1.42.
+        assert!(close(z.at(2, 0), 1.0), "{}", z.at(2, 0));
+        // In front of a far surface (r = 1 and r = 20) the matte blends as it is.
+        assert!(close(z.at(3, 0), 100.0));
+        assert!(
+            close(z.at(4, 0), 1.0 / (0.03 * 0.2 + 0.97 * 0.01)),
+            "{}",
+            z.at(4, 0)
+        );
     }
 
     #[test]
