@@ -1110,7 +1110,8 @@ pub const MATTE_SKY_SHARE: f32 = 0.95;
 /// `lo = g·MATTE_FIGURE_SHARE`,
 /// `hi = 1 − g·(1 − MATTE_SKY_SHARE)`, the share is `clamp((s − lo)/(hi − lo), 0, 1)`. A
 /// distant ridge or a sunlit cloud against the sky (`r` of 2–30) keeps its soft matte, whose
-/// ambiguous glow a hard cut would tear into specks. Non-finite inputs give `s` clamped.
+/// ambiguous glow a hard cut would tear into specks. A NaN matte counts as no sky; a NaN or
+/// non-positive ratio leaves the (clamped) matte as it is.
 pub fn matte_sky_share(s: f32, r: f32) -> f32 {
     let s = if s.is_finite() {
         s.clamp(0.0, 1.0)
