@@ -192,14 +192,19 @@ pub(super) fn build_canvas(
             synthesised,
         });
     }
-    let [fl, ft, fr, fb] = frame_bleed(image);
-    let synthesised = if fl + ft + fr + fb == 0 {
+    let frame = crate::stages::outpaint::frame_mask(image);
+    let synthesised = if frame.data().iter().all(|&f| !f) {
         synthesised
     } else {
-        let (x0, y0) = (layout.left_pad + fl, layout.top_pad + ft);
-        let (x1, y1) = (layout.left_pad + w - fr, layout.top_pad + h - fb);
+        let frame = placed(
+            &frame,
+            layout.width,
+            layout.height,
+            (layout.left_pad, layout.top_pad),
+            false,
+        );
         MaskRaster::from_fn(layout.width, layout.height, |x, y| {
-            synthesised.at(x, y) || !((x0..x1).contains(&x) && (y0..y1).contains(&y))
+            synthesised.at(x, y) || frame.at(x, y)
         })
     };
     let at = (layout.left_pad, layout.top_pad);
@@ -240,27 +245,13 @@ pub(super) fn build_canvas(
     )
 }
 
-/// The width of a flat black or white frame around `image` on each side (left, top, right,
-/// bottom), with two more pixels on each framed side for the JPEG ringing and anti-aliasing
-/// along it, at most a quarter of the photo: a canvas re-fills it with the margin, so that it
-/// does not continue as a seam around the photo.
-fn frame_bleed(image: &RgbRaster) -> [usize; 4] {
-    let (w, h) = image.size();
-    let bleed = |b: usize| if b > 0 { b + 2 } else { 0 };
-    let [fl, ft, fr, fb] = crate::stages::outpaint::frame_border(image).map(bleed);
-    [fl.min(w / 4), ft.min(h / 4), fr.min(w / 4), fb.min(h / 4)]
-}
-
 /// The unique objects ([`crate::stages::inpaint::unique_objects`]) of the pixels of `image` a
-/// canvas keeps (all but a frame's bleed), in the photo's coordinates: the draft canvas's
+/// canvas keeps (all but its frame, [`crate::stages::outpaint::frame_mask`]), in the photo's
+/// coordinates: the draft canvas's
 /// sources leave them out without searching every canvas again ([`build_canvas`]'s
 /// `photo_objects`).
 pub(super) fn photo_unique_objects(image: &RgbRaster) -> MaskRaster {
-    let (w, h) = image.size();
-    let [fl, ft, fr, fb] = frame_bleed(image);
-    let kept = MaskRaster::from_fn(w, h, |x, y| {
-        (fl..w.saturating_sub(fr)).contains(&x) && (ft..h.saturating_sub(fb)).contains(&y)
-    });
+    let kept = crate::stages::outpaint::frame_mask(image).map(|f| !f);
     crate::stages::inpaint::unique_objects(image, Some(&kept))
 }
 
@@ -374,5 +365,67 @@ mod tests {
         assert!(searched < 0.05 && given < 0.05, "{searched} {given}");
         // Without them the membrane carries the square into the margin.
         assert!(nothing > 0.15, "{nothing}");
+    }
+
+    #[test]
+    fn a_frame_and_its_rim_are_refilled_with_the_margin() {
+        // A grey gradient picture inside a black frame of 4 px with a pale rim of 3 px along its
+        // inside edge (a scanned canvas), its canvas 24 px wider on every side.
+        let (w, h) = (240, 160);
+        let grey = |x: usize, y: usize| {
+            let g = 0.3 + 0.2 * (x + y) as f32 / (w + h) as f32;
+            [g, g, g * 1.1]
+        };
+        let photo = RgbRaster::from_fn(w, h, |x, y| {
+            let edge = x.min(y).min(w - 1 - x).min(h - 1 - y);
+            match edge {
+                0..4 => [0.0; 3],
+                4..7 => [0.9, 0.88, 0.75],
+                _ => grey(x, y),
+            }
+        });
+        let pad = 24;
+        let layout = CanvasLayout {
+            left_pad: pad,
+            top_pad: pad,
+            width: w + 2 * pad,
+            height: h + 2 * pad,
+        };
+        let canvas = build_canvas(
+            &Project::new("photo.png"),
+            layout,
+            &photo,
+            &Intrinsics::from_hfov(w, h, 60.0),
+            &GrayRaster::new(w, h, 5.0),
+            &GrayRaster::new(w, h, 0.0),
+            &SketchInpainter,
+            None,
+            &Progress::none(),
+        )
+        .expect("canvas");
+        // Every frame and rim pixel is synthesised, and what fills it and the margin beyond is
+        // neither the frame's black nor the rim's cream: within 0.1 of the picture's greys.
+        for y in 0..h {
+            for x in 0..w {
+                if x.min(y).min(w - 1 - x).min(h - 1 - y) < 7 {
+                    assert!(canvas.synthesised.at(x + pad, y + pad), "({x}, {y})");
+                }
+            }
+        }
+        for (x, y) in [
+            (pad + 2, pad + 40),
+            (pad + 5, pad + 40),
+            (pad + 60, pad + 5),
+            (10, 10),
+        ] {
+            let [r, g, b] = canvas.image.at(x, y);
+            assert!(
+                (0.25..0.6).contains(&r) && (r - g).abs() < 0.1 && b < 0.7,
+                "({x}, {y}): {r} {g} {b}"
+            );
+        }
+        // The picture itself is kept.
+        assert_eq!(canvas.image.at(pad + 120, pad + 80), grey(120, 80));
+        assert!(!canvas.synthesised.at(pad + 120, pad + 80));
     }
 }

@@ -1,6 +1,9 @@
-//! A flat black or white frame around the photo ([`frame_border`]), re-filled with the margin.
+//! A flat black or white frame around the photo ([`frame_border`]) and what lies along its
+//! inside edge ([`frame_mask`]), re-filled with the margin.
 
-use crate::raster::RgbRaster;
+use crate::raster::morph::dilate;
+use crate::raster::{MaskRaster, RgbRaster};
+use std::collections::VecDeque;
 
 /// Widest frame band [`frame_border`] accepts, as a fraction of the image side.
 pub const MAX_FRAME_FRACTION: f32 = 0.04;
@@ -47,6 +50,189 @@ pub fn frame_border(image: &RgbRaster) -> [usize; 4] {
     ]
 }
 
+/// Pixels of the anti-aliasing and JPEG ringing along a frame's inner edge that
+/// [`frame_mask`] drops with it.
+pub const FRAME_BLEED_PX: usize = 2;
+
+/// Deepest rim [`frame_mask`] drops inside a frame, as a fraction of the image's short side.
+pub const MAX_RIM_FRACTION: f32 = 0.025;
+
+/// Pixel `(x, y)` at offset `t` from side `side` (0 left, 1 top, 2 right, 3 bottom) on the
+/// line `j` that runs perpendicular to that side.
+fn side_pixel(side: usize, j: usize, t: usize, (w, h): (usize, usize)) -> (usize, usize) {
+    match side {
+        0 => (t, j),
+        1 => (j, t),
+        2 => (w - 1 - t, j),
+        _ => (j, h - 1 - t),
+    }
+}
+
+/// Per-channel median of `colours` (empty: black).
+fn median_colour(colours: &mut [[f32; 3]]) -> [f32; 3] {
+    let mut out = [0.0; 3];
+    if colours.is_empty() {
+        return out;
+    }
+    for (k, o) in out.iter_mut().enumerate() {
+        let mid = colours.len() / 2;
+        colours.select_nth_unstable_by(mid, |a, b| a[k].total_cmp(&b[k]));
+        *o = colours[mid][k];
+    }
+    out
+}
+
+fn distance2(a: [f32; 3], b: [f32; 3]) -> f32 {
+    (0..3).map(|k| (a[k] - b[k]).powi(2)).sum()
+}
+
+/// The pixels of `image` that are its frame, not the scene (set = frame). Empty unless
+/// [`frame_border`] finds a flat black or white band on some side; then, on each such side:
+///
+/// - the frame itself, followed where it runs askew (a scan of a painting lies tilted inside
+///   its black border): every pixel connected to the side's outer line through pixels within
+///   0.06 of that line's mean colour, per channel, up to [`MAX_FRAME_FRACTION`] of the side;
+/// - a rim along its inside edge (a canvas's unpainted edge, a mat, a print's paper margin):
+///   with `c` the median colour of the first two pixels inside the frame on every line
+///   perpendicular to the side and `ci` the median colour `T .. 2T` pixels further in (`T` =
+///   [`MAX_RIM_FRACTION`] of the short side, at least 3), each line's run of pixels nearer to
+///   `c` than to `ci`, at most `T` long. The side has a rim only when `c` and `ci` differ by
+///   more than 0.15 in some channel, at least half the lines run 2 pixels or more (a rim goes
+///   along the side) and at most a quarter run the whole `T` (a rim ends: a sky or a wall at the
+///   photo's edge goes on, and is scene);
+/// - [`FRAME_BLEED_PX`] more pixels inside both, for the JPEG ringing and anti-aliasing.
+///
+/// Outpainted from, any of these would continue as a seam or a pale frame around the photo;
+/// [`crate::scene`] re-fills them with the rest of the canvas margin.
+pub fn frame_mask(image: &RgbRaster) -> MaskRaster {
+    let (w, h) = image.size();
+    let bands = frame_border(image);
+    let mut mask = MaskRaster::new(w, h, false);
+    if bands.iter().all(|&b| b == 0) {
+        return mask;
+    }
+    let dims = [(h, w), (w, h), (h, w), (w, h)]; // (lines along the side, depth into the image)
+    for side in 0..4 {
+        if bands[side] == 0 {
+            continue;
+        }
+        let (along, depth) = dims[side];
+        let cap = ((depth as f32 * MAX_FRAME_FRACTION).floor() as usize)
+            .min(depth / 2)
+            .max(bands[side]);
+        let mut mean = [0.0f32; 3];
+        for j in 0..along {
+            let (x, y) = side_pixel(side, j, 0, (w, h));
+            let c = image.at(x, y);
+            (0..3).for_each(|k| mean[k] += c[k] / along as f32);
+        }
+        let flat = |c: [f32; 3]| (0..3).all(|k| (c[k] - mean[k]).abs() <= 0.06);
+        // Flood from the outer line, within `cap` of the side.
+        let offset = |x: usize, y: usize| match side {
+            0 => x,
+            1 => y,
+            2 => w - 1 - x,
+            _ => h - 1 - y,
+        };
+        let mut queue = VecDeque::new();
+        for j in 0..along {
+            let (x, y) = side_pixel(side, j, 0, (w, h));
+            if flat(image.at(x, y)) && !mask.at(x, y) {
+                mask.set(x, y, true);
+                queue.push_back((x, y));
+            }
+        }
+        while let Some((x, y)) = queue.pop_front() {
+            let steps = [
+                (x.wrapping_sub(1), y),
+                (x + 1, y),
+                (x, y.wrapping_sub(1)),
+                (x, y + 1),
+            ];
+            for (nx, ny) in steps {
+                if nx < w
+                    && ny < h
+                    && offset(nx, ny) < cap
+                    && !mask.at(nx, ny)
+                    && flat(image.at(nx, ny))
+                {
+                    mask.set(nx, ny, true);
+                    queue.push_back((nx, ny));
+                }
+            }
+        }
+    }
+    // Rims, measured from where each line leaves the frame.
+    let rim_depth = ((w.min(h) as f32 * MAX_RIM_FRACTION).ceil() as usize).max(3);
+    let mut rim = MaskRaster::new(w, h, false);
+    for side in 0..4 {
+        if bands[side] == 0 {
+            continue;
+        }
+        let (along, depth) = dims[side];
+        let starts: Vec<usize> = (0..along)
+            .map(|j| {
+                (0..depth)
+                    .find(|&t| {
+                        let (x, y) = side_pixel(side, j, t, (w, h));
+                        !mask.at(x, y)
+                    })
+                    .unwrap_or(depth)
+            })
+            .collect();
+        let colours_at = |lo: usize, hi: usize| {
+            let mut out = Vec::new();
+            for (j, &s) in starts.iter().enumerate() {
+                for t in (s + lo)..(s + hi).min(depth) {
+                    let (x, y) = side_pixel(side, j, t, (w, h));
+                    out.push(image.at(x, y));
+                }
+            }
+            out
+        };
+        let c = median_colour(&mut colours_at(FRAME_BLEED_PX, FRAME_BLEED_PX + 2));
+        let inner = colours_at(rim_depth, 2 * rim_depth);
+        if inner.is_empty() {
+            continue;
+        }
+        let ci = median_colour(&mut inner.clone());
+        if (0..3).all(|k| (c[k] - ci[k]).abs() <= 0.15) {
+            continue;
+        }
+        let runs: Vec<usize> = starts
+            .iter()
+            .enumerate()
+            .map(|(j, &s)| {
+                (0..rim_depth)
+                    .take_while(|&t| {
+                        s + t < depth
+                            && (t < FRAME_BLEED_PX || {
+                                let (x, y) = side_pixel(side, j, s + t, (w, h));
+                                let p = image.at(x, y);
+                                distance2(p, c) < distance2(p, ci)
+                            })
+                    })
+                    .count()
+            })
+            .collect();
+        let long = runs.iter().filter(|&&r| r > FRAME_BLEED_PX).count();
+        let endless = runs.iter().filter(|&&r| r == rim_depth).count();
+        if 2 * long < along || 4 * endless > along {
+            continue;
+        }
+        for (j, (&s, &r)) in starts.iter().zip(&runs).enumerate() {
+            for t in s..(s + r).min(depth) {
+                let (x, y) = side_pixel(side, j, t, (w, h));
+                rim.set(x, y, true);
+            }
+        }
+    }
+    for (m, &r) in mask.data_mut().iter_mut().zip(rim.data()) {
+        *m |= r;
+    }
+    dilate(&mask, 2 * FRAME_BLEED_PX + 1)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -75,5 +261,86 @@ mod tests {
         // Tiny images have no frame.
         assert_eq!(frame_border(&RgbRaster::new(2, 2, [0.0; 3])), [0; 4]);
         assert_eq!(frame_border(&RgbRaster::new(1, 1000, [0.0; 3])), [0; 4]);
+    }
+
+    /// A textured picture, tilted one pixel in 20 inside a black frame, with a pale rim of
+    /// `rim` pixels along its edge on the left and top.
+    fn framed(rim: usize) -> RgbRaster {
+        RgbRaster::from_fn(300, 200, |x, y| {
+            let left = 4 + y / 25; // 4 → 11
+            let top = 3 + x / 60; // 3 → 7
+            if x < left || y < top || x >= 294 || y >= 196 {
+                [0.0, 0.01, 0.02]
+            } else if x < left + rim || y < top + rim {
+                [0.85, 0.82, 0.7]
+            } else {
+                let t = ((x * 7 + y * 13) % 10) as f32 / 10.0;
+                [0.1 + 0.3 * t, 0.2, 0.5 - 0.2 * t]
+            }
+        })
+    }
+
+    #[test]
+    fn frame_mask_follows_a_tilted_frame_and_its_rim() {
+        let image = framed(4);
+        let mask = frame_mask(&image);
+        for y in 0..200 {
+            for x in 0..300 {
+                let (left, top) = (4 + y / 25, 3 + x / 60);
+                // Frame and rim, plus the bleed, are dropped; the picture 1 px further in is kept.
+                let dropped = x < left + 4 + FRAME_BLEED_PX
+                    || y < top + 4 + FRAME_BLEED_PX
+                    || x + FRAME_BLEED_PX >= 294
+                    || y + FRAME_BLEED_PX >= 196;
+                let kept = x > left + 4 + FRAME_BLEED_PX
+                    && y > top + 4 + FRAME_BLEED_PX
+                    && x + FRAME_BLEED_PX + 1 < 294
+                    && y + FRAME_BLEED_PX + 1 < 196;
+                if dropped {
+                    assert!(mask.at(x, y), "({x}, {y}) is frame or rim");
+                }
+                if kept {
+                    assert!(!mask.at(x, y), "({x}, {y}) is picture");
+                }
+            }
+        }
+        // Without a rim only the frame and its bleed go, followed where it runs askew (to its
+        // 11th column at the bottom, its 4th at the top).
+        let plain = frame_mask(&framed(0));
+        assert!(plain.at(10 + FRAME_BLEED_PX, 190));
+        assert!(!plain.at(11 + FRAME_BLEED_PX, 190));
+        assert!(!plain.at(4 + FRAME_BLEED_PX, 20));
+        assert!(!plain.at(150, 100));
+    }
+
+    #[test]
+    fn frame_mask_leaves_a_sky_along_a_letterbox_bar() {
+        // A black bar above a blue sky that fills the top quarter of a textured picture: the bar
+        // and its bleed go, the sky (a band that does not end) stays.
+        let image = RgbRaster::from_fn(160, 100, |x, y| {
+            if y < 4 {
+                [0.0; 3]
+            } else if y < 30 {
+                [0.3, 0.5, 0.9]
+            } else {
+                let t = ((x * 7 + y * 13) % 10) as f32 / 10.0;
+                [0.2 + 0.5 * t, 0.4, 0.6 - 0.3 * t]
+            }
+        });
+        let mask = frame_mask(&image);
+        for x in 0..160 {
+            for y in 0..100 {
+                assert_eq!(mask.at(x, y), y < 4 + FRAME_BLEED_PX, "({x}, {y})");
+            }
+        }
+        // No frame, no mask.
+        let sky = RgbRaster::new(100, 50, [0.3, 0.5, 0.9]);
+        assert!(frame_mask(&sky).data().iter().all(|&m| !m));
+        assert!(
+            frame_mask(&RgbRaster::new(2, 2, [0.0; 3]))
+                .data()
+                .iter()
+                .all(|&m| !m)
+        );
     }
 }

@@ -26,7 +26,7 @@ mod seam;
 mod smooth;
 
 pub use footprint::{Footprint, canvas_from_views, footprint_from_views};
-pub use frame::{MAX_FRAME_FRACTION, frame_border};
+pub use frame::{FRAME_BLEED_PX, MAX_FRAME_FRACTION, MAX_RIM_FRACTION, frame_border, frame_mask};
 pub use layout::{CanvasLayout, CanvasOptions, CanvasSizing, DepthRange, Placement};
 pub use seam::{blend_seam, blend_seam_sketch, seam_band, seam_step};
 pub use smooth::{SMOOTH_CELL_PX, SMOOTH_RESIDUAL, continue_smooth_regions};
