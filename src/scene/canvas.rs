@@ -139,7 +139,8 @@ fn complete_canvas(
     } else {
         crate::stages::outpaint::blend_seam(&mut result.image, hole, progress)?;
     }
-    let filled_disparity = result.guide.unwrap_or(disparity);
+    let mut filled_disparity = result.guide.unwrap_or(disparity);
+    crate::stages::outpaint::floor_below(&mut filled_disparity, hole);
     let depth = filled_disparity.map(|d| {
         if d.is_finite() && d > 0.0 {
             (1.0 / d).min(far)
@@ -427,5 +428,54 @@ mod tests {
         // The picture itself is kept.
         assert_eq!(canvas.image.at(pad + 120, pad + 80), grey(120, 80));
         assert!(!canvas.synthesised.at(pad + 120, pad + 80));
+    }
+
+    #[test]
+    fn the_margin_below_a_ground_continues_the_ground() {
+        // A ground plane under a horizon at row 10 of a 96×64 photo, disparity
+        // 0.004·(y − 10), textured so that the fill copies patches of mid-distance ground; the
+        // canvas 24 px wider on every side. Below the photo the margin's depth is never behind
+        // the row above it, and it stops at the photo's nearest depth (its bottom row), which
+        // the canvas was sized for.
+        let (w, h) = (96, 64);
+        let photo = RgbRaster::from_fn(w, h, |x, y| {
+            let t = ((x * 7 + y * 13) % 10) as f32 / 10.0;
+            if y < 10 {
+                [0.5, 0.6, 0.9]
+            } else {
+                [0.3 + 0.3 * t, 0.3, 0.2]
+            }
+        });
+        let depth = GrayRaster::from_fn(w, h, |_, y| 1.0 / (0.004 * (y as f32 - 10.0)).max(0.001));
+        let pad = 24;
+        let layout = CanvasLayout {
+            left_pad: pad,
+            top_pad: pad,
+            width: w + 2 * pad,
+            height: h + 2 * pad,
+        };
+        let canvas = build_canvas(
+            &Project::new("photo.png"),
+            layout,
+            &photo,
+            &Intrinsics::from_hfov(w, h, 60.0),
+            &depth,
+            &GrayRaster::new(w, h, 0.0),
+            &SketchInpainter,
+            None,
+            &Progress::none(),
+        )
+        .expect("canvas");
+        let edge = depth.at(48, h - 1);
+        for x in [0, pad + 48, layout.width - 1] {
+            let mut above = edge;
+            for y in pad + h..layout.height {
+                let z = canvas.depth.at(x, y);
+                assert!(z <= above + 1e-3, "({x}, {y}): {z} behind {above}");
+                above = z;
+            }
+            let last = canvas.depth.at(x, layout.height - 1);
+            assert!((last - edge).abs() < 0.01 * edge, "{x}: {last} {edge}");
+        }
     }
 }
