@@ -322,26 +322,39 @@ mod tests {
                 [g, g, g]
             }
         });
-        let pad = 24;
+        let canvas = padded_canvas(&photo, &GrayRaster::new(w, h, 5.0), objects);
+        (canvas, photo)
+    }
+
+    /// Pixels [`padded_canvas`] adds on every side.
+    const PAD: usize = 24;
+
+    /// The canvas of `photo` (depth `depth`, no sky) [`PAD`] pixels wider on every side,
+    /// filled by the sketch with the photo's objects as given.
+    fn padded_canvas(
+        photo: &RgbRaster,
+        depth: &GrayRaster,
+        objects: Option<&MaskRaster>,
+    ) -> Canvas {
+        let (w, h) = photo.size();
         let layout = CanvasLayout {
-            left_pad: pad,
-            top_pad: pad,
-            width: w + 2 * pad,
-            height: h + 2 * pad,
+            left_pad: PAD,
+            top_pad: PAD,
+            width: w + 2 * PAD,
+            height: h + 2 * PAD,
         };
-        let canvas = build_canvas(
+        build_canvas(
             &Project::new("photo.png"),
             layout,
-            &photo,
+            photo,
             &Intrinsics::from_hfov(w, h, 60.0),
-            &GrayRaster::new(w, h, 5.0),
+            depth,
             &GrayRaster::new(w, h, 0.0),
             &SketchInpainter,
             objects,
             &Progress::none(),
         )
-        .expect("canvas");
-        (canvas, photo)
+        .expect("canvas")
     }
 
     /// How red the margin is 12 px right of the square, past the seam's blend (red minus
@@ -385,25 +398,8 @@ mod tests {
                 _ => grey(x, y),
             }
         });
-        let pad = 24;
-        let layout = CanvasLayout {
-            left_pad: pad,
-            top_pad: pad,
-            width: w + 2 * pad,
-            height: h + 2 * pad,
-        };
-        let canvas = build_canvas(
-            &Project::new("photo.png"),
-            layout,
-            &photo,
-            &Intrinsics::from_hfov(w, h, 60.0),
-            &GrayRaster::new(w, h, 5.0),
-            &GrayRaster::new(w, h, 0.0),
-            &SketchInpainter,
-            None,
-            &Progress::none(),
-        )
-        .expect("canvas");
+        let pad = PAD;
+        let canvas = padded_canvas(&photo, &GrayRaster::new(w, h, 5.0), None);
         // Every frame and rim pixel is synthesised, and what fills it and the margin beyond is
         // neither the frame's black nor the rim's cream: within 0.1 of the picture's greys.
         for y in 0..h {
@@ -447,25 +443,9 @@ mod tests {
             }
         });
         let depth = GrayRaster::from_fn(w, h, |_, y| 1.0 / (0.004 * (y as f32 - 10.0)).max(0.001));
-        let pad = 24;
-        let layout = CanvasLayout {
-            left_pad: pad,
-            top_pad: pad,
-            width: w + 2 * pad,
-            height: h + 2 * pad,
-        };
-        let canvas = build_canvas(
-            &Project::new("photo.png"),
-            layout,
-            &photo,
-            &Intrinsics::from_hfov(w, h, 60.0),
-            &depth,
-            &GrayRaster::new(w, h, 0.0),
-            &SketchInpainter,
-            None,
-            &Progress::none(),
-        )
-        .expect("canvas");
+        let pad = PAD;
+        let canvas = padded_canvas(&photo, &depth, None);
+        let layout = canvas.layout;
         let edge = depth.at(48, h - 1);
         for x in [0, pad + 48, layout.width - 1] {
             let mut above = edge;
