@@ -12,14 +12,15 @@ pub const FLOOR_MAX_GROWTH: f32 = 2.0;
 
 /// Raises the disparity (`1/Z`) of the hole pixels below the known pixels of each column to at
 /// least the ground continued from the photo's bottom edge:
-/// `d(y) = min(d_b + s·(y − y_b), FLOOR_MAX_GROWTH·d_b, d_near)`, where `y_b` is the column's last known
-/// row, `d_b` the median of its last three known disparities, and `s ≥ 0` the disparity gained
-/// per row down the photo's bottom band ([`FLOOR_BAND`] of the height), fitted by least squares
-/// to the median over all columns at each row offset from `y_b`; `d_near` is the 99th
-/// percentile of the known disparities (of an even sample of at most 2²⁰ pixels) (the nearest depth the canvas was sized for,
-/// [`super::DepthRange::from_depth`]: nearer, the margin would slide past the canvas's edge in
-/// a fly-out and leave it uncovered). A column with no known pixel takes the nearest known
-/// column's `y_b` and `d_b`.
+/// `d(y) = min(d_b + s·(y − y_b), FLOOR_MAX_GROWTH·d_b, d_near)`, where `y_b` is the column's
+/// last known row; `s ≥ 0` the disparity gained per row down the photo's bottom band
+/// ([`FLOOR_BAND`] of the height), fitted by least squares to the median over all columns at
+/// each row offset from `y_b`; `d_b` the median of the column's last three known disparities,
+/// each carried down to `y_b` along `s`; and `d_near` the 99th percentile of the known
+/// disparities (of an even sample of at most 2²⁰ pixels): the nearest depth the canvas was
+/// sized for ([`super::DepthRange::from_depth`]) — nearer, the margin would slide past the
+/// canvas's edge in a fly-out and leave it uncovered. A column with no known pixel takes the
+/// nearest known column's `y_b` and `d_b`.
 ///
 /// Exemplar outpainting completes disparity with its colour, copying a mid-distance patch under
 /// the photo's nearest row: in a fly-out the photo's bottom edge then stands as a ledge in

@@ -93,13 +93,16 @@ fn distance2(a: [f32; 3], b: [f32; 3]) -> f32 {
 ///   its black border): every pixel connected to the side's outer line through pixels within
 ///   0.06 of that line's mean colour, per channel, up to [`MAX_FRAME_FRACTION`] of the side;
 /// - a rim along its inside edge (a canvas's unpainted edge, a mat, a print's paper margin):
-///   with `c` the median colour of the first two pixels inside the frame on every line
-///   perpendicular to the side and `ci` the median colour `T .. 2T` pixels further in (`T` =
-///   [`MAX_RIM_FRACTION`] of the short side, at least 3), each line's run of pixels nearer to
-///   `c` than to `ci`, at most `T` long. The side has a rim only when `c` and `ci` differ by
-///   more than 0.15 in some channel, at least half the lines run 2 pixels or more (a rim goes
-///   along the side) and at most a quarter run the whole `T` (a rim ends: a sky or a wall at the
-///   photo's edge goes on, and is scene);
+///   with `c` the median colour of the pixels 2 and 3 pixels inside the frame (past its
+///   ringing) on every line perpendicular to the side and `ci` the median colour `T .. 2T`
+///   pixels inside (`T` = [`MAX_RIM_FRACTION`] of the short side, at least 3), each line's run
+///   from the frame: its first [`FRAME_BLEED_PX`] pixels, then every pixel nearer to `c` than
+///   to `ci`, at most `T` in all. The side has a rim only when `c` and `ci` differ by more than
+///   0.15 in some channel, at least half the lines run past the bleed (a rim goes along the
+///   side) and at most a quarter run the whole `T` (a rim ends: a sky or a wall at the photo's
+///   edge goes on, and is scene). Content that differs from what lies 2.5–5 % further in and
+///   ends within 2.5 % all along a framed side (a dark tree line under a frame's top, above a
+///   sky) is taken for a rim too and re-filled;
 /// - [`FRAME_BLEED_PX`] more pixels inside both, for the JPEG ringing and anti-aliasing.
 ///
 /// Outpainted from, any of these would continue as a seam or a pale frame around the photo;
