@@ -241,9 +241,29 @@ mod tests {
         }
         assert_eq!(d.at(0, 5), 0.01);
         assert_eq!(d.at(19, 9), 0.01);
-        // Nothing known: nothing changes; NaN in the fill is replaced.
+        // Nothing known: nothing changes. A NaN, infinite or zero fill below the photo gets
+        // the ground; a NaN in the photo is no edge (the row above is).
         let mut none = GrayRaster::new(3, 3, 0.5);
         floor_below(&mut none, &MaskRaster::new(3, 3, true));
         assert!(none.data().iter().all(|&v| v == 0.5));
+        let hole = MaskRaster::from_fn(3, 6, |_, y| y >= 3);
+        let mut d = GrayRaster::from_fn(3, 6, |x, y| match (x, y) {
+            (_, 0..2) => 0.3,
+            (1, 2) => f32::NAN,
+            (_, 2) => 0.3,
+            (0, _) => f32::NAN,
+            (1, _) => f32::INFINITY,
+            _ => 0.0,
+        });
+        floor_below(&mut d, &hole);
+        for x in 0..3 {
+            for y in 3..6 {
+                assert!(
+                    (d.at(x, y) - 0.3).abs() < 1e-6,
+                    "({x}, {y}): {}",
+                    d.at(x, y)
+                );
+            }
+        }
     }
 }

@@ -345,5 +345,19 @@ mod tests {
                 .iter()
                 .all(|&m| !m)
         );
+        // An all-black picture: a frame band of 4 % on each side and its bleed, no rim (the
+        // inside is as black as the frame), the middle kept; a 1-pixel line has no frame.
+        let black = frame_mask(&RgbRaster::new(100, 50, [0.0; 3]));
+        assert!(
+            black.at(0, 25) && black.at(3 + FRAME_BLEED_PX, 25) && black.at(50, 1 + FRAME_BLEED_PX)
+        );
+        assert!(!black.at(4 + FRAME_BLEED_PX, 25) && !black.at(50, 2 + FRAME_BLEED_PX));
+        assert!(!black.at(50, 25));
+        assert!(
+            frame_mask(&RgbRaster::new(1, 1000, [0.0; 3]))
+                .data()
+                .iter()
+                .all(|&m| !m)
+        );
     }
 }
