@@ -248,9 +248,8 @@ pub(super) fn build_canvas(
 
 /// The unique objects ([`crate::stages::inpaint::unique_objects`]) of the pixels of `image` a
 /// canvas keeps (all but its frame, [`crate::stages::outpaint::frame_mask`]), in the photo's
-/// coordinates: the draft canvas's
-/// sources leave them out without searching every canvas again ([`build_canvas`]'s
-/// `photo_objects`).
+/// coordinates: the draft canvas's sources leave them out without searching every canvas again
+/// ([`build_canvas`]'s `photo_objects`).
 pub(super) fn photo_unique_objects(image: &RgbRaster) -> MaskRaster {
     let kept = crate::stages::outpaint::frame_mask(image).map(|f| !f);
     crate::stages::inpaint::unique_objects(image, Some(&kept))
