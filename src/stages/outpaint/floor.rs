@@ -56,19 +56,11 @@ pub fn floor_below(disparity: &mut GrayRaster, hole: &MaskRaster) {
     let Some(near) = quantile(&known, 0.99) else {
         return;
     };
-    let median = |v: &mut Vec<f32>| -> Option<f32> {
-        if v.is_empty() {
-            return None;
-        }
-        let mid = v.len() / 2;
-        v.select_nth_unstable_by(mid, f32::total_cmp);
-        Some(v[mid])
-    };
     // The slope: median over columns at each offset above the edge, least squares.
     let band = ((FLOOR_BAND * h as f32).round() as usize).max(4);
     let profile: Vec<(f32, f32)> = (0..band)
         .filter_map(|o| {
-            let mut v: Vec<f32> = last_known
+            let v: Vec<f32> = last_known
                 .iter()
                 .enumerate()
                 .filter_map(|(x, yb)| {
@@ -77,7 +69,7 @@ pub fn floor_below(disparity: &mut GrayRaster, hole: &MaskRaster) {
                     (!hole.at(x, y) && valid(d)).then_some(d)
                 })
                 .collect();
-            median(&mut v).map(|d| (o as f32, d))
+            quantile(&v, 0.5).map(|d| (o as f32, d))
         })
         .collect();
     let slope = if profile.len() >= 2 {
@@ -102,14 +94,14 @@ pub fn floor_below(disparity: &mut GrayRaster, hole: &MaskRaster) {
         .enumerate()
         .map(|(x, yb)| {
             let yb = (*yb)?;
-            let mut v: Vec<f32> = (0..3)
+            let v: Vec<f32> = (0..3)
                 .filter_map(|o| {
                     let y = yb.checked_sub(o)?;
                     let d = disparity.at(x, y);
                     (!hole.at(x, y) && valid(d)).then_some(d + slope * o as f32)
                 })
                 .collect();
-            median(&mut v).map(|d| (yb, d))
+            quantile(&v, 0.5).map(|d| (yb, d))
         })
         .collect();
     // Columns without a known pixel take the nearest column that has one (the left on a tie).

@@ -2,7 +2,7 @@
 //! inside edge ([`frame_mask`]), re-filled with the margin.
 
 use crate::raster::morph::dilate;
-use crate::raster::{MaskRaster, RgbRaster};
+use crate::raster::{MaskRaster, RgbRaster, luma, quantile};
 use std::collections::VecDeque;
 
 /// Widest frame band [`frame_border`] accepts, as a fraction of the image side.
@@ -16,13 +16,17 @@ pub const MAX_FRAME_FRACTION: f32 = 0.04;
 /// would continue as a dark seam around the photo, so [`crate::scene`] re-fills it with the
 /// rest of the canvas margin. A uniform sky (blue, grey) is never a frame.
 pub fn frame_border(image: &RgbRaster) -> [usize; 4] {
+    frame_bands(image).map(|(width, _)| width)
+}
+
+/// [`frame_border`]'s widths, each with its outer line's mean colour (the frame's colour).
+fn frame_bands(image: &RgbRaster) -> [(usize, [f32; 3]); 4] {
     let (w, h) = image.size();
     if w < 3 || h < 3 {
-        return [0; 4];
+        return [(0, [0.0; 3]); 4];
     }
-    let luma = |c: [f32; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
     // `line(i)` lists the pixels of the i-th line from one edge; `n` lines at most.
-    let band = |lines: usize, line: &dyn Fn(usize) -> Vec<[f32; 3]>| -> usize {
+    let band = |lines: usize, line: &dyn Fn(usize) -> Vec<[f32; 3]>| -> (usize, [f32; 3]) {
         let cap = ((lines as f32 * MAX_FRAME_FRACTION).floor() as usize).min(lines / 2);
         let outer = line(0);
         let mean = outer
@@ -30,15 +34,14 @@ pub fn frame_border(image: &RgbRaster) -> [usize; 4] {
             .fold([0.0f32; 3], |a, c| [a[0] + c[0], a[1] + c[1], a[2] + c[2]]);
         let n = outer.len().max(1) as f32;
         let mean = [mean[0] / n, mean[1] / n, mean[2] / n];
-        let l = luma(mean);
-        if (0.08..=0.92).contains(&l) {
-            return 0;
+        if (0.08..=0.92).contains(&luma(mean)) {
+            return (0, mean);
         }
         let flat = |px: &[[f32; 3]]| {
             px.iter()
                 .all(|c| (0..3).all(|k| (c[k] - mean[k]).abs() <= 0.06))
         };
-        (0..cap).take_while(|&i| flat(&line(i))).count()
+        ((0..cap).take_while(|&i| flat(&line(i))).count(), mean)
     };
     let column = |x: usize| (0..h).map(|y| image.at(x, y)).collect::<Vec<_>>();
     let row = |y: usize| image.row(y).to_vec();
@@ -69,17 +72,11 @@ fn side_pixel(side: usize, j: usize, t: usize, (w, h): (usize, usize)) -> (usize
 }
 
 /// Per-channel median of `colours` (empty: black).
-fn median_colour(colours: &mut [[f32; 3]]) -> [f32; 3] {
-    let mut out = [0.0; 3];
-    if colours.is_empty() {
-        return out;
-    }
-    for (k, o) in out.iter_mut().enumerate() {
-        let mid = colours.len() / 2;
-        colours.select_nth_unstable_by(mid, |a, b| a[k].total_cmp(&b[k]));
-        *o = colours[mid][k];
-    }
-    out
+fn median_colour(colours: &[[f32; 3]]) -> [f32; 3] {
+    std::array::from_fn(|k| {
+        let channel: Vec<f32> = colours.iter().map(|c| c[k]).collect();
+        quantile(&channel, 0.5).unwrap_or(0.0)
+    })
 }
 
 fn distance2(a: [f32; 3], b: [f32; 3]) -> f32 {
@@ -109,26 +106,20 @@ fn distance2(a: [f32; 3], b: [f32; 3]) -> f32 {
 /// [`crate::scene`] re-fills them with the rest of the canvas margin.
 pub fn frame_mask(image: &RgbRaster) -> MaskRaster {
     let (w, h) = image.size();
-    let bands = frame_border(image);
+    let bands = frame_bands(image);
     let mut mask = MaskRaster::new(w, h, false);
-    if bands.iter().all(|&b| b == 0) {
+    if bands.iter().all(|&(width, _)| width == 0) {
         return mask;
     }
     let dims = [(h, w), (w, h), (h, w), (w, h)]; // (lines along the side, depth into the image)
-    for side in 0..4 {
-        if bands[side] == 0 {
+    for (side, &(width, mean)) in bands.iter().enumerate() {
+        if width == 0 {
             continue;
         }
         let (along, depth) = dims[side];
         let cap = ((depth as f32 * MAX_FRAME_FRACTION).floor() as usize)
             .min(depth / 2)
-            .max(bands[side]);
-        let mut mean = [0.0f32; 3];
-        for j in 0..along {
-            let (x, y) = side_pixel(side, j, 0, (w, h));
-            let c = image.at(x, y);
-            (0..3).for_each(|k| mean[k] += c[k] / along as f32);
-        }
+            .max(width);
         let flat = |c: [f32; 3]| (0..3).all(|k| (c[k] - mean[k]).abs() <= 0.06);
         // Flood from the outer line, within `cap` of the side.
         let offset = |x: usize, y: usize| match side {
@@ -168,8 +159,8 @@ pub fn frame_mask(image: &RgbRaster) -> MaskRaster {
     // Rims, measured from where each line leaves the frame.
     let rim_depth = ((w.min(h) as f32 * MAX_RIM_FRACTION).ceil() as usize).max(3);
     let mut rim = MaskRaster::new(w, h, false);
-    for side in 0..4 {
-        if bands[side] == 0 {
+    for (side, &(width, _)) in bands.iter().enumerate() {
+        if width == 0 {
             continue;
         }
         let (along, depth) = dims[side];
@@ -193,12 +184,12 @@ pub fn frame_mask(image: &RgbRaster) -> MaskRaster {
             }
             out
         };
-        let c = median_colour(&mut colours_at(FRAME_BLEED_PX, FRAME_BLEED_PX + 2));
+        let c = median_colour(&colours_at(FRAME_BLEED_PX, FRAME_BLEED_PX + 2));
         let inner = colours_at(rim_depth, 2 * rim_depth);
         if inner.is_empty() {
             continue;
         }
-        let ci = median_colour(&mut inner.clone());
+        let ci = median_colour(&inner);
         if (0..3).all(|k| (c[k] - ci[k]).abs() <= 0.15) {
             continue;
         }
