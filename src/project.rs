@@ -30,6 +30,10 @@ pub struct Project {
     /// The input photo. Relative paths are relative to the project file's folder (or to the
     /// working directory for a project that has not been saved).
     pub input: PathBuf,
+    /// What of the photo is the picture (a film still's black bars are not). A project file
+    /// without this section keeps the whole photo, as every project did before it existed.
+    #[serde(default = "PhotoSettings::whole")]
+    pub photo: PhotoSettings,
     /// Output frames.
     #[serde(default)]
     pub output: OutputSettings,
@@ -132,6 +136,30 @@ impl WorkingSettings {
             )));
         }
         Ok(())
+    }
+}
+
+/// What of the photo the scene is built from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PhotoSettings {
+    /// Crop a film still's or a video frame's black bars (a letterbox or a pillarbox, found by
+    /// [`crate::stages::outpaint::letterbox_bars`]) before anything else: they are not scene,
+    /// and kept they would move with the scene in every frame. On for a new project.
+    pub crop_bars: bool,
+}
+
+impl Default for PhotoSettings {
+    fn default() -> Self {
+        Self { crop_bars: true }
+    }
+}
+
+impl PhotoSettings {
+    /// The whole photo, bars and all (what a project file made before the setting existed
+    /// meant).
+    pub fn whole() -> Self {
+        Self { crop_bars: false }
     }
 }
 
@@ -253,6 +281,7 @@ impl Project {
         Self {
             version: PROJECT_VERSION,
             input: input.into(),
+            photo: PhotoSettings::default(),
             output: OutputSettings::default(),
             camera: CameraSettings::default(),
             depth: DepthSettings::default(),
@@ -550,6 +579,11 @@ mod tests {
         let p = Project::from_json(r#"{"version": 1, "input": "a.jpg"}"#).unwrap();
         assert_eq!(p.output.frames, 100);
         assert_eq!(p.render, SplatSettings::default());
+        // A file without the photo section was made before bars were cropped: it keeps them.
+        assert!(!p.photo.crop_bars);
+        assert!(Project::new("a.jpg").photo.crop_bars);
+        let p = Project::from_json(r#"{"version": 1, "input": "a.jpg", "photo": {}}"#).unwrap();
+        assert!(p.photo.crop_bars);
     }
 
     #[test]
@@ -574,6 +608,10 @@ mod tests {
             (
                 r#"{"version": 1, "input": "a", "render": {"k": 99}}"#,
                 "k (surfaces per pixel) = 99",
+            ),
+            (
+                r#"{"version": 1, "input": "a", "photo": {"crop_bars": 3}}"#,
+                "\"photo.crop_bars\"",
             ),
         ];
         for (json, needle) in cases {

@@ -124,6 +124,9 @@ pub fn render_project(
         }
         scene = builder.build(&project, &next_step())?;
     }
+    if let Some(line) = scene.working.bars_note() {
+        note(Note::Info(line));
+    }
     for w in &scene.warnings {
         note(Note::Warning(w.clone()));
     }

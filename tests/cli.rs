@@ -1035,3 +1035,63 @@ fn depth_edits_remember_the_estimate_they_were_made_on() {
         serde_json::from_str(&std::fs::read_to_string(&kept).unwrap()).unwrap();
     assert_eq!(kept["depth"]["edited_on"], "0123456789abcdef");
 }
+
+#[test]
+fn a_film_stills_bars_are_cropped_unless_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // evening_glow as a 2.39:1 picture in a 16:9 JPEG, 46 black rows above and below.
+    let small = image::open(data("evening_glow_320.jpg")).unwrap();
+    let picture = small
+        .resize_exact(480, 178, image::imageops::FilterType::Triangle)
+        .to_rgb8();
+    let still = image::RgbImage::from_fn(480, 270, |x, y| {
+        if (46..224).contains(&y) {
+            *picture.get_pixel(x, y - 46)
+        } else {
+            image::Rgb([0, 0, 0])
+        }
+    });
+    let photo = d.join("still.jpg");
+    still.save(&photo).unwrap();
+    let args = ["--frames", "8", "--preset", "orbit", "--range", "4..5"];
+    let o = render(&photo, &d.join("cropped"), &args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let said = format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(said.contains("black bars cropped (top"), "{said}");
+    let frame = image::open(&frames_in(&d.join("cropped"))[0])
+        .unwrap()
+        .to_rgb8();
+    // The output is the picture's shape, and no frame row is the bars' black.
+    let (w, h) = frame.dimensions();
+    assert_eq!(w, 480);
+    assert!((170..=178).contains(&h), "{w}×{h}");
+    let darkest_row = (0..h)
+        .map(|y| {
+            (0..w)
+                .map(|x| frame.get_pixel(x, y).0[1] as u32)
+                .sum::<u32>()
+                / w
+        })
+        .min()
+        .unwrap();
+    assert!(
+        darkest_row > 12,
+        "a black row is left: mean green {darkest_row}"
+    );
+    // --keep-bars: the whole still, bars moving with the scene.
+    let o = render(
+        &photo,
+        &d.join("kept"),
+        &[&args[..], &["--keep-bars"]].concat(),
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let frame = image::open(&frames_in(&d.join("kept"))[0])
+        .unwrap()
+        .to_rgb8();
+    assert_eq!(frame.dimensions(), (480, 270));
+}

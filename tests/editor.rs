@@ -1527,3 +1527,57 @@ fn a_target_stroke_takes_the_depth_of_a_point() {
     let (under, there) = (at(0.4, 0.85), at(0.5, 0.45));
     assert!((under / there - 1.0).abs() < 0.05, "{under} vs {there}");
 }
+
+/// The Input tab says which black bars a film still lost, and "Crop black bars" turns the crop
+/// over as one undoable edit.
+#[test]
+fn a_film_stills_bars_are_cropped_and_the_input_tab_can_keep_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let small = image::open(sample()).unwrap();
+    let picture = small
+        .resize_exact(480, 178, image::imageops::FilterType::Triangle)
+        .to_rgb8();
+    let still = image::RgbImage::from_fn(480, 270, |x, y| {
+        if (46..224).contains(&y) {
+            *picture.get_pixel(x, y - 46)
+        } else {
+            image::Rgb([0, 0, 0])
+        }
+    });
+    let photo = dir.path().join("still.png");
+    still.save(&photo).unwrap();
+    let mut p = Project::new(&photo);
+    p.inpaint.preset = InpaintPreset::Draft;
+    p.output.frames = 3;
+    p.layers.params.mode = LayerCount::Count(3);
+    let file = dir.path().join("still.json");
+    p.save(&file).unwrap();
+    let Some(mut h) = harness(file) else {
+        return;
+    };
+    let limit = Duration::from_secs(600);
+    wait_idle(&mut h, limit);
+    h.get_by_label("1 Input").click();
+    h.step();
+    h.step();
+    let size = |h: &Harness<'_, EditorApp>| h.state().snapshot().unwrap().scene.input.rgb.size();
+    assert_eq!(size(&h), (480, 174));
+    assert!(
+        h.query_by_label("cropped: top 48 px, bottom 48 px")
+            .is_some()
+    );
+    h.get_by_label("Crop black bars").click();
+    h.step();
+    wait_idle(&mut h, limit);
+    assert!(!h.state().project().unwrap().photo.crop_bars);
+    assert_eq!(size(&h), (480, 270));
+    assert!(h.query_by_label_contains("cropped:").is_none());
+    h.state_mut().undo();
+    h.step();
+    wait_idle(&mut h, limit);
+    assert!(
+        h.state().project().unwrap().photo.crop_bars,
+        "one undo crops again"
+    );
+    assert_eq!(size(&h), (480, 174));
+}

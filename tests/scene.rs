@@ -634,3 +634,87 @@ fn a_big_photo_is_built_at_its_working_size() {
     let (fx, fy) = at(300.0, 200.0);
     assert_eq!(after.at(fx, fy), before.at(fx, fy));
 }
+
+/// `tests/data/evening_glow_320.jpg` as a 2.39:1 film still in a 16:9 frame (black bars of
+/// 44 rows at the top and bottom of 400 × 225, a little noise on them), written to `dir`.
+fn letterboxed(dir: &std::path::Path) -> PathBuf {
+    let small = image::open(photo("evening_glow_320.jpg")).unwrap();
+    let picture = small
+        .resize_exact(400, 137, image::imageops::FilterType::Triangle)
+        .to_rgb8();
+    let frame = image::RgbImage::from_fn(400, 225, |x, y| {
+        if (44..181).contains(&y) {
+            *picture.get_pixel(x, y - 44)
+        } else {
+            image::Rgb([((x + y) % 3) as u8; 3])
+        }
+    });
+    let path = dir.join("still.png");
+    frame.save(&path).unwrap();
+    path
+}
+
+#[test]
+fn a_film_stills_black_bars_are_cropped_and_a_project_can_keep_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = letterboxed(dir.path());
+    let mut p = Project::new(&path);
+    p.output.frames = 4;
+    p.inpaint.preset = InpaintPreset::Draft;
+    let mut builder = SceneBuilder::new();
+    let scene = builder.build(&p, &Progress::none()).expect("build");
+    let bleed = makeit4d::stages::outpaint::FRAME_BLEED_PX;
+    // The picture, less the bleed along each bar: nothing black is left in its first row.
+    assert_eq!(scene.working.bars, [0, 44 + bleed, 0, 44 + bleed]);
+    let picture = (400, 137 - 2 * bleed);
+    assert_eq!(scene.working.photo, picture);
+    assert_eq!(scene.input.rgb.size(), picture);
+    assert_eq!(scene.output_camera(&p).size, picture);
+    let top_luma = (0..400)
+        .map(|x| makeit4d::raster::luma(scene.input.rgb.at(x, 0)))
+        .sum::<f32>()
+        / 400.0;
+    assert!(top_luma > 0.1, "{top_luma}");
+    let note = scene.working.bars_note().expect("a note");
+    assert!(note.contains("top 46 px, bottom 46 px"), "{note}");
+    // A depth map of the whole photo is cropped like it: far bars, a near picture.
+    let depth = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(400, 225, |_, y| {
+        image::Luma([if (44..181).contains(&y) {
+            60_000
+        } else {
+            1_000
+        }])
+    });
+    let depth_path = dir.path().join("still_depth.png");
+    depth.save(&depth_path).unwrap();
+    let mut imported = p.clone();
+    imported.depth.import = Some(makeit4d::stages::depth::DepthImport::new(
+        &depth_path,
+        makeit4d::stages::depth::io::DepthFileKind::Disparity,
+    ));
+    let scene_imported = builder.build(&imported, &Progress::none()).expect("import");
+    let d = &scene_imported.depth.estimate.depth;
+    assert_eq!(d.size(), picture);
+    let (near, far) = d
+        .data()
+        .iter()
+        .fold((f32::MAX, 0.0f32), |(a, b), &z| (a.min(z), b.max(z)));
+    assert!(
+        far <= 1.01 * near,
+        "the bars' far depth came in: {near} .. {far}"
+    );
+    // Kept (the command line's --keep-bars, a project made before the setting): the whole
+    // photo, as before.
+    let mut kept = p.clone();
+    kept.photo.crop_bars = false;
+    let scene_kept = builder.build(&kept, &Progress::none()).expect("kept");
+    assert_eq!(scene_kept.working.bars, [0; 4]);
+    assert_eq!(scene_kept.input.rgb.size(), (400, 225));
+    assert!(scene_kept.working.bars_note().is_none());
+    let old = Project::from_json(&format!(
+        r#"{{"version": 1, "input": {:?}}}"#,
+        path.display().to_string()
+    ))
+    .unwrap();
+    assert!(!old.photo.crop_bars);
+}

@@ -53,10 +53,7 @@ fn project(input: &Path, frames: usize) -> Project {
 }
 
 fn import(project: &mut Project, path: &Path, kind: DepthFileKind) {
-    project.depth.import = Some(DepthImport {
-        path: path.to_path_buf(),
-        kind,
-    });
+    project.depth.import = Some(DepthImport::new(path, kind));
 }
 
 fn assert_finite_frame(frame: &Frame, what: &str) {

@@ -943,6 +943,10 @@ pub(crate) struct RenderArgs {
     /// Do not outpaint: the canvas is the photo.
     #[arg(long)]
     pub(crate) no_outpaint: bool,
+    /// Keep a film still's black bars (a letterbox or pillarbox is cropped by default; a project
+    /// keeps its own choice in `photo.crop_bars`).
+    #[arg(long)]
+    pub(crate) keep_bars: bool,
     /// The size the scene is built at: `auto` (what the output shows at the path's largest
     /// magnification, photos up to 2 MP as they are, at most --max-megapixels), `full` (the
     /// photo's own), or the working long side in pixels.

@@ -217,6 +217,9 @@ fn apply_scene_flags(args: &RenderArgs, project: &mut Project) -> anyhow::Result
     if args.no_outpaint {
         project.canvas.enabled = false;
     }
+    if args.keep_bars {
+        project.photo.crop_bars = false;
+    }
     match args.working_size {
         Some(WorkingSizeArg::Auto) => project.working.long_side = None,
         Some(WorkingSizeArg::Full) => {

@@ -43,6 +43,9 @@ pub struct SceneBuilder {
     decoded: Option<(u64, Arc<image::DynamicImage>)>,
     /// Headers of the inputs, by input key.
     headers: Vec<(u64, crate::image_io::ImageHeader)>,
+    /// The black bars cropped from the inputs (`[left, top, right, bottom]` photo pixels), by
+    /// input key.
+    bars: Vec<(u64, [usize; 4])>,
     /// Proxy depths for the path's magnification, by photo and depth settings.
     proxies: Vec<(u64, Arc<ProxyDepth>)>,
     /// Working sizes by the settings that decide them, least recently used first.
@@ -272,8 +275,16 @@ impl SceneBuilder {
         p_load: &Progress,
         dry: bool,
     ) -> Result<std::result::Result<(u64, Arc<LoadedImage>, WorkingSize), Stage>> {
-        let photo_key = key_of(0, &project.input);
+        let photo_key = if project.photo.crop_bars {
+            key_of(0, &(&project.input, "crop_bars"))
+        } else {
+            // The key a photo had before bars were cropped.
+            key_of(0, &project.input)
+        };
         let working = self.working_size(project, photo_key, p_load)?;
+        // With bars looked for, the photo was decoded to find them: read through that decode
+        // (cropped when there were bars).
+        let via_decoded = !working.is_photo() || project.photo.crop_bars;
         let key = if working.is_photo() {
             // The key of a photo built at its own size, as before working sizes existed.
             photo_key
@@ -281,10 +292,10 @@ impl SceneBuilder {
             key_of(photo_key, &working.size)
         };
         let in_load = self.load.peek(key).is_some();
-        let photo = if in_load || dry || working.is_photo() {
+        let photo = if in_load || dry || !via_decoded {
             None
         } else {
-            Some(self.decoded_photo(photo_key, &project.input)?)
+            Some(self.decoded_photo(photo_key, project)?)
         };
         if working.is_photo() {
             // Nothing is downsampled from it later.
@@ -327,21 +338,54 @@ impl SceneBuilder {
         Ok(depth)
     }
 
-    /// The decoded photo of input key `key` (decoded once, kept while it is the last one).
-    fn decoded_photo(
-        &mut self,
-        key: u64,
-        path: &std::path::Path,
-    ) -> Result<Arc<image::DynamicImage>> {
+    /// The decoded photo of input key `key` (decoded once, kept while it is the last one),
+    /// its black bars cropped when `project.photo.crop_bars` says so.
+    fn decoded_photo(&mut self, key: u64, project: &Project) -> Result<Arc<image::DynamicImage>> {
         if let Some((k, image)) = &self.decoded
             && *k == key
         {
             return Ok(image.clone());
         }
         self.decoded = None;
-        let image = Arc::new(decode_image(path)?);
+        let mut image = decode_image(&project.input)?;
+        if project.photo.crop_bars {
+            let bars @ [left, top, right, bottom] = crate::stages::outpaint::letterbox_bars(&image);
+            if bars != [0; 4] {
+                let (w, h) = (image.width() as usize, image.height() as usize);
+                image = image.crop_imm(
+                    left as u32,
+                    top as u32,
+                    (w - left - right) as u32,
+                    (h - top - bottom) as u32,
+                );
+            }
+            self.bars.retain(|e| e.0 != key);
+            self.bars.push((key, bars));
+            if self.bars.len() > CACHE_ENTRIES {
+                self.bars.remove(0);
+            }
+        }
+        let image = Arc::new(image);
         self.decoded = Some((key, image.clone()));
         Ok(image)
+    }
+
+    /// The black bars cropped from the photo of input key `key` (none unless
+    /// `project.photo.crop_bars`): found on its decoded pixels the first time.
+    fn photo_bars(&mut self, key: u64, project: &Project) -> Result<[usize; 4]> {
+        if !project.photo.crop_bars {
+            return Ok([0; 4]);
+        }
+        if let Some((_, bars)) = self.bars.iter().find(|e| e.0 == key) {
+            return Ok(*bars);
+        }
+        self.decoded = None;
+        self.decoded_photo(key, project)?;
+        Ok(self
+            .bars
+            .iter()
+            .find(|e| e.0 == key)
+            .map_or([0; 4], |e| e.1))
     }
 
     /// The working size of `project`'s scene ([`choose_working_size`]): remembered per the
@@ -382,14 +426,17 @@ impl SceneBuilder {
         let header = remembered(&mut self.headers, key, CACHE_ENTRIES, || {
             read_header(&project.input)
         })?;
+        let bars @ [left, top, right, bottom] = self.photo_bars(key, project)?;
+        let picture = (header.size.0 - left - right, header.size.1 - top - bottom);
         let budget_frame = self.budget_frame;
         let mut chosen = choose_working_size(
             project,
-            header.size,
+            picture,
             header.decode_bytes(),
             budget_frame,
             || self.proxy_depth(project, key, p)?.magnification(project),
         )?;
+        chosen.bars = bars;
         let automatic = |w: &WorkingSize| {
             matches!(
                 w.reason,
@@ -432,7 +479,7 @@ impl SceneBuilder {
         );
         let mut memo = std::mem::take(&mut self.proxies);
         let proxy = remembered(&mut memo, proxy_key, CACHE_ENTRIES, || {
-            let photo = self.decoded_photo(key, &project.input)?;
+            let photo = self.decoded_photo(key, project)?;
             Ok(Arc::new(ProxyDepth::new(project, &photo, p)?))
         });
         self.proxies = memo;
@@ -471,11 +518,26 @@ impl SceneBuilder {
         // A stroke paints over the estimate without strokes, which is the depth stage's own
         // output for the same settings without strokes: found cached under that key, or
         // estimated once and cached there too.
+        let mut settings = project.depth.clone();
+        if let Some(import) = &mut settings.import
+            && working.bars != [0; 4]
+        {
+            // A depth map of the whole photo is cropped like the photo.
+            let [l, t, r, b] = working.bars;
+            let (pw, ph) = (working.photo.0 + l + r, working.photo.1 + t + b);
+            import.bars = Some([
+                l as f32 / pw as f32,
+                t as f32 / ph as f32,
+                r as f32 / pw as f32,
+                b as f32 / ph as f32,
+            ]);
+        }
+        let settings = &settings;
         let unpainted_settings = crate::stages::depth::DepthSettings {
             strokes: Vec::new(),
             targets: Vec::new(),
             popups: Vec::new(),
-            ..project.depth.without_signature()
+            ..settings.without_signature()
         };
         let edited = project.depth.has_edits();
         let unpainted_key = key_of(key, &(&unpainted_settings, project.camera.hfov_deg));
@@ -510,7 +572,7 @@ impl SceneBuilder {
             |p| {
                 if !edited {
                     estimates += 1;
-                    return run_depth_stage(&project.depth, &input.rgb, &intrinsics, p);
+                    return run_depth_stage(settings, &input.rgb, &intrinsics, p);
                 }
                 let bare = match unpainted {
                     Some(v) => v,

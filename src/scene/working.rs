@@ -82,8 +82,11 @@ pub enum WorkingReason {
 /// The working size of a scene and why.
 #[derive(Clone, Debug, PartialEq)]
 pub struct WorkingSize {
-    /// The photo's own size.
+    /// The photo's own size (its picture's: without the black bars cropped from it).
     pub photo: (usize, usize),
+    /// The black bars cropped from the photo, `[left, top, right, bottom]` in its pixels
+    /// (`project.photo.crop_bars`); all zero when none were.
+    pub bars: [usize; 4],
     /// The size every stage runs at.
     pub size: (usize, usize),
     /// Why.
@@ -100,12 +103,39 @@ impl WorkingSize {
             size,
             reason: WorkingReason::Photo,
             estimate_mib: 0,
+            bars: [0; 4],
         }
     }
 
     /// True when the scene is built at the photo's own size.
     pub fn is_photo(&self) -> bool {
         self.size == self.photo
+    }
+
+    /// The black bars cropped from the photo, as words (`top 92 px, bottom 92 px`); `None`
+    /// when none were.
+    pub fn bars_cropped(&self) -> Option<String> {
+        if self.bars == [0; 4] {
+            return None;
+        }
+        let sides: Vec<String> = ["left", "top", "right", "bottom"]
+            .iter()
+            .zip(self.bars)
+            .filter(|(_, px)| *px > 0)
+            .map(|(side, px)| format!("{side} {px} px"))
+            .collect();
+        Some(sides.join(", "))
+    }
+
+    /// One line saying which black bars were cropped from the photo, if any.
+    pub fn bars_note(&self) -> Option<String> {
+        let (w, h) = self.photo;
+        self.bars_cropped().map(|sides| {
+            format!(
+                "photo: black bars cropped ({sides}; the picture is {w}×{h}); --keep-bars or \
+                 photo.crop_bars = false in the project keeps them"
+            )
+        })
     }
 
     /// Working pixels per photo pixel along x and y.
@@ -294,6 +324,7 @@ pub fn choose_working_size(
             reason
         },
         estimate_mib: needs(size).div_ceil(MIB),
+        bars: [0; 4],
     })
 }
 

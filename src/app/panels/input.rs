@@ -83,6 +83,7 @@ impl StagePanel for InputPanel {
                     .on_hover_text(working.to_string());
             }
         }
+        bars_ui(ui, cx, working.and_then(|w| w.bars_cropped()));
         ui.separator();
         ui.heading("Camera");
         if let Some(v) = committed(ui, "hfov", cx.project.camera.hfov_deg, |ui, v| {
@@ -127,6 +128,32 @@ impl StagePanel for InputPanel {
                 ui.colored_label(ui.visuals().warn_fg_color, w);
             }
         }
+    }
+}
+
+/// The "Crop black bars" switch (one undo step) and what it cropped. Edits placed on the
+/// picture (strokes, targets, pop-ups, painted motion) would move with its crop, so the switch
+/// waits until there are none.
+fn bars_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, cropped: Option<String>) {
+    let mut crop = cx.project.photo.crop_bars;
+    let placed = cx.project.has_pixel_content() || cx.project.depth.has_edits();
+    let response = ui.add_enabled(!placed, egui::Checkbox::new(&mut crop, "Crop black bars"));
+    if placed {
+        response.on_disabled_hover_text(
+            "Edits are placed on the picture as it is now; turning this over would move them. \
+             Remove the depth and motion edits first.",
+        );
+    } else {
+        response.on_hover_text(
+            "A film still's letterbox or pillarbox is not scene: cropped, the picture fills \
+             every frame instead of bars moving with it",
+        );
+    }
+    if crop != cx.project.photo.crop_bars {
+        cx.edit("Crop black bars", |p| p.photo.crop_bars = crop);
+    }
+    if let Some(sides) = cropped {
+        ui.label(format!("cropped: {sides}"));
     }
 }
 

@@ -184,10 +184,7 @@ pub fn nvs_project(
         Keyframe::new(0.0, &Pose::IDENTITY).with_interpolation(Interpolation::Linear),
         Keyframe::new(1.0, &pose_at(pair.baseline, 1.0)).with_interpolation(Interpolation::Linear),
     ]));
-    project.depth.import = Some(DepthImport {
-        path: depth_path.to_path_buf(),
-        kind: DepthFileKind::Depth,
-    });
+    project.depth.import = Some(DepthImport::new(depth_path, DepthFileKind::Depth));
     if options.depth == NvsDepth::Estimated {
         project.depth.method = options.depth_settings.method;
         project.depth.model = options.depth_settings.model.clone();

@@ -303,6 +303,20 @@ pub fn import_depth(
     width: usize,
     height: usize,
 ) -> Result<ImportedDepth> {
+    import_depth_of_picture(path, kind, None, width, height)
+}
+
+/// [`import_depth`] for the picture of a photo whose black bars were cropped (`bars`: `[left,
+/// top, right, bottom]` as fractions of the photo's sides): a map with the whole photo's
+/// aspect is cropped alike before it is resampled; one with the picture's own aspect (within
+/// 1 %, made on the cropped picture) is taken as it is. Each case says so in the warnings.
+pub fn import_depth_of_picture(
+    path: &Path,
+    kind: DepthFileKind,
+    bars: Option<[f32; 4]>,
+    width: usize,
+    height: usize,
+) -> Result<ImportedDepth> {
     if width == 0 || height == 0 {
         return Err(Error::invalid(
             "depth import: the target size has no pixels",
@@ -338,6 +352,10 @@ pub fn import_depth(
         None => values_to_depth(&values, kind)?,
     };
     warnings.extend(warning);
+    let depth = match bars {
+        Some(bars) => crop_to_picture(depth, bars, (width, height), &mut warnings),
+        None => depth,
+    };
     let depth = if depth.size() != (width, height) {
         warnings.push(format!(
             "the depth map is {}×{} and was resampled to the image size {width}×{height}",
@@ -352,6 +370,39 @@ pub fn import_depth(
         depth
     };
     Ok(ImportedDepth { depth, warnings })
+}
+
+/// `depth` cropped by `bars` (fractions of its sides) unless it already has the aspect of the
+/// picture (`picture`, any scale) and not the photo's.
+fn crop_to_picture(
+    depth: GrayRaster,
+    [left, top, right, bottom]: [f32; 4],
+    picture: (usize, usize),
+    warnings: &mut Vec<String>,
+) -> GrayRaster {
+    let (w, h) = depth.size();
+    let aspect = w as f64 / h as f64;
+    let picture_aspect = picture.0 as f64 / picture.1.max(1) as f64;
+    let kept = (1.0 - left - right) as f64 / (1.0 - top - bottom).max(1e-6) as f64;
+    let photo_aspect = picture_aspect / kept;
+    let near = |a: f64, b: f64| (a / b - 1.0).abs() <= 0.01;
+    if near(aspect, picture_aspect) && !near(aspect, photo_aspect) {
+        warnings.push(format!(
+            "the depth map is {w}×{h}, the shape of the picture inside the photo's black bars: \
+             taken as the picture's"
+        ));
+        return depth;
+    }
+    let x0 = ((left * w as f32).round() as usize).min(w - 1);
+    let y0 = ((top * h as f32).round() as usize).min(h - 1);
+    let x1 = (((1.0 - right) * w as f32).round() as usize).clamp(x0 + 1, w);
+    let y1 = (((1.0 - bottom) * h as f32).round() as usize).clamp(y0 + 1, h);
+    warnings.push(format!(
+        "the depth map was cropped to {}×{} at ({x0}, {y0}) like the photo's black bars",
+        x1 - x0,
+        y1 - y0
+    ));
+    GrayRaster::from_fn(x1 - x0, y1 - y0, |x, y| depth.at(x0 + x, y0 + y))
 }
 
 /// Reads the sidecar of `png_path` when it exists and is a `makeit4d` depth sidecar.

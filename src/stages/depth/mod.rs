@@ -67,6 +67,22 @@ pub struct DepthImport {
     pub path: std::path::PathBuf,
     /// What its values mean.
     pub kind: io::DepthFileKind,
+    /// The black bars cropped from the photo (`[left, top, right, bottom]` as fractions of
+    /// its sides; set by the scene builder, never saved): a map of the whole photo is cropped
+    /// alike ([`io::import_depth_of_picture`]).
+    #[serde(skip)]
+    pub bars: Option<[f32; 4]>,
+}
+
+impl DepthImport {
+    /// The depth file `path`, its values meaning `kind`.
+    pub fn new(path: impl Into<std::path::PathBuf>, kind: io::DepthFileKind) -> Self {
+        Self {
+            path: path.into(),
+            kind,
+            bars: None,
+        }
+    }
 }
 
 /// Everything the depth stage needs; stored in the project file.
@@ -273,7 +289,7 @@ pub fn run_depth_stage(
         Ok(analysis.estimate)
     };
     let (estimate, estimator) = if let Some(import) = &settings.import {
-        let imported = io::import_depth(&import.path, import.kind, w, h)?;
+        let imported = io::import_depth_of_picture(&import.path, import.kind, import.bars, w, h)?;
         warnings.extend(imported.warnings);
         let far = imported.depth.data().iter().copied().fold(0.0f32, f32::max);
         let sky = imported

@@ -16,10 +16,11 @@
 //! (InfNat-Zero's rule, [`Intrinsics::padded`](crate::geometry::Intrinsics::padded)).
 //!
 //! Files: this module holds [`outpaint`]; `layout.rs` the canvas layout, depth slab and sizing
-//! rule, `footprint.rs` the sizing from the camera path, `frame.rs` the photo's frame,
+//! rule, `footprint.rs` the sizing from the camera path, `frame.rs` the photo's frame, `bars.rs` a film still's black bars,
 //! `floor.rs` the ground's disparity continued below it, `smooth.rs` the smooth regions
 //! continued into the margin and `seam.rs` the seam blend.
 
+mod bars;
 mod floor;
 mod footprint;
 mod frame;
@@ -27,6 +28,7 @@ mod layout;
 mod seam;
 mod smooth;
 
+pub use bars::{MAX_BAR_FRACTION, letterbox_bars};
 pub use floor::{FLOOR_BAND, FLOOR_MAX_GROWTH, floor_below};
 pub use footprint::{Footprint, canvas_from_views, footprint_from_views};
 pub use frame::{FRAME_BLEED_PX, MAX_FRAME_FRACTION, MAX_RIM_FRACTION, frame_border, frame_mask};

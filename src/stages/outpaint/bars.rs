@@ -1,0 +1,235 @@
+//! Black bars around a still from a film or a video (letterbox, pillarbox), cropped before the
+//! scene is built ([`letterbox_bars`]).
+
+use super::frame::{FRAME_BLEED_PX, MAX_FRAME_FRACTION};
+use crate::raster::luma;
+use image::{DynamicImage, GenericImageView};
+
+/// Widest bar [`letterbox_bars`] crops, as a fraction of the side it runs across (a 2.76:1
+/// film in a 4:3 frame leaves 25.7 % a bar).
+pub const MAX_BAR_FRACTION: f32 = 0.3;
+
+/// Share of a bar line's pixels that must lie within [`BAR_TOLERANCE`] of the bar's colour;
+/// lines with a smaller share (but at least [`BAR_TEXT_SHARE`]) may lie inside a bar, as
+/// subtitles do, but never end one.
+const BAR_FLAT_SHARE: f32 = 0.98;
+/// Smallest flat share of a line inside a bar (a line of subtitles); a line below it is the
+/// picture.
+const BAR_TEXT_SHARE: f32 = 0.5;
+/// Smallest mean flat share over a whole bar.
+const BAR_MEAN_SHARE: f32 = 0.9;
+/// Per-channel distance from the bar's colour of a pixel that belongs to the bar (as
+/// [`super::frame_border`]'s flat lines).
+const BAR_TOLERANCE: f32 = 0.06;
+/// Brightest bar colour (luma): bars are black; a flat white or grey band is a sky, a wall or
+/// a mat, never cropped.
+const BAR_MAX_LUMA: f32 = 0.08;
+
+/// The widths `[left, top, right, bottom]` (pixels) of the black bars around `image` that are
+/// not the picture: a letterbox (top and bottom), a pillarbox (left and right) or both, found
+/// as follows. From each edge inward, with `c` the mean colour of the outermost line (it must
+/// be black, luma < 0.08), the bar runs over the lines whose pixels lie within 0.06 of `c`
+/// (per channel): every line in it at least half such pixels (a line of burned-in subtitles
+/// may cross a bar), its last line at least 98 %, all of them together 90 %, and the first
+/// line with fewer than half is the picture, within [`MAX_BAR_FRACTION`] of the side (a black
+/// band that runs further is a dark photo, not a bar). Then [`FRAME_BLEED_PX`] more pixels go
+/// with it (the JPEG ringing along the bar's edge).
+///
+/// Bars are cropped only in pairs — both top and bottom, or both left and right — and only
+/// when each is wider than [`MAX_FRAME_FRACTION`] of the side: a thinner black line is a frame,
+/// which [`super::frame_mask`] re-fills (followed where it runs askew, which a crop cannot do),
+/// and a single black band (a night sky above a lit street) is scene. Left and right bars are
+/// looked for between the top and bottom ones. All zero when there is nothing to crop.
+pub fn letterbox_bars(image: &DynamicImage) -> [usize; 4] {
+    let (w, h) = (image.width() as usize, image.height() as usize);
+    if w < 8 || h < 8 {
+        return [0; 4];
+    }
+    let px = |x: usize, y: usize| {
+        let p = image.get_pixel(x as u32, y as u32).0;
+        [
+            p[0] as f32 / 255.0,
+            p[1] as f32 / 255.0,
+            p[2] as f32 / 255.0,
+        ]
+    };
+    let (top, bottom) = bar_pair(h, &|i| (0..w).map(|x| px(x, i)).collect(), &|i| {
+        (0..w).map(|x| px(x, h - 1 - i)).collect()
+    });
+    let rows = top..h - bottom;
+    let (left, right) = bar_pair(w, &|i| rows.clone().map(|y| px(i, y)).collect(), &|i| {
+        rows.clone().map(|y| px(w - 1 - i, y)).collect()
+    });
+    [left, top, right, bottom]
+}
+
+type Line<'a> = &'a dyn Fn(usize) -> Vec<[f32; 3]>;
+
+/// The widths of the bars at both ends of `lines` lines (each read by `near(i)` / `far(i)`, the
+/// i-th line from its edge), bleed included; `(0, 0)` unless both are bars.
+fn bar_pair(lines: usize, near: Line, far: Line) -> (usize, usize) {
+    let (a, b) = (bar(lines, near), bar(lines, far));
+    let min = (lines as f32 * MAX_FRAME_FRACTION).floor() as usize;
+    if a <= min || b <= min {
+        return (0, 0);
+    }
+    let bleed = |width: usize| (width + FRAME_BLEED_PX).min(lines / 2);
+    let (a, b) = (bleed(a), bleed(b));
+    if a + b >= lines { (0, 0) } else { (a, b) }
+}
+
+/// The width of the bar along one edge, its bleed not included (see [`letterbox_bars`]).
+fn bar(lines: usize, line: Line) -> usize {
+    let cap = (lines as f32 * MAX_BAR_FRACTION).floor() as usize;
+    let outer = line(0);
+    if outer.is_empty() {
+        return 0;
+    }
+    let n = outer.len() as f32;
+    let sum = outer
+        .iter()
+        .fold([0.0f32; 3], |a, c| [a[0] + c[0], a[1] + c[1], a[2] + c[2]]);
+    let colour = sum.map(|s| s / n);
+    if luma(colour) >= BAR_MAX_LUMA {
+        return 0;
+    }
+    let share = |i: usize| {
+        let px = line(i);
+        let near = px
+            .iter()
+            .filter(|c| (0..3).all(|k| (c[k] - colour[k]).abs() <= BAR_TOLERANCE))
+            .count();
+        near as f32 / px.len().max(1) as f32
+    };
+    let mut shares = Vec::new();
+    for i in 0..=cap.min(lines - 1) {
+        let s = share(i);
+        if s < BAR_TEXT_SHARE {
+            // The picture: the bar ends at the last line that is flat all across.
+            let width = shares
+                .iter()
+                .rposition(|&s| s >= BAR_FLAT_SHARE)
+                .map_or(0, |last| last + 1);
+            let mean = shares[..width].iter().sum::<f32>() / width.max(1) as f32;
+            return if width > 0 && mean >= BAR_MEAN_SHARE {
+                width
+            } else {
+                0
+            };
+        }
+        shares.push(s);
+    }
+    // Dark past the widest bar: a dark photo.
+    0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use image::{Rgb, RgbImage};
+
+    /// A textured picture of `pw × ph` pixels, centred in a `w × h` frame of `bar` colour,
+    /// with a little noise on the bars (±2 levels, as a JPEG's).
+    fn boxed(w: u32, h: u32, pw: u32, ph: u32, bar: [u8; 3]) -> DynamicImage {
+        let (x0, y0) = ((w - pw) / 2, (h - ph) / 2);
+        DynamicImage::ImageRgb8(RgbImage::from_fn(w, h, |x, y| {
+            if x < x0 || y < y0 || x >= x0 + pw || y >= y0 + ph {
+                let n = ((x * 7 + y * 3) % 5) as u8;
+                Rgb(bar.map(|c| c.saturating_add(n)))
+            } else {
+                let t = ((x * 7 + y * 13) % 10) as u8;
+                Rgb([60 + 15 * t, 90, 200 - 10 * t])
+            }
+        }))
+    }
+
+    #[test]
+    fn a_letterbox_is_cropped_with_its_bleed() {
+        // A 2.39:1 film in a 16:9 frame: 92 px bars of 720 (12.8 %).
+        let image = boxed(1280, 720, 1280, 536, [4, 4, 4]);
+        let b = FRAME_BLEED_PX;
+        assert_eq!(letterbox_bars(&image), [0, 92 + b, 0, 92 + b]);
+        // A pillarbox: a 4:3 picture in a 16:9 frame (160 px a side of 1280).
+        let image = boxed(1280, 720, 960, 720, [0, 0, 0]);
+        assert_eq!(letterbox_bars(&image), [160 + b, 0, 160 + b, 0]);
+        // Both (a window box): the sides are looked for between the top and bottom bars.
+        let image = boxed(1000, 800, 800, 600, [2, 2, 2]);
+        assert_eq!(letterbox_bars(&image), [100 + b, 100 + b, 100 + b, 100 + b]);
+    }
+
+    #[test]
+    fn subtitles_in_a_bar_go_with_it() {
+        let mut image = boxed(1280, 720, 1280, 536, [0, 0, 0]).to_rgb8();
+        // White text across a third of the bottom bar's width, rows 650..670.
+        for y in 650..670 {
+            for x in (430..850).step_by(2) {
+                image.put_pixel(x, y, Rgb([240, 240, 240]));
+            }
+        }
+        let image = DynamicImage::ImageRgb8(image);
+        assert_eq!(letterbox_bars(&image)[3], 92 + FRAME_BLEED_PX);
+    }
+
+    #[test]
+    fn what_is_not_a_pair_of_bars_stays() {
+        // Thin bars (at most 4 % of the side) are a frame, re-filled by `frame_mask` instead.
+        let thin = boxed(1000, 500, 1000, 480, [0, 0, 0]);
+        assert_eq!(letterbox_bars(&thin), [0; 4]);
+        let just_over = boxed(1000, 500, 1000, 458, [0, 0, 0]);
+        assert_eq!(letterbox_bars(&just_over)[1], 21 + FRAME_BLEED_PX);
+        // White or grey bands are skies, walls and mats.
+        assert_eq!(
+            letterbox_bars(&boxed(1280, 720, 1280, 536, [250, 250, 250])),
+            [0; 4]
+        );
+        assert_eq!(
+            letterbox_bars(&boxed(1280, 720, 1280, 536, [120, 120, 120])),
+            [0; 4]
+        );
+        // One black band only (a night sky above a lit street).
+        let mut night = boxed(1280, 720, 1280, 536, [0, 0, 0]).to_rgb8();
+        for y in 628..720 {
+            for x in 0..1280 {
+                night.put_pixel(x, y, Rgb([30 + (x % 40) as u8, 80, 60]));
+            }
+        }
+        assert_eq!(letterbox_bars(&DynamicImage::ImageRgb8(night)), [0; 4]);
+        // Black past the widest bar (a dark photo), all black, tiny images.
+        assert_eq!(
+            letterbox_bars(&boxed(400, 400, 400, 100, [0, 0, 0])),
+            [0; 4]
+        );
+        let black = DynamicImage::ImageRgb8(RgbImage::new(300, 200));
+        assert_eq!(letterbox_bars(&black), [0; 4]);
+        assert_eq!(
+            letterbox_bars(&DynamicImage::ImageRgb8(RgbImage::new(1, 1))),
+            [0; 4]
+        );
+        assert_eq!(
+            letterbox_bars(&DynamicImage::ImageRgb8(RgbImage::new(7, 900))),
+            [0; 4]
+        );
+        // A picture without bars.
+        assert_eq!(
+            letterbox_bars(&boxed(640, 400, 640, 400, [0, 0, 0])),
+            [0; 4]
+        );
+    }
+
+    #[test]
+    fn a_dark_picture_edge_is_not_cut_into() {
+        // The bars end where a line is less than half black; a picture whose top rows are dark
+        // in places (a dark ridge over 40 % of the width) keeps them.
+        let mut image = boxed(1280, 720, 1280, 536, [0, 0, 0]).to_rgb8();
+        for y in 92..140 {
+            for x in 0..512 {
+                image.put_pixel(x, y, Rgb([1, 1, 1]));
+            }
+        }
+        let image = DynamicImage::ImageRgb8(image);
+        assert_eq!(
+            letterbox_bars(&image),
+            [0, 92 + FRAME_BLEED_PX, 0, 92 + FRAME_BLEED_PX]
+        );
+    }
+}
