@@ -677,6 +677,18 @@ fn a_film_stills_black_bars_are_cropped_and_a_project_can_keep_them() {
     assert!(top_luma > 0.1, "{top_luma}");
     let note = scene.working.bars_note().expect("a note");
     assert!(note.contains("top 46 px, bottom 46 px"), "{note}");
+    // Built smaller than the photo: downsampled from the picture, its shape kept.
+    let mut small = p.clone();
+    small.working.long_side = Some(200);
+    let scene_small = builder.build(&small, &Progress::none()).expect("small");
+    assert_eq!(scene_small.working.photo, picture);
+    assert_eq!(scene_small.working.bars, scene.working.bars);
+    assert_eq!(scene_small.input.rgb.size(), (200, 67));
+    let top_small = (0..200)
+        .map(|x| makeit4d::raster::luma(scene_small.input.rgb.at(x, 0)))
+        .sum::<f32>()
+        / 200.0;
+    assert!(top_small > 0.1, "{top_small}");
     // A depth map of the whole photo is cropped like it: far bars, a near picture.
     let depth = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(400, 225, |_, y| {
         image::Luma([if (44..181).contains(&y) {
