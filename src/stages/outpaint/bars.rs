@@ -152,6 +152,9 @@ mod tests {
         // A pillarbox: a 4:3 picture in a 16:9 frame (160 px a side of 1280).
         let image = boxed(1280, 720, 960, 720, [0, 0, 0]);
         assert_eq!(letterbox_bars(&image), [160 + b, 0, 160 + b, 0]);
+        // A video frame in limited range: its black is 16 of 255.
+        let image = boxed(1280, 720, 1280, 536, [16, 16, 16]);
+        assert_eq!(letterbox_bars(&image), [0, 92 + b, 0, 92 + b]);
         // Both (a window box): the sides are looked for between the top and bottom bars.
         let image = boxed(1000, 800, 800, 600, [2, 2, 2]);
         assert_eq!(letterbox_bars(&image), [100 + b, 100 + b, 100 + b, 100 + b]);
