@@ -369,6 +369,67 @@ impl Project {
         self.working.coordinates_size = Some(size);
     }
 
+    /// Moves the edits placed on the picture from one crop of a `photo`-sized photo to
+    /// another (`from`, `to`: the black bars cropped, `[left, top, right, bottom]` photo
+    /// pixels), so that each stays on the same photo pixel: image-relative points (depth
+    /// targets and their radii, pop-up clicks and handles, the horizons) are re-expressed in
+    /// the new picture, and pixel coordinates (depth strokes, motion) are moved by the crop's
+    /// offset at their own scale, `working.coordinates_size` (`working` when unset: the size
+    /// they were made at) becoming the new picture's size at that scale.
+    pub fn move_picture(
+        &mut self,
+        photo: (usize, usize),
+        from: [usize; 4],
+        to: [usize; 4],
+        working: [usize; 2],
+    ) {
+        if from == to {
+            return;
+        }
+        let rect = |[l, t, r, b]: [usize; 4]| {
+            let w = photo.0.saturating_sub(l + r).max(1) as f64;
+            let h = photo.1.saturating_sub(t + b).max(1) as f64;
+            (l as f64, t as f64, w, h)
+        };
+        let (fl, ft, fw, fh) = rect(from);
+        let (tl, tt, tw, th) = rect(to);
+        let x = |f: f32| ((fl + f as f64 * fw - tl) / tw) as f32;
+        let y = |f: f32| ((ft + f as f64 * fh - tt) / th) as f32;
+        let point = |p: [f32; 2]| [x(p[0]), y(p[1])];
+        let d = &mut self.depth;
+        for t in &mut d.targets {
+            t.points = t.points.iter().map(|&p| point(p)).collect();
+            t.same_as = t.same_as.map(point);
+            t.radius = (t.radius as f64 * fw / tw) as f32;
+        }
+        for p in &mut d.popups {
+            p.seeds = p.seeds.iter().map(|&s| point(s)).collect();
+            if let crate::stages::depth::regions::PopUpShape::Tilted { from, to, .. } = &mut p.shape
+            {
+                *from = point(*from);
+                *to = point(*to);
+            }
+        }
+        d.classical.horizon = d.classical.horizon.map(y);
+        d.horizon.horizon = y(d.horizon.horizon);
+        if self.has_pixel_content() {
+            let [cw, ch] = self.working.coordinates_size.unwrap_or(working);
+            let k = 0.5 * (cw as f64 / fw + ch as f64 / fh);
+            let (dx, dy) = (((fl - tl) * k) as f32, ((ft - tt) * k) as f32);
+            self.depth.strokes = self
+                .depth
+                .strokes
+                .iter()
+                .map(|s| s.translated(dx, dy))
+                .collect();
+            self.motion = self.motion.mapped(&|p| [p[0] + dx, p[1] + dy], 1.0);
+            self.working.coordinates_size = Some([
+                ((tw * k).round() as usize).max(1),
+                ((th * k).round() as usize).max(1),
+            ]);
+        }
+    }
+
     /// Applies `f` to every file path the project refers to (input, models, imports); a
     /// catalogue model's name (`lama`) is not a path and stays as it is.
     pub fn map_paths(&mut self, f: impl Fn(&Path) -> PathBuf) {
@@ -572,6 +633,87 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("working.coordinates_size"), "{e}");
+    }
+
+    #[test]
+    fn edits_stay_on_their_photo_pixel_when_the_crop_changes() {
+        use crate::stages::depth::paint::{DepthStroke, DepthStrokeKind};
+        use crate::stages::depth::propagate::TargetStroke;
+        use crate::stages::depth::regions::{PopUp, PopUpShape};
+        use crate::stages::motion::Anchor;
+        // A 100 × 60 photo with 10-row bars: the picture is 100 × 40.
+        let bars = [0, 10, 0, 10];
+        let mut p = Project::new("a.jpg");
+        p.depth.targets.push(TargetStroke {
+            points: vec![[0.5, 0.0], [0.25, 1.0]],
+            radius: 0.1,
+            depth: 3.0,
+            hidden: false,
+            same_as: Some([0.0, 0.5]),
+        });
+        p.depth.popups.push(PopUp {
+            seeds: vec![[0.5, 0.5]],
+            shape: PopUpShape::Tilted {
+                from: [0.5, 0.25],
+                from_depth: 2.0,
+                to: [0.5, 0.75],
+                to_depth: 4.0,
+            },
+            hidden: false,
+        });
+        p.depth.classical.horizon = Some(0.25);
+        // Pixel coordinates made at half the picture's size (50 × 20).
+        p.working.coordinates_size = Some([50, 20]);
+        p.depth.strokes.push(DepthStroke {
+            kind: DepthStrokeKind::Pull,
+            points: vec![[10.0, 0.0]],
+            radius_px: 4.0,
+            strength: 0.5,
+        });
+        p.motion.anchors.push(Anchor {
+            centre: [25.0, 19.0],
+            radius: 3.0,
+        });
+        let original = p.clone();
+        // Uncropped: the picture's top row lies 10 rows down the photo.
+        p.move_picture((100, 60), bars, [0; 4], [100, 40]);
+        let t = &p.depth.targets[0];
+        let close =
+            |a: [f32; 2], b: [f32; 2]| (a[0] - b[0]).abs() < 1e-6 && (a[1] - b[1]).abs() < 1e-6;
+        assert!(close(t.points[0], [0.5, 10.0 / 60.0]), "{:?}", t.points);
+        assert!(close(t.points[1], [0.25, 50.0 / 60.0]), "{:?}", t.points);
+        assert!(close(t.same_as.unwrap(), [0.0, 0.5]));
+        assert!((t.radius - 0.1).abs() < 1e-6, "the width did not change");
+        let PopUpShape::Tilted { from, to, .. } = p.depth.popups[0].shape else {
+            panic!()
+        };
+        assert!(close(from, [0.5, 20.0 / 60.0]) && close(to, [0.5, 40.0 / 60.0]));
+        assert!((p.depth.classical.horizon.unwrap() - 20.0 / 60.0).abs() < 1e-6);
+        // Pixels: 10 photo rows are 5 coordinate rows at this scale.
+        assert_eq!(p.depth.strokes[0].points, vec![[10.0, 5.0]]);
+        assert_eq!(p.depth.strokes[0].radius_px, 4.0);
+        assert_eq!(p.motion.anchors[0].centre, [25.0, 24.0]);
+        assert_eq!(p.working.coordinates_size, Some([50, 30]));
+        // And back: as it was.
+        p.move_picture((100, 60), [0; 4], bars, [100, 60]);
+        assert_eq!(p.depth.strokes, original.depth.strokes);
+        assert_eq!(p.motion, original.motion);
+        assert_eq!(
+            p.working.coordinates_size,
+            original.working.coordinates_size
+        );
+        let back = &p.depth.targets[0];
+        for (a, b) in back.points.iter().zip(&original.depth.targets[0].points) {
+            assert!(close(*a, *b), "{a:?} {b:?}");
+        }
+        // A pillarbox narrows the picture: radii (fractions of its width) grow.
+        let mut q = original.clone();
+        q.move_picture((100, 60), [0; 4], [20, 0, 20, 0], [100, 60]);
+        assert!((q.depth.targets[0].radius - 0.1 * 100.0 / 60.0).abs() < 1e-6);
+        assert!(close(
+            q.depth.targets[0].points[0],
+            [(50.0 - 20.0) / 60.0, 0.0]
+        ));
     }
 
     #[test]

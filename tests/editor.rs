@@ -1529,7 +1529,7 @@ fn a_target_stroke_takes_the_depth_of_a_point() {
 }
 
 /// The Input tab says which black bars a film still lost, and "Crop black bars" turns the crop
-/// over as one undoable edit.
+/// over as one undoable edit that keeps a depth target on its photo pixel.
 #[test]
 fn a_film_stills_bars_are_cropped_and_the_input_tab_can_keep_them() {
     let dir = tempfile::tempdir().unwrap();
@@ -1550,6 +1550,16 @@ fn a_film_stills_bars_are_cropped_and_the_input_tab_can_keep_them() {
     p.inpaint.preset = InpaintPreset::Draft;
     p.output.frames = 3;
     p.layers.params.mode = LayerCount::Count(3);
+    // A depth target at the top centre of the picture, made on the cropped still.
+    p.depth
+        .targets
+        .push(makeit4d::stages::depth::propagate::TargetStroke {
+            points: vec![[0.5, 0.0]],
+            radius: 0.02,
+            depth: 40.0,
+            hidden: false,
+            same_as: None,
+        });
     let file = dir.path().join("still.json");
     p.save(&file).unwrap();
     let Some(mut h) = harness(file) else {
@@ -1569,15 +1579,22 @@ fn a_film_stills_bars_are_cropped_and_the_input_tab_can_keep_them() {
     h.get_by_label("Crop black bars").click();
     h.step();
     wait_idle(&mut h, limit);
-    assert!(!h.state().project().unwrap().photo.crop_bars);
+    let kept = h.state().project().unwrap().clone();
+    assert!(!kept.photo.crop_bars);
     assert_eq!(size(&h), (480, 270));
     assert!(h.query_by_label_contains("cropped:").is_none());
+    assert!(
+        h.query_by_label("found, kept: top 48 px, bottom 48 px")
+            .is_some()
+    );
+    // The target stayed on its photo row: the picture's top row is row 48 of the still.
+    let y = kept.depth.targets[0].points[0][1];
+    assert!((y - 48.0 / 270.0).abs() < 1e-5, "{y}");
     h.state_mut().undo();
     h.step();
     wait_idle(&mut h, limit);
-    assert!(
-        h.state().project().unwrap().photo.crop_bars,
-        "one undo crops again"
-    );
+    let again = h.state().project().unwrap();
+    assert!(again.photo.crop_bars, "one undo crops again");
+    assert_eq!(again.depth.targets[0].points[0], [0.5, 0.0]);
     assert_eq!(size(&h), (480, 174));
 }

@@ -43,8 +43,8 @@ pub struct SceneBuilder {
     decoded: Option<(u64, Arc<image::DynamicImage>)>,
     /// Headers of the inputs, by input key.
     headers: Vec<(u64, crate::image_io::ImageHeader)>,
-    /// The black bars cropped from the inputs (`[left, top, right, bottom]` photo pixels), by
-    /// input key.
+    /// The black bars found around the inputs (`[left, top, right, bottom]` photo pixels), by
+    /// input path.
     bars: Vec<(u64, [usize; 4])>,
     /// Proxy depths for the path's magnification, by photo and depth settings.
     proxies: Vec<(u64, Arc<ProxyDepth>)>,
@@ -282,9 +282,8 @@ impl SceneBuilder {
             key_of(0, &project.input)
         };
         let working = self.working_size(project, photo_key, p_load)?;
-        // With bars looked for, the photo was decoded to find them: read through that decode
-        // (cropped when there were bars).
-        let via_decoded = !working.is_photo() || project.photo.crop_bars;
+        // The photo was decoded to look for bars: read through that decode (cropped when they
+        // are).
         let key = if working.is_photo() {
             // The key of a photo built at its own size, as before working sizes existed.
             photo_key
@@ -292,7 +291,7 @@ impl SceneBuilder {
             key_of(photo_key, &working.size)
         };
         let in_load = self.load.peek(key).is_some();
-        let photo = if in_load || dry || !via_decoded {
+        let photo = if in_load || dry {
             None
         } else {
             Some(self.decoded_photo(photo_key, project)?)
@@ -339,7 +338,8 @@ impl SceneBuilder {
     }
 
     /// The decoded photo of input key `key` (decoded once, kept while it is the last one),
-    /// its black bars cropped when `project.photo.crop_bars` says so.
+    /// its black bars cropped when `project.photo.crop_bars` says so. The bars are looked for
+    /// either way ([`Self::photo_bars`]).
     fn decoded_photo(&mut self, key: u64, project: &Project) -> Result<Arc<image::DynamicImage>> {
         if let Some((k, image)) = &self.decoded
             && *k == key
@@ -348,44 +348,57 @@ impl SceneBuilder {
         }
         self.decoded = None;
         let mut image = decode_image(&project.input)?;
-        if project.photo.crop_bars {
-            let bars @ [left, top, right, bottom] = crate::stages::outpaint::letterbox_bars(&image);
-            if bars != [0; 4] {
-                let (w, h) = (image.width() as usize, image.height() as usize);
-                image = image.crop_imm(
-                    left as u32,
-                    top as u32,
-                    (w - left - right) as u32,
-                    (h - top - bottom) as u32,
-                );
+        let path_key = key_of(0, &project.input);
+        let found = match self.bars.iter().find(|e| e.0 == path_key) {
+            Some(e) => e.1,
+            None => {
+                let found = crate::stages::outpaint::letterbox_bars(&image);
+                self.bars.push((path_key, found));
+                if self.bars.len() > CACHE_ENTRIES {
+                    self.bars.remove(0);
+                }
+                found
             }
-            self.bars.retain(|e| e.0 != key);
-            self.bars.push((key, bars));
-            if self.bars.len() > CACHE_ENTRIES {
-                self.bars.remove(0);
-            }
+        };
+        if project.photo.crop_bars && found != [0; 4] {
+            let [left, top, right, bottom] = found;
+            let (w, h) = (image.width() as usize, image.height() as usize);
+            image = image.crop_imm(
+                left as u32,
+                top as u32,
+                (w - left - right) as u32,
+                (h - top - bottom) as u32,
+            );
         }
         let image = Arc::new(image);
         self.decoded = Some((key, image.clone()));
         Ok(image)
     }
 
-    /// The black bars cropped from the photo of input key `key` (none unless
-    /// `project.photo.crop_bars`): found on its decoded pixels the first time.
-    fn photo_bars(&mut self, key: u64, project: &Project) -> Result<[usize; 4]> {
-        if !project.photo.crop_bars {
-            return Ok([0; 4]);
-        }
-        if let Some((_, bars)) = self.bars.iter().find(|e| e.0 == key) {
-            return Ok(*bars);
-        }
-        self.decoded = None;
-        self.decoded_photo(key, project)?;
-        Ok(self
-            .bars
-            .iter()
-            .find(|e| e.0 == key)
-            .map_or([0; 4], |e| e.1))
+    /// The black bars of the photo of input key `key`, `(found, cropped)`: found on its
+    /// decoded pixels the first time, cropped when `project.photo.crop_bars` (the editor
+    /// offers the switch with what it would crop).
+    fn photo_bars(&mut self, key: u64, project: &Project) -> Result<([usize; 4], [usize; 4])> {
+        let path_key = key_of(0, &project.input);
+        let found = match self.bars.iter().find(|e| e.0 == path_key) {
+            Some(e) => e.1,
+            None => {
+                self.decoded = None;
+                self.decoded_photo(key, project)?;
+                self.bars
+                    .iter()
+                    .find(|e| e.0 == path_key)
+                    .map_or([0; 4], |e| e.1)
+            }
+        };
+        Ok((
+            found,
+            if project.photo.crop_bars {
+                found
+            } else {
+                [0; 4]
+            },
+        ))
     }
 
     /// The working size of `project`'s scene ([`choose_working_size`]): remembered per the
@@ -426,7 +439,7 @@ impl SceneBuilder {
         let header = remembered(&mut self.headers, key, CACHE_ENTRIES, || {
             read_header(&project.input)
         })?;
-        let bars @ [left, top, right, bottom] = self.photo_bars(key, project)?;
+        let (found, bars @ [left, top, right, bottom]) = self.photo_bars(key, project)?;
         let picture = (header.size.0 - left - right, header.size.1 - top - bottom);
         let budget_frame = self.budget_frame;
         let mut chosen = choose_working_size(
@@ -437,6 +450,7 @@ impl SceneBuilder {
             || self.proxy_depth(project, key, p)?.magnification(project),
         )?;
         chosen.bars = bars;
+        chosen.found_bars = found;
         let automatic = |w: &WorkingSize| {
             matches!(
                 w.reason,

@@ -87,6 +87,9 @@ pub struct WorkingSize {
     /// The black bars cropped from the photo, `[left, top, right, bottom]` in its pixels
     /// (`project.photo.crop_bars`); all zero when none were.
     pub bars: [usize; 4],
+    /// The black bars found around the photo, cropped or not (what turning
+    /// `photo.crop_bars` over would crop).
+    pub found_bars: [usize; 4],
     /// The size every stage runs at.
     pub size: (usize, usize),
     /// Why.
@@ -104,6 +107,7 @@ impl WorkingSize {
             reason: WorkingReason::Photo,
             estimate_mib: 0,
             bars: [0; 4],
+            found_bars: [0; 4],
         }
     }
 
@@ -115,16 +119,18 @@ impl WorkingSize {
     /// The black bars cropped from the photo, as words (`top 92 px, bottom 92 px`); `None`
     /// when none were.
     pub fn bars_cropped(&self) -> Option<String> {
-        if self.bars == [0; 4] {
-            return None;
-        }
+        (self.bars != [0; 4]).then(|| Self::sides(self.bars))
+    }
+
+    /// Bars `[left, top, right, bottom]` as words: `top 92 px, bottom 92 px`.
+    pub fn sides(bars: [usize; 4]) -> String {
         let sides: Vec<String> = ["left", "top", "right", "bottom"]
             .iter()
-            .zip(self.bars)
+            .zip(bars)
             .filter(|(_, px)| *px > 0)
             .map(|(side, px)| format!("{side} {px} px"))
             .collect();
-        Some(sides.join(", "))
+        sides.join(", ")
     }
 
     /// One line saying which black bars were cropped from the photo, if any.
@@ -325,6 +331,7 @@ pub fn choose_working_size(
         },
         estimate_mib: needs(size).div_ceil(MIB),
         bars: [0; 4],
+        found_bars: [0; 4],
     })
 }
 

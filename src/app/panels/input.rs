@@ -83,7 +83,8 @@ impl StagePanel for InputPanel {
                     .on_hover_text(working.to_string());
             }
         }
-        bars_ui(ui, cx, working.and_then(|w| w.bars_cropped()));
+        let working = working.cloned();
+        bars_ui(ui, cx, working);
         ui.separator();
         ui.heading("Camera");
         if let Some(v) = committed(ui, "hfov", cx.project.camera.hfov_deg, |ui, v| {
@@ -131,30 +132,41 @@ impl StagePanel for InputPanel {
     }
 }
 
-/// The "Crop black bars" switch (one undo step) and what it cropped. Edits placed on the
-/// picture (strokes, targets, pop-ups, painted motion) would move with its crop, so the switch
-/// waits until there are none.
-fn bars_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, cropped: Option<String>) {
+/// The "Crop black bars" switch (one undo step; the edits placed on the picture move with
+/// it, [`crate::project::Project::move_picture`]) and what it crops.
+fn bars_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, working: Option<crate::scene::WorkingSize>) {
     let mut crop = cx.project.photo.crop_bars;
-    let placed = cx.project.has_pixel_content() || cx.project.depth.has_edits();
-    let response = ui.add_enabled(!placed, egui::Checkbox::new(&mut crop, "Crop black bars"));
-    if placed {
-        response.on_disabled_hover_text(
-            "Edits are placed on the picture as it is now; turning this over would move them. \
-             Remove the depth and motion edits first.",
+    ui.add(egui::Checkbox::new(&mut crop, "Crop black bars"))
+        .on_hover_text(
+            "A film still's letterbox or pillarbox is not scene: cropped, the picture fills every \
+         frame instead of bars moving with it",
         );
-    } else {
-        response.on_hover_text(
-            "A film still's letterbox or pillarbox is not scene: cropped, the picture fills \
-             every frame instead of bars moving with it",
-        );
-    }
+    let Some(working) = working else {
+        return;
+    };
+    let found = working.found_bars;
     if crop != cx.project.photo.crop_bars {
-        cx.edit("Crop black bars", |p| p.photo.crop_bars = crop);
+        let [l, t, r, b] = working.bars;
+        let photo = (working.photo.0 + l + r, working.photo.1 + t + b);
+        let (from, to) = if crop {
+            ([0; 4], found)
+        } else {
+            (found, [0; 4])
+        };
+        let size = [working.size.0, working.size.1];
+        cx.edit("Crop black bars", |p| {
+            p.move_picture(photo, from, to, size);
+            p.photo.crop_bars = crop;
+        });
     }
-    if let Some(sides) = cropped {
-        ui.label(format!("cropped: {sides}"));
-    }
+    match (working.bars_cropped(), found != [0; 4]) {
+        (Some(sides), _) => ui.label(format!("cropped: {sides}")),
+        (None, true) => ui.label(format!(
+            "found, kept: {}",
+            crate::scene::WorkingSize::sides(found)
+        )),
+        (None, false) => ui.label("no black bars found"),
+    };
 }
 
 /// The diffusion fill's model, prompts and sampler (#45): each change one undo step.

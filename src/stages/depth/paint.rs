@@ -54,6 +54,14 @@ impl DepthStroke {
         }
     }
 
+    /// The same stroke moved by `(dx, dy)` pixels (another crop of the photo).
+    pub fn translated(&self, dx: f32, dy: f32) -> Self {
+        Self {
+            points: self.points.iter().map(|p| [p[0] + dx, p[1] + dy]).collect(),
+            ..self.clone()
+        }
+    }
+
     /// Checks the stroke; the message says what is wrong.
     pub fn validate(&self) -> Result<()> {
         if !(self.radius_px.is_finite() && self.radius_px > 0.0) {

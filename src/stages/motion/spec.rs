@@ -134,7 +134,12 @@ impl MotionSpec {
     /// painted at): positions (pixel centres at integers, `x' = (x + ½)·s − ½`), radii and
     /// speeds in pixels per frame.
     pub fn scaled(&self, s: f32) -> Self {
-        let at = |p: [f32; 2]| p.map(|v| (v + 0.5) * s - 0.5);
+        self.mapped(&|p: [f32; 2]| p.map(|v| (v + 0.5) * s - 0.5), s)
+    }
+
+    /// The same motion with every position moved by `at` and radii and speeds scaled by `s`
+    /// ([`Self::scaled`]; a translation with `s` = 1 for another crop of the photo).
+    pub fn mapped(&self, at: &dyn Fn([f32; 2]) -> [f32; 2], s: f32) -> Self {
         let stroke = |k: &Stroke| Stroke {
             points: k.points.iter().map(|&p| at(p)).collect(),
             radius: k.radius * s,
