@@ -721,7 +721,10 @@ fn a_film_stills_black_bars_are_cropped_and_a_project_can_keep_them() {
     kept.photo.crop_bars = false;
     let scene_kept = builder.build(&kept, &Progress::none()).expect("kept");
     assert_eq!(scene_kept.working.bars, [0; 4]);
-    assert_eq!(scene_kept.working.found_bars, scene.working.bars, "found, not cropped");
+    assert_eq!(
+        scene_kept.working.found_bars, scene.working.bars,
+        "found, not cropped"
+    );
     assert_eq!(scene_kept.input.rgb.size(), (400, 225));
     assert!(scene_kept.working.bars_note().is_none());
     let old = Project::from_json(&format!(
