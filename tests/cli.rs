@@ -1041,17 +1041,7 @@ fn a_film_stills_bars_are_cropped_unless_kept() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     // evening_glow as a 2.39:1 picture in a 16:9 JPEG, 46 black rows above and below.
-    let small = image::open(data("evening_glow_320.jpg")).unwrap();
-    let picture = small
-        .resize_exact(480, 178, image::imageops::FilterType::Triangle)
-        .to_rgb8();
-    let still = image::RgbImage::from_fn(480, 270, |x, y| {
-        if (46..224).contains(&y) {
-            *picture.get_pixel(x, y - 46)
-        } else {
-            image::Rgb([0, 0, 0])
-        }
-    });
+    let still = common::letterboxed_still(480, 270, 178);
     let photo = d.join("still.jpg");
     still.save(&photo).unwrap();
     let args = ["--frames", "8", "--preset", "orbit", "--range", "4..5"];

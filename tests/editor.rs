@@ -4,6 +4,8 @@
 //! Without a wgpu adapter these tests are skipped with a message — except when `CI` is set,
 //! where a missing adapter fails them (the renderer must really run in CI).
 
+mod common;
+
 use eframe::egui;
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
@@ -100,6 +102,14 @@ fn on_depth_tab(file: PathBuf) -> Option<Harness<'static, EditorApp>> {
     h.step();
     h.step();
     Some(h)
+}
+
+/// Waits until `h` is idle ([`wait_idle`]), then shows the Input tab.
+fn idle_on_input_tab(h: &mut Harness<'_, EditorApp>, limit: Duration) {
+    wait_idle(h, limit);
+    h.get_by_label("1 Input").click();
+    h.step();
+    h.step();
 }
 
 fn layer_count(h: &Harness<'_, EditorApp>) -> usize {
@@ -1365,10 +1375,7 @@ fn the_input_tab_sets_the_diffusion_fill_and_its_prompt() {
         return;
     };
     let limit = Duration::from_secs(600);
-    wait_idle(&mut h, limit);
-    h.get_by_label("1 Input").click();
-    h.step();
-    h.step();
+    idle_on_input_tab(&mut h, limit);
     assert!(
         h.query_by_label_contains("inpainter: diffusion optimum (2 steps of ddim)")
             .is_some(),
@@ -1533,17 +1540,7 @@ fn a_target_stroke_takes_the_depth_of_a_point() {
 #[test]
 fn a_film_stills_bars_are_cropped_and_the_input_tab_can_keep_them() {
     let dir = tempfile::tempdir().unwrap();
-    let small = image::open(sample()).unwrap();
-    let picture = small
-        .resize_exact(480, 178, image::imageops::FilterType::Triangle)
-        .to_rgb8();
-    let still = image::RgbImage::from_fn(480, 270, |x, y| {
-        if (46..224).contains(&y) {
-            *picture.get_pixel(x, y - 46)
-        } else {
-            image::Rgb([0, 0, 0])
-        }
-    });
+    let still = common::letterboxed_still(480, 270, 178);
     let photo = dir.path().join("still.png");
     still.save(&photo).unwrap();
     let mut p = Project::new(&photo);
@@ -1566,10 +1563,7 @@ fn a_film_stills_bars_are_cropped_and_the_input_tab_can_keep_them() {
         return;
     };
     let limit = Duration::from_secs(600);
-    wait_idle(&mut h, limit);
-    h.get_by_label("1 Input").click();
-    h.step();
-    h.step();
+    idle_on_input_tab(&mut h, limit);
     let size = |h: &Harness<'_, EditorApp>| h.state().snapshot().unwrap().scene.input.rgb.size();
     assert_eq!(size(&h), (480, 174));
     assert!(

@@ -1,6 +1,8 @@
 //! The stage graph end to end on a small real photo: caching, outpainting from the path,
 //! layering, motion loops.
 
+mod common;
+
 use makeit4d::geometry::View;
 use makeit4d::path::{CameraPath, Preset, PresetKind};
 use makeit4d::progress::Progress;
@@ -635,22 +637,13 @@ fn a_big_photo_is_built_at_its_working_size() {
     assert_eq!(after.at(fx, fy), before.at(fx, fy));
 }
 
-/// `tests/data/evening_glow_320.jpg` as a 2.39:1 film still in a 16:9 frame (black bars of
-/// 44 rows at the top and bottom of 400 × 225, a little noise on them), written to `dir`.
+/// A 2.39:1 film still in a 16:9 frame (black bars of 44 rows at the top and bottom of
+/// 400 × 225), written to `dir`.
 fn letterboxed(dir: &std::path::Path) -> PathBuf {
-    let small = image::open(photo("evening_glow_320.jpg")).unwrap();
-    let picture = small
-        .resize_exact(400, 137, image::imageops::FilterType::Triangle)
-        .to_rgb8();
-    let frame = image::RgbImage::from_fn(400, 225, |x, y| {
-        if (44..181).contains(&y) {
-            *picture.get_pixel(x, y - 44)
-        } else {
-            image::Rgb([((x + y) % 3) as u8; 3])
-        }
-    });
     let path = dir.join("still.png");
-    frame.save(&path).unwrap();
+    common::letterboxed_still(400, 225, 137)
+        .save(&path)
+        .unwrap();
     path
 }
 

@@ -17,6 +17,23 @@ pub fn data(name: &str) -> PathBuf {
         .join(name)
 }
 
+/// `tests/data/evening_glow_320.jpg` as a film still: the photo resized to `w × picture_h`,
+/// centred in a `w × h` frame between black bars (levels 0–2, a little noise as a JPEG's).
+pub fn letterboxed_still(w: u32, h: u32, picture_h: u32) -> image::RgbImage {
+    let picture = image::open(data("evening_glow_320.jpg"))
+        .expect("the sample photo")
+        .resize_exact(w, picture_h, image::imageops::FilterType::Triangle)
+        .to_rgb8();
+    let top = (h - picture_h) / 2;
+    image::RgbImage::from_fn(w, h, |x, y| {
+        if (top..top + picture_h).contains(&y) {
+            *picture.get_pixel(x, y - top)
+        } else {
+            image::Rgb([((x + y) % 3) as u8; 3])
+        }
+    })
+}
+
 /// A file of `tests/fixtures/`.
 pub fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
