@@ -282,8 +282,6 @@ impl SceneBuilder {
             key_of(0, &project.input)
         };
         let working = self.working_size(project, photo_key, p_load)?;
-        // The photo was decoded to look for bars: read through that decode (cropped when they
-        // are).
         let key = if working.is_photo() {
             // The key of a photo built at its own size, as before working sizes existed.
             photo_key
@@ -291,6 +289,8 @@ impl SceneBuilder {
             key_of(photo_key, &working.size)
         };
         let in_load = self.load.peek(key).is_some();
+        // The photo was decoded to look for bars: read through that decode (cropped when they
+        // are cropped).
         let photo = if in_load || dry {
             None
         } else {

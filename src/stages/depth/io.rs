@@ -513,6 +513,31 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_map_of_the_whole_photo_is_cropped_like_it() {
+        // A 10 × 6 photo with one-row bars: the picture is 10 × 4 (aspect 2.5).
+        let bars = [0.0, 1.0 / 6.0, 0.0, 1.0 / 6.0];
+        let photo_map = GrayRaster::from_fn(10, 6, |x, y| (10 * y + x) as f32);
+        let mut warnings = Vec::new();
+        let cropped = crop_to_picture(photo_map, bars, (10, 4), &mut warnings);
+        assert_eq!(cropped.size(), (10, 4));
+        assert_eq!(cropped.at(0, 0), 10.0);
+        assert_eq!(cropped.at(9, 3), 49.0);
+        assert!(
+            warnings[0].contains("cropped to 10×4 at (0, 1)"),
+            "{warnings:?}"
+        );
+        // A map made on the picture (its shape, at any scale) is taken as it is.
+        let picture_map = GrayRaster::from_fn(20, 8, |x, y| (x + y) as f32);
+        let mut warnings = Vec::new();
+        let kept = crop_to_picture(picture_map.clone(), bars, (10, 4), &mut warnings);
+        assert_eq!(kept, picture_map);
+        assert!(
+            warnings[0].contains("taken as the picture's"),
+            "{warnings:?}"
+        );
+    }
+
+    #[test]
     fn npy_roundtrip_and_layouts() {
         let r = Raster::from_fn(3, 2, |x, y| (10 * y + x) as f32 + 0.5);
         let bytes = npy_bytes(&r);
