@@ -30,10 +30,11 @@ const BAR_MAX_LUMA: f32 = 0.08;
 /// as follows. From each edge inward, with `c` the mean colour of the outermost line (it must
 /// be black, luma < 0.08), the bar runs over the lines whose pixels lie within 0.06 of `c`
 /// (per channel): every line in it at least half such pixels (a line of burned-in subtitles
-/// may cross a bar), its last line at least 98 %, all of them together 90 %, and the first
-/// line with fewer than half is the picture, within [`MAX_BAR_FRACTION`] of the side (a black
-/// band that runs further is a dark photo, not a bar). Then [`FRAME_BLEED_PX`] more pixels go
-/// with it (the JPEG ringing along the bar's edge).
+/// may cross a bar), all of them together 90 %, and the first line with fewer than half is the
+/// picture, within [`MAX_BAR_FRACTION`] of the side (a black band that runs further is a dark
+/// photo, not a bar). The bar ends at its last line with at least 98 % such pixels, or at the
+/// picture when at most `2 ·` [`FRAME_BLEED_PX`] lines lie between (the bar's JPEG-ringed
+/// edge). Then [`FRAME_BLEED_PX`] more pixels go with it (the ringing inside the picture).
 ///
 /// Bars are cropped only in pairs — both top and bottom, or both left and right — and only
 /// when each is wider than [`MAX_FRAME_FRACTION`] of the side: a thinner black line is a frame,
@@ -105,16 +106,20 @@ fn bar(lines: usize, line: Line) -> usize {
     for i in 0..=cap.min(lines - 1) {
         let s = share(i);
         if s < BAR_TEXT_SHARE {
-            // The picture: the bar ends at the last line that is flat all across.
-            let width = shares
+            // The picture: the bar ends at the last line that is flat all across, or here when
+            // the lines between are the bar's edge (JPEG ringing, at most 2 bleeds wide).
+            let flat = shares
                 .iter()
                 .rposition(|&s| s >= BAR_FLAT_SHARE)
                 .map_or(0, |last| last + 1);
-            let mean = shares[..width].iter().sum::<f32>() / width.max(1) as f32;
-            return if width > 0 && mean >= BAR_MEAN_SHARE {
-                width
+            let mean = shares[..flat].iter().sum::<f32>() / flat.max(1) as f32;
+            if flat == 0 || mean < BAR_MEAN_SHARE {
+                return 0;
+            }
+            return if i - flat <= 2 * FRAME_BLEED_PX {
+                i
             } else {
-                0
+                flat
             };
         }
         shares.push(s);
@@ -158,6 +163,21 @@ mod tests {
         // Both (a window box): the sides are looked for between the top and bottom bars.
         let image = boxed(1000, 800, 800, 600, [2, 2, 2]);
         assert_eq!(letterbox_bars(&image), [100 + b, 100 + b, 100 + b, 100 + b]);
+    }
+
+    #[test]
+    fn a_bars_ringing_edge_goes_with_it() {
+        // A JPEG's bar is not flat along the picture: its last 3 lines hold 30 % of the
+        // picture's ringing. They go with the bar, then the bleed.
+        let mut image = boxed(1280, 720, 1280, 536, [0, 0, 0]).to_rgb8();
+        for y in (89..92).chain(628..631) {
+            for x in (0..1280).filter(|x| x % 10 < 3) {
+                image.put_pixel(x, y, Rgb([70, 60, 50]));
+            }
+        }
+        let image = DynamicImage::ImageRgb8(image);
+        let b = FRAME_BLEED_PX;
+        assert_eq!(letterbox_bars(&image), [0, 92 + b, 0, 92 + b]);
     }
 
     #[test]
