@@ -1084,4 +1084,19 @@ fn a_film_stills_bars_are_cropped_unless_kept() {
         .unwrap()
         .to_rgb8();
     assert_eq!(frame.dimensions(), (480, 270));
+    // `depth` crops them too (its map is the picture's, as `render` builds it), or keeps them.
+    for (keep, size) in [(false, (480, h)), (true, (480, 270))] {
+        let out = d.join(format!("depth_{keep}.png"));
+        let mut cmd = common::exe();
+        cmd.arg("depth").arg(&photo).arg("--out").arg(&out);
+        if keep {
+            cmd.arg("--keep-bars");
+        }
+        let o = cmd.output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let map = image::open(&out).unwrap();
+        assert_eq!((map.width(), map.height()), size);
+        let said = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(said.contains("black bars cropped"), !keep, "{said}");
+    }
 }

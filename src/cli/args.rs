@@ -208,6 +208,10 @@ pub(crate) struct DepthArgs {
     /// grey PNGs into this folder and print its analysis (horizon, haziness, …).
     #[arg(long, value_name = "DIR")]
     pub(crate) cues: Option<PathBuf>,
+    /// Keep a film still's black bars (by default a letterbox or pillarbox is cropped, as
+    /// `render` does, and the depth map is the picture's).
+    #[arg(long)]
+    pub(crate) keep_bars: bool,
 }
 
 #[derive(Args, Debug)]

@@ -7,7 +7,23 @@ use std::sync::atomic::AtomicBool;
 
 pub(crate) fn depth(args: DepthArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<()> {
     use makeit4d::stages::depth::{DepthMethod, DepthSettings, io, preview, run_depth_stage};
-    let input = makeit4d::image_io::load_image(&args.image)?;
+    let mut photo = makeit4d::image_io::decode_image(&args.image)?;
+    if !args.keep_bars {
+        let bars @ [l, t, r, b] = makeit4d::stages::outpaint::letterbox_bars(&photo);
+        if bars != [0; 4] {
+            let (pw, ph) = (photo.width() as usize, photo.height() as usize);
+            let (w, h) = (pw - l - r, ph - t - b);
+            photo = photo.crop_imm(l as u32, t as u32, w as u32, h as u32);
+            eprintln!(
+                "photo: black bars cropped ({}; the picture is {w}×{h}, and so is the depth); \
+                 --keep-bars keeps them",
+                makeit4d::scene::WorkingSize::sides(bars)
+            );
+        }
+    }
+    let size = (photo.width() as usize, photo.height() as usize);
+    let input = makeit4d::image_io::load_at_size(&photo, size);
+    drop(photo);
     let (w, h) = input.rgb.size();
     let intrinsics = makeit4d::geometry::Intrinsics::from_hfov(w, h, args.fov);
     let mut settings = DepthSettings::default();
