@@ -442,13 +442,14 @@ impl SceneBuilder {
         let (found, bars @ [left, top, right, bottom]) = self.photo_bars(key, project)?;
         let picture = (header.size.0 - left - right, header.size.1 - top - bottom);
         let budget_frame = self.budget_frame;
-        let mut chosen = choose_working_size(
-            project,
-            picture,
-            header.decode_bytes(),
-            budget_frame,
-            || self.proxy_depth(project, key, p)?.magnification(project),
-        )?;
+        let decode_bytes = if bars == [0; 4] {
+            header.decode_bytes()
+        } else {
+            crate::scene::working::cropped_decode_bytes(header.decode_bytes(), header.size, picture)
+        };
+        let mut chosen = choose_working_size(project, picture, decode_bytes, budget_frame, || {
+            self.proxy_depth(project, key, p)?.magnification(project)
+        })?;
         chosen.bars = bars;
         chosen.found_bars = found;
         let automatic = |w: &WorkingSize| {

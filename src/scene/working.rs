@@ -198,6 +198,9 @@ pub fn budget_mib(settings: &WorkingSettings) -> u64 {
 
 /// Estimated peak bytes of building a scene at `working` pixels from a photo whose decoding
 /// takes `decode_bytes`.
+///
+/// (For a photo whose black bars are cropped, `decode_bytes` is
+/// [`cropped_decode_bytes`]: the crop is a copy made while the decoded photo is held.)
 pub fn build_bytes(working: (usize, usize), decode_bytes: u64) -> u64 {
     (working.0 as u64 * working.1 as u64).saturating_mul(BUILD_BYTES_PER_PIXEL) + decode_bytes
 }
@@ -333,6 +336,22 @@ pub fn choose_working_size(
         bars: [0; 4],
         found_bars: [0; 4],
     })
+}
+
+/// Peak bytes of decoding a `photo`-sized photo of `decode_bytes` and cropping its black bars
+/// to `picture`: the decoded photo and the cropped copy, held together for a moment.
+pub fn cropped_decode_bytes(
+    decode_bytes: u64,
+    photo: (usize, usize),
+    picture: (usize, usize),
+) -> u64 {
+    let photo_px = (photo.0 as u128 * photo.1 as u128).max(1);
+    let picture_px = picture.0 as u128 * picture.1 as u128;
+    if picture_px >= photo_px {
+        return decode_bytes;
+    }
+    let copy = decode_bytes as u128 * picture_px / photo_px;
+    decode_bytes.saturating_add(copy as u64)
 }
 
 /// Checks that rendering `output` frames of a scene built at `working` fits `settings`' memory
@@ -498,6 +517,23 @@ pub fn proxy_magnification(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_crop_costs_its_copy_while_decoding() {
+        // 6000 × 4000 RGB (72 MB) cropped to 6000 × 2510: 72 + 45.18 MB at the peak.
+        let decode = 72_000_000;
+        assert_eq!(
+            cropped_decode_bytes(decode, (6000, 4000), (6000, 2510)),
+            72_000_000 + 45_180_000
+        );
+        // Nothing cropped, or a degenerate size: the decode alone.
+        assert_eq!(
+            cropped_decode_bytes(decode, (6000, 4000), (6000, 4000)),
+            decode
+        );
+        assert_eq!(cropped_decode_bytes(decode, (0, 0), (0, 0)), decode);
+        assert_eq!(cropped_decode_bytes(u64::MAX, (2, 2), (1, 1)), u64::MAX);
+    }
     use crate::path::{CameraPath, Preset, PresetKind};
     use crate::raster::GrayRaster;
 
