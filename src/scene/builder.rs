@@ -445,7 +445,7 @@ impl SceneBuilder {
         let decode_bytes = if bars == [0; 4] {
             header.decode_bytes()
         } else {
-            crate::scene::working::cropped_decode_bytes(header.decode_bytes(), header.size, picture)
+            crate::scene::cropped_decode_bytes(header.decode_bytes(), header.size, picture)
         };
         let mut chosen = choose_working_size(project, picture, decode_bytes, budget_frame, || {
             self.proxy_depth(project, key, p)?.magnification(project)

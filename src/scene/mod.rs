@@ -47,7 +47,8 @@ pub use working::{
     BUILD_BYTES_PER_PIXEL, DEFAULT_BUDGET_SHARE, DEFAULT_MAX_MEGAPIXELS, FLOOR_MEGAPIXELS,
     FRAME_BYTES_PER_PIXEL, MIN_WORKING_PIXELS, PROXY_LONG_SIDE, ProxyDepth, WorkingReason,
     WorkingSettings, WorkingSize, budget_mib, build_bytes, check_render_budget,
-    choose_working_size, frame_bytes, machine_memory_mib, path_magnification, proxy_magnification,
+    choose_working_size, cropped_decode_bytes, frame_bytes, machine_memory_mib, path_magnification,
+    proxy_magnification,
 };
 
 use crate::error::Result;
