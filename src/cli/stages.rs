@@ -9,11 +9,10 @@ pub(crate) fn depth(args: DepthArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<
     use makeit4d::stages::depth::{DepthMethod, DepthSettings, io, preview, run_depth_stage};
     let mut photo = makeit4d::image_io::decode_image(&args.image)?;
     if !args.keep_bars {
-        let bars @ [l, t, r, b] = makeit4d::stages::outpaint::letterbox_bars(&photo);
+        let bars = makeit4d::stages::outpaint::letterbox_bars(&photo);
         if bars != [0; 4] {
-            let (pw, ph) = (photo.width() as usize, photo.height() as usize);
-            let (w, h) = (pw - l - r, ph - t - b);
-            photo = photo.crop_imm(l as u32, t as u32, w as u32, h as u32);
+            photo = makeit4d::stages::outpaint::crop_bars(photo, bars);
+            let (w, h) = (photo.width(), photo.height());
             eprintln!(
                 "photo: black bars cropped ({}; the picture is {w}×{h}, and so is the depth); \
                  --keep-bars keeps them",

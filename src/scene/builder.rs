@@ -360,15 +360,8 @@ impl SceneBuilder {
                 found
             }
         };
-        if project.photo.crop_bars && found != [0; 4] {
-            let [left, top, right, bottom] = found;
-            let (w, h) = (image.width() as usize, image.height() as usize);
-            image = image.crop_imm(
-                left as u32,
-                top as u32,
-                (w - left - right) as u32,
-                (h - top - bottom) as u32,
-            );
+        if project.photo.crop_bars {
+            image = crate::stages::outpaint::crop_bars(image, found);
         }
         let image = Arc::new(image);
         self.decoded = Some((key, image.clone()));

@@ -518,6 +518,9 @@ pub fn proxy_magnification(
 mod tests {
     use super::*;
 
+    use crate::path::{CameraPath, Preset, PresetKind};
+    use crate::raster::GrayRaster;
+
     #[test]
     fn a_crop_costs_its_copy_while_decoding() {
         // 6000 × 4000 RGB (72 MB) cropped to 6000 × 2510: 72 + 45.18 MB at the peak.
@@ -534,8 +537,6 @@ mod tests {
         assert_eq!(cropped_decode_bytes(decode, (0, 0), (0, 0)), decode);
         assert_eq!(cropped_decode_bytes(u64::MAX, (2, 2), (1, 1)), u64::MAX);
     }
-    use crate::path::{CameraPath, Preset, PresetKind};
-    use crate::raster::GrayRaster;
 
     fn project(output: Option<(usize, usize)>) -> Project {
         let mut p = Project::new("photo.jpg");

@@ -136,11 +136,15 @@ impl StagePanel for InputPanel {
 /// it, [`crate::project::Project::move_picture`]) and what it crops.
 fn bars_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, working: Option<crate::scene::WorkingSize>) {
     let mut crop = cx.project.photo.crop_bars;
-    ui.add(egui::Checkbox::new(&mut crop, "Crop black bars"))
-        .on_hover_text(
-            "A film still's letterbox or pillarbox is not scene: cropped, the picture fills every \
+    // Until the photo is read, where the bars are (and so where the edits go) is not known.
+    ui.add_enabled(
+        working.is_some(),
+        egui::Checkbox::new(&mut crop, "Crop black bars"),
+    )
+    .on_hover_text(
+        "A film still's letterbox or pillarbox is not scene: cropped, the picture fills every \
          frame instead of bars moving with it",
-        );
+    );
     let Some(working) = working else {
         return;
     };

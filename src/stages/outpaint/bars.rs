@@ -1,7 +1,7 @@
 //! Black bars around a still from a film or a video (letterbox, pillarbox), cropped before the
 //! scene is built ([`letterbox_bars`]).
 
-use super::frame::{FRAME_BLEED_PX, MAX_FRAME_FRACTION};
+use super::frame::{DARK_LUMA, FRAME_BLEED_PX, MAX_FRAME_FRACTION, is_flat, mean_colour};
 use crate::raster::luma;
 use image::{DynamicImage, GenericImageView};
 
@@ -9,7 +9,7 @@ use image::{DynamicImage, GenericImageView};
 /// film in a 4:3 frame leaves 25.7 % a bar).
 pub const MAX_BAR_FRACTION: f32 = 0.3;
 
-/// Share of a bar line's pixels that must lie within [`BAR_TOLERANCE`] of the bar's colour;
+/// Share of a bar line's pixels that must lie within 0.06 of the bar's colour (as a frame's);
 /// lines with a smaller share (but at least [`BAR_TEXT_SHARE`]) may lie inside a bar, as
 /// subtitles do, but never end one.
 const BAR_FLAT_SHARE: f32 = 0.98;
@@ -18,12 +18,6 @@ const BAR_FLAT_SHARE: f32 = 0.98;
 const BAR_TEXT_SHARE: f32 = 0.5;
 /// Smallest mean flat share over a whole bar.
 const BAR_MEAN_SHARE: f32 = 0.9;
-/// Per-channel distance from the bar's colour of a pixel that belongs to the bar (as
-/// [`super::frame_border`]'s flat lines).
-const BAR_TOLERANCE: f32 = 0.06;
-/// Brightest bar colour (luma): bars are black; a flat white or grey band is a sky, a wall or
-/// a mat, never cropped.
-const BAR_MAX_LUMA: f32 = 0.08;
 
 /// The widths `[left, top, right, bottom]` (pixels) of the black bars around `image` that are
 /// not the picture: a letterbox (top and bottom), a pillarbox (left and right) or both, found
@@ -64,6 +58,22 @@ pub fn letterbox_bars(image: &DynamicImage) -> [usize; 4] {
     [left, top, right, bottom]
 }
 
+/// `image` without its `bars` (`[left, top, right, bottom]`, [`letterbox_bars`]); `image`
+/// itself when there are none.
+pub fn crop_bars(image: DynamicImage, bars: [usize; 4]) -> DynamicImage {
+    let [left, top, right, bottom] = bars;
+    let (w, h) = (image.width() as usize, image.height() as usize);
+    if bars == [0; 4] || left + right >= w || top + bottom >= h {
+        return image;
+    }
+    image.crop_imm(
+        left as u32,
+        top as u32,
+        (w - left - right) as u32,
+        (h - top - bottom) as u32,
+    )
+}
+
 type Line<'a> = &'a dyn Fn(usize) -> Vec<[f32; 3]>;
 
 /// The widths of the bars at both ends of `lines` lines (each read by `near(i)` / `far(i)`, the
@@ -86,20 +96,14 @@ fn bar(lines: usize, line: Line) -> usize {
     if outer.is_empty() {
         return 0;
     }
-    let n = outer.len() as f32;
-    let sum = outer
-        .iter()
-        .fold([0.0f32; 3], |a, c| [a[0] + c[0], a[1] + c[1], a[2] + c[2]]);
-    let colour = sum.map(|s| s / n);
-    if luma(colour) >= BAR_MAX_LUMA {
+    // Bars are black: a flat white or grey band is a sky, a wall or a mat, never cropped.
+    let colour = mean_colour(&outer);
+    if luma(colour) >= DARK_LUMA {
         return 0;
     }
     let share = |i: usize| {
         let px = line(i);
-        let near = px
-            .iter()
-            .filter(|c| (0..3).all(|k| (c[k] - colour[k]).abs() <= BAR_TOLERANCE))
-            .count();
+        let near = px.iter().filter(|&&c| is_flat(c, colour)).count();
         near as f32 / px.len().max(1) as f32
     };
     let mut shares = Vec::new();
@@ -163,6 +167,24 @@ mod tests {
         // Both (a window box): the sides are looked for between the top and bottom bars.
         let image = boxed(1000, 800, 800, 600, [2, 2, 2]);
         assert_eq!(letterbox_bars(&image), [100 + b, 100 + b, 100 + b, 100 + b]);
+    }
+
+    #[test]
+    fn crop_bars_keeps_the_picture() {
+        let image = boxed(1000, 800, 800, 600, [0, 0, 0]);
+        let bars = letterbox_bars(&image);
+        let picture = crop_bars(image.clone(), bars);
+        let b = FRAME_BLEED_PX as u32;
+        assert_eq!(
+            (picture.width(), picture.height()),
+            (800 - 2 * b, 600 - 2 * b)
+        );
+        assert_eq!(picture.get_pixel(0, 0), image.get_pixel(100 + b, 100 + b));
+        // No bars, or bars that would leave nothing: the image as it is.
+        let same = crop_bars(image.clone(), [0; 4]);
+        assert_eq!(same.as_bytes(), image.as_bytes());
+        let same = crop_bars(image.clone(), [0, 400, 0, 400]);
+        assert_eq!((same.width(), same.height()), (1000, 800));
     }
 
     #[test]

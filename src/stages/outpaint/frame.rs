@@ -8,6 +8,25 @@ use std::collections::VecDeque;
 /// Widest frame band [`frame_border`] accepts, as a fraction of the image side.
 pub const MAX_FRAME_FRACTION: f32 = 0.04;
 
+/// Per-channel distance from a frame's (or a bar's) colour of a pixel that belongs to it.
+pub(super) const FLAT_TOLERANCE: f32 = 0.06;
+/// A frame (or a bar) is black below this luma (white above `1 −` it).
+pub(super) const DARK_LUMA: f32 = 0.08;
+
+/// The mean colour of `line` (black when empty).
+pub(super) fn mean_colour(line: &[[f32; 3]]) -> [f32; 3] {
+    let sum = line
+        .iter()
+        .fold([0.0f32; 3], |a, c| [a[0] + c[0], a[1] + c[1], a[2] + c[2]]);
+    let n = line.len().max(1) as f32;
+    sum.map(|s| s / n)
+}
+
+/// True when `c` lies within [`FLAT_TOLERANCE`] of `colour` in every channel.
+pub(super) fn is_flat(c: [f32; 3], colour: [f32; 3]) -> bool {
+    (0..3).all(|k| (c[k] - colour[k]).abs() <= FLAT_TOLERANCE)
+}
+
 /// The widths `[left, top, right, bottom]` of a flat black or white frame around `image` (a
 /// painting's frame line, a scanner margin, a letterbox bar): from each edge inward, every
 /// line whose pixels are all within 0.06 of the outermost line's mean colour, per channel,
@@ -28,19 +47,11 @@ fn frame_bands(image: &RgbRaster) -> [(usize, [f32; 3]); 4] {
     // `line(i)` lists the pixels of the i-th line from one edge; `n` lines at most.
     let band = |lines: usize, line: &dyn Fn(usize) -> Vec<[f32; 3]>| -> (usize, [f32; 3]) {
         let cap = ((lines as f32 * MAX_FRAME_FRACTION).floor() as usize).min(lines / 2);
-        let outer = line(0);
-        let mean = outer
-            .iter()
-            .fold([0.0f32; 3], |a, c| [a[0] + c[0], a[1] + c[1], a[2] + c[2]]);
-        let n = outer.len().max(1) as f32;
-        let mean = [mean[0] / n, mean[1] / n, mean[2] / n];
-        if (0.08..=0.92).contains(&luma(mean)) {
+        let mean = mean_colour(&line(0));
+        if (DARK_LUMA..=1.0 - DARK_LUMA).contains(&luma(mean)) {
             return (0, mean);
         }
-        let flat = |px: &[[f32; 3]]| {
-            px.iter()
-                .all(|c| (0..3).all(|k| (c[k] - mean[k]).abs() <= 0.06))
-        };
+        let flat = |px: &[[f32; 3]]| px.iter().all(|&c| is_flat(c, mean));
         ((0..cap).take_while(|&i| flat(&line(i))).count(), mean)
     };
     let column = |x: usize| (0..h).map(|y| image.at(x, y)).collect::<Vec<_>>();
@@ -120,7 +131,7 @@ pub fn frame_mask(image: &RgbRaster) -> MaskRaster {
         let cap = ((depth as f32 * MAX_FRAME_FRACTION).floor() as usize)
             .min(depth / 2)
             .max(width);
-        let flat = |c: [f32; 3]| (0..3).all(|k| (c[k] - mean[k]).abs() <= 0.06);
+        let flat = |c: [f32; 3]| is_flat(c, mean);
         // Flood from the outer line, within `cap` of the side.
         let offset = |x: usize, y: usize| match side {
             0 => x,

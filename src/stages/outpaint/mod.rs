@@ -28,7 +28,7 @@ mod layout;
 mod seam;
 mod smooth;
 
-pub use bars::{MAX_BAR_FRACTION, letterbox_bars};
+pub use bars::{MAX_BAR_FRACTION, crop_bars, letterbox_bars};
 pub use floor::{FLOOR_BAND, FLOOR_MAX_GROWTH, floor_below};
 pub use footprint::{Footprint, canvas_from_views, footprint_from_views};
 pub use frame::{FRAME_BLEED_PX, MAX_FRAME_FRACTION, MAX_RIM_FRACTION, frame_border, frame_mask};
