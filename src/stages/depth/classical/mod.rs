@@ -5,7 +5,8 @@
 //! image reduced to [`ClassicalDepthParams::work_size_px`], fused, refined at full resolution by
 //! a fast guided filter so depth edges sit on image edges, and converted to depth `Z`:
 //!
-//! 1. **Sky**: bright, low-texture pixels connected to the top border (flood fill).
+//! 1. **Sky**: bright, low-texture pixels connected to the top border (flood fill); above the
+//!    horizon that sky gives, smooth clouds lit by a low sun join it ([`sunlit`]).
 //! 2. **Horizon**: the user's override, else the median lower edge of the sky, else a default.
 //! 3. **Position / ground plane** ("tour into the picture"): below the horizon a ground plane
 //!    seen from camera height `h` has `Z = h·fy/(v − v_h)`, i.e. disparity linear in `v`.
@@ -2071,6 +2072,86 @@ mod tests {
         );
         // The cloud is not nearer than the ground below the horizon.
         assert!(e.depth.at(35, 16) >= e.depth.at(80, 60));
+    }
+
+    #[test]
+    fn a_cloud_lit_by_a_low_sun_is_sky_and_a_red_tree_is_not() {
+        assert!(sunlit([0.62, 0.45, 0.38])); // a brown cloud's underside
+        assert!(sunlit([0.85, 0.6, 0.35])); // an orange glow, not bright enough for sky_coloured
+        assert!(!sky_coloured([0.62, 0.45, 0.38]) && !sky_coloured([0.85, 0.6, 0.35]));
+        assert!(!sunlit([0.9, 0.15, 0.1])); // a red tree
+        assert!(!sunlit([0.3, 0.6, 0.2])); // foliage
+        let (w, h) = (160, 100);
+        let mut img = landscape(w, h, 50);
+        // At the left a soft-edged brown cloud band (from row 18 down) over an orange glow
+        // (from row 32 down) that runs down to the ground at row 50: the band reaches the
+        // ground through the glow. At the right a smooth red block (a tree's crown) in the
+        // sky.
+        let (cloud, glow) = ([0.62, 0.45, 0.38], [0.85, 0.6, 0.35]);
+        for y in 18..50 {
+            for x in 0..70 {
+                let alpha = ((70 - x) as f32 / 12.0).min(1.0) * ((y - 17) as f32 / 10.0).min(1.0);
+                let g = ((y as f32 - 32.0) / 8.0).clamp(0.0, 1.0);
+                let sky = img.at(x, y);
+                img.set(
+                    x,
+                    y,
+                    std::array::from_fn(|c| {
+                        let over = cloud[c] + (glow[c] - cloud[c]) * g;
+                        sky[c] + (over - sky[c]) * alpha
+                    }),
+                );
+            }
+        }
+        for y in 10..22 {
+            for x in 120..136 {
+                img.set(x, y, [0.9, 0.15, 0.1]);
+            }
+        }
+        let a = estimator()
+            .analyse(&img, &intrinsics(w, h), &Progress::none())
+            .unwrap();
+        let e = a.estimate;
+        check_sane(&e, w, h);
+        assert!(e.sky.at(30, 28) > 0.5, "the lit cloud is sky");
+        assert!(e.sky.at(30, 42) > 0.5, "the glow is sky");
+        assert!(e.sky.at(128, 16) < 0.5, "the red crown is not sky");
+        assert!(e.sky.at(30, 70) < 0.5, "the ground is not sky");
+        let far = e.depth.data().iter().copied().fold(0.0f32, f32::max);
+        assert!(
+            e.depth.at(30, 28) > 0.99 * far,
+            "the lit cloud is at the far plane"
+        );
+        assert!(
+            e.depth.at(128, 16) < 0.5 * far,
+            "the crown is in front of the sky"
+        );
+    }
+
+    #[test]
+    fn a_sunsets_lit_clouds_are_sky_on_a_real_photo() {
+        // evening_glow at 320 × 200: the orange underside of the dark cloud band (120, 48) and
+        // the brown cloud at the right (270, 37) were left out of the sky, so the motion
+        // suggestion drifted the cloud's top and held its underside; the sky's horizon stays.
+        let img = load_test_photo("evening_glow_320.jpg");
+        let (w, h) = img.size();
+        let a = estimator()
+            .analyse(&img, &intrinsics(w, h), &Progress::none())
+            .unwrap();
+        check_sane(&a.estimate, w, h);
+        for (x, y) in [
+            (110, 48),
+            (120, 48),
+            (130, 48),
+            (265, 36),
+            (270, 37),
+            (275, 38),
+        ] {
+            assert!(a.estimate.sky.at(x, y) > 0.5, "({x}, {y}) is sky");
+        }
+        assert!((a.horizon - 0.304).abs() < 0.01, "horizon {}", a.horizon);
+        // The mountains and the shore below stay out of it.
+        assert!(median_depth(&a.estimate.sky, [0.0, 0.36, 1.0, 1.0]) < 0.5);
     }
 
     /// A pale sky brightening towards a sea horizon between rows `line` and `line + 1`, a calm

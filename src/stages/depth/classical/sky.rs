@@ -15,11 +15,44 @@ pub fn sky_coloured(c: Rgb) -> bool {
     !vegetation && (blue || saturation <= 0.35 || luma(c) >= 0.65)
 }
 
+/// Saturation up to which a warm colour can be a cloud lit by a low sun ([`sunlit`]).
+pub const SUNLIT_MAX_SATURATION: f32 = 0.6;
+
+/// Whether a colour can be a cloud lit by a low sun: not vegetation-green, saturation up to
+/// [`SUNLIT_MAX_SATURATION`] (an orange or pink cloud, a brown cloud's underside; a red
+/// autumn tree or a kite is more saturated).
+pub fn sunlit(c: Rgb) -> bool {
+    let max = c[0].max(c[1]).max(c[2]);
+    let min = c[0].min(c[1]).min(c[2]);
+    let saturation = if max > 1e-3 { (max - min) / max } else { 0.0 };
+    let vegetation = c[1] > c[0] + 0.03 && c[1] > c[2] + 0.03;
+    !vegetation && saturation <= SUNLIT_MAX_SATURATION
+}
+
+/// The candidates 4-connected to a candidate of the top row.
+fn flood_from_top(candidate: &MaskRaster) -> GrayRaster {
+    let (w, h) = candidate.size();
+    let mut sky = Raster::new(w, h, 0.0f32);
+    let mut queue = VecDeque::new();
+    for x in 0..w {
+        if h > 0 && candidate.at(x, 0) {
+            sky.set(x, 0, 1.0);
+            queue.push_back((x, 0usize));
+        }
+    }
+    flood(&mut sky, &mut queue, |_, _, nx, ny| candidate.at(nx, ny));
+    sky
+}
+
 /// Hard sky mask (1 = sky): candidates 4-connected to a candidate in the top row. A candidate
 /// is [`sky_coloured`] and either light and smooth (luma ≥ `sky_min_luma`, texture ≤
 /// `sky_max_texture`) or much brighter than the image (luma ≥ `sky_bright_factor` × median
-/// luma: sky seen through branches, bright clouds). A "sky" darker than the rest of the
-/// picture is none (a dark ceiling, the tops of cups seen from above).
+/// luma: sky seen through branches, bright clouds). Then, when that sky gives a horizon
+/// ([`horizon_from_sky`]), the flood runs again with the light and smooth pixels above the
+/// horizon that are [`sunlit`] added to the candidates: a sunset's orange, pink or brown cloud
+/// (too saturated or too dark for [`sky_coloured`]) is sky, while below the horizon a warm,
+/// smooth field or wall still is not. A "sky" darker than the rest of the picture is none (a
+/// dark ceiling, the tops of cups seen from above).
 pub(super) fn sky_mask(
     work: &RgbRaster,
     work_luma: &GrayRaster,
@@ -29,21 +62,23 @@ pub(super) fn sky_mask(
     let (w, h) = work.size();
     let median_luma = quantile(work_luma.data(), 0.5).unwrap_or(0.0);
     let bright = (p.sky_bright_factor * median_luma).max(p.sky_min_luma);
+    let smooth_and_light = |x: usize, y: usize| {
+        work_luma.at(x, y) >= p.sky_min_luma && texture.at(x, y) <= p.sky_max_texture
+    };
     let candidate = Raster::from_fn(w, h, |x, y| {
-        let c = work.at(x, y);
-        let l = work_luma.at(x, y);
-        let smooth_and_light = l >= p.sky_min_luma && texture.at(x, y) <= p.sky_max_texture;
-        sky_coloured(c) && (smooth_and_light || l >= bright)
+        sky_coloured(work.at(x, y)) && (smooth_and_light(x, y) || work_luma.at(x, y) >= bright)
     });
-    let mut sky = Raster::new(w, h, 0.0f32);
-    let mut queue = VecDeque::new();
-    for x in 0..w {
-        if candidate.at(x, 0) {
-            sky.set(x, 0, 1.0);
-            queue.push_back((x, 0usize));
-        }
+    let mut sky = flood_from_top(&candidate);
+    if let Some(horizon) = horizon_from_sky(&sky) {
+        // Above the horizon that sky gives, a smooth cloud lit by a low sun (orange, pink,
+        // brown) is sky too.
+        let above = horizon * (h - 1) as f32;
+        let lit = Raster::from_fn(w, h, |x, y| {
+            candidate.at(x, y)
+                || ((y as f32) < above && smooth_and_light(x, y) && sunlit(work.at(x, y)))
+        });
+        sky = flood_from_top(&lit);
     }
-    flood(&mut sky, &mut queue, |_, _, nx, ny| candidate.at(nx, ny));
     // The texture blur makes the last rows above a skyline look textured: grow the sky by up
     // to 3 px into bright neighbours of nearly the same colour.
     let similar = |x: usize, y: usize, nx: usize, ny: usize| {
