@@ -143,7 +143,8 @@ impl WorkingSettings {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct PhotoSettings {
-    /// Crop a film still's or a video frame's black bars (a letterbox or a pillarbox, found by
+    /// Crop a film still's or a video frame's black bars (a letterbox or a pillarbox), or the
+    /// white padding an app adds to fit a photo into a square (found by
     /// [`crate::stages::outpaint::letterbox_bars`]) before anything else: they are not scene,
     /// and kept they would move with the scene in every frame. On for a new project.
     pub crop_bars: bool,

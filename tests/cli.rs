@@ -1052,7 +1052,7 @@ fn a_film_stills_bars_are_cropped_unless_kept() {
         String::from_utf8_lossy(&o.stdout),
         String::from_utf8_lossy(&o.stderr)
     );
-    assert!(said.contains("black bars cropped (top"), "{said}");
+    assert!(said.contains("bars cropped (top"), "{said}");
     let frame = image::open(&frames_in(&d.join("cropped"))[0])
         .unwrap()
         .to_rgb8();
@@ -1097,6 +1097,26 @@ fn a_film_stills_bars_are_cropped_unless_kept() {
         let map = image::open(&out).unwrap();
         assert_eq!((map.width(), map.height()), size);
         let said = String::from_utf8_lossy(&o.stderr);
-        assert_eq!(said.contains("black bars cropped"), !keep, "{said}");
+        assert_eq!(said.contains("bars cropped"), !keep, "{said}");
     }
+    // An app's white padding (the photo fitted into a square, saved as a JPEG) goes the same
+    // way.
+    let padded = d.join("padded.jpg");
+    common::white_padded_still(300, 300, 188)
+        .save(&padded)
+        .unwrap();
+    let out = d.join("depth_padded.png");
+    let o = common::exe()
+        .arg("depth")
+        .arg(&padded)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let said = String::from_utf8_lossy(&o.stderr);
+    assert!(said.contains("bars cropped (top"), "{said}");
+    let map = image::open(&out).unwrap();
+    assert_eq!(map.width(), 300);
+    assert!((180..=188).contains(&map.height()), "{}", map.height());
 }

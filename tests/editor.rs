@@ -1535,7 +1535,7 @@ fn a_target_stroke_takes_the_depth_of_a_point() {
     assert!((under / there - 1.0).abs() < 0.05, "{under} vs {there}");
 }
 
-/// The Input tab says which black bars a film still lost, and "Crop black bars" turns the crop
+/// The Input tab says which black bars a film still lost, and "Crop bars" turns the crop
 /// over as one undoable edit that keeps a depth target on its photo pixel.
 #[test]
 fn a_film_stills_bars_are_cropped_and_the_input_tab_can_keep_them() {
@@ -1570,7 +1570,7 @@ fn a_film_stills_bars_are_cropped_and_the_input_tab_can_keep_them() {
         h.query_by_label("cropped: top 48 px, bottom 48 px")
             .is_some()
     );
-    h.get_by_label("Crop black bars").click();
+    h.get_by_label("Crop bars").click();
     h.step();
     wait_idle(&mut h, limit);
     let kept = h.state().project().unwrap().clone();

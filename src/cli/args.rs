@@ -208,8 +208,9 @@ pub(crate) struct DepthArgs {
     /// grey PNGs into this folder and print its analysis (horizon, haziness, …).
     #[arg(long, value_name = "DIR")]
     pub(crate) cues: Option<PathBuf>,
-    /// Keep a film still's black bars (by default a letterbox or pillarbox is cropped, as
-    /// `render` does, and the depth map is the picture's).
+    /// Keep the bars around the picture (by default a film still's black letterbox or
+    /// pillarbox, or an app's white padding, is cropped, as `render` does, and the depth map is
+    /// the picture's).
     #[arg(long)]
     pub(crate) keep_bars: bool,
 }
@@ -947,8 +948,9 @@ pub(crate) struct RenderArgs {
     /// Do not outpaint: the canvas is the photo.
     #[arg(long)]
     pub(crate) no_outpaint: bool,
-    /// Keep a film still's black bars (a letterbox or pillarbox is cropped by default; a project
-    /// keeps its own choice in `photo.crop_bars`).
+    /// Keep the bars around the picture (a film still's black letterbox or pillarbox, or an
+    /// app's white padding, is cropped by default; a project keeps its own choice in
+    /// `photo.crop_bars`).
     #[arg(long)]
     pub(crate) keep_bars: bool,
     /// The size the scene is built at: `auto` (what the output shows at the path's largest

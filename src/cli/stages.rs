@@ -14,7 +14,7 @@ pub(crate) fn depth(args: DepthArgs, cancel: Arc<AtomicBool>) -> anyhow::Result<
             photo = makeit4d::stages::outpaint::crop_bars(photo, bars);
             let (w, h) = (photo.width(), photo.height());
             eprintln!(
-                "photo: black bars cropped ({}; the picture is {w}×{h}, and so is the depth); \
+                "photo: bars cropped ({}; the picture is {w}×{h}, and so is the depth); \
                  --keep-bars keeps them",
                 makeit4d::scene::WorkingSize::sides(bars)
             );

@@ -133,12 +133,12 @@ impl WorkingSize {
         sides.join(", ")
     }
 
-    /// One line saying which black bars were cropped from the photo, if any.
+    /// One line saying which bars (black or white) were cropped from the photo, if any.
     pub fn bars_note(&self) -> Option<String> {
         let (w, h) = self.photo;
         self.bars_cropped().map(|sides| {
             format!(
-                "photo: black bars cropped ({sides}; the picture is {w}×{h}); --keep-bars or \
+                "photo: bars cropped ({sides}; the picture is {w}×{h}); --keep-bars or \
                  photo.crop_bars = false in the project keeps them"
             )
         })

@@ -20,6 +20,16 @@ pub fn data(name: &str) -> PathBuf {
 /// `tests/data/evening_glow_320.jpg` as a film still: the photo resized to `w × picture_h`,
 /// centred in a `w × h` frame between black bars (levels 0–2, a little noise as a JPEG's).
 pub fn letterboxed_still(w: u32, h: u32, picture_h: u32) -> image::RgbImage {
+    still_between_bars(w, h, picture_h, 0)
+}
+
+/// The same between white bars (levels 253–255): the padding an app adds to fit a photo into
+/// a square.
+pub fn white_padded_still(w: u32, h: u32, picture_h: u32) -> image::RgbImage {
+    still_between_bars(w, h, picture_h, 253)
+}
+
+fn still_between_bars(w: u32, h: u32, picture_h: u32, bar: u8) -> image::RgbImage {
     let picture = image::open(data("evening_glow_320.jpg"))
         .expect("the sample photo")
         .resize_exact(w, picture_h, image::imageops::FilterType::Triangle)
@@ -29,7 +39,7 @@ pub fn letterboxed_still(w: u32, h: u32, picture_h: u32) -> image::RgbImage {
         if (top..top + picture_h).contains(&y) {
             *picture.get_pixel(x, y - top)
         } else {
-            image::Rgb([((x + y) % 3) as u8; 3])
+            image::Rgb([bar + ((x + y) % 3) as u8; 3])
         }
     })
 }

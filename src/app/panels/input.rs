@@ -132,18 +132,19 @@ impl StagePanel for InputPanel {
     }
 }
 
-/// The "Crop black bars" switch (one undo step; the edits placed on the picture move with
+/// The "Crop bars" switch (one undo step; the edits placed on the picture move with
 /// it, [`crate::project::Project::move_picture`]) and what it crops.
 fn bars_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, working: Option<crate::scene::WorkingSize>) {
     let mut crop = cx.project.photo.crop_bars;
     // Until the photo is read, where the bars are (and so where the edits go) is not known.
     ui.add_enabled(
         working.is_some(),
-        egui::Checkbox::new(&mut crop, "Crop black bars"),
+        egui::Checkbox::new(&mut crop, "Crop bars"),
     )
     .on_hover_text(
-        "A film still's letterbox or pillarbox is not scene: cropped, the picture fills every \
-         frame instead of bars moving with it",
+        "A film still's black letterbox or pillarbox, or the white padding an app adds to fit a \
+         photo into a square, is not scene: cropped, the picture fills every frame instead of \
+         bars moving with it",
     );
     let Some(working) = working else {
         return;
@@ -158,7 +159,7 @@ fn bars_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, working: Option<crate::scene:
             (found, [0; 4])
         };
         let size = [working.size.0, working.size.1];
-        cx.edit("Crop black bars", |p| {
+        cx.edit("Crop bars", |p| {
             p.move_picture(photo, from, to, size);
             p.photo.crop_bars = crop;
         });
@@ -169,7 +170,7 @@ fn bars_ui(ui: &mut Ui, cx: &mut PanelContext<'_>, working: Option<crate::scene:
             "found, kept: {}",
             crate::scene::WorkingSize::sides(found)
         )),
-        (None, false) => ui.label("no black bars found"),
+        (None, false) => ui.label("no bars found"),
     };
 }
 

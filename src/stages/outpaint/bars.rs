@@ -1,5 +1,6 @@
-//! Black bars around a still from a film or a video (letterbox, pillarbox), cropped before the
-//! scene is built ([`letterbox_bars`]).
+//! Black bars around a still from a film or a video (letterbox, pillarbox), and the white
+//! padding an app adds to fit a photo into a square, cropped before the scene is built
+//! ([`letterbox_bars`]).
 
 use super::frame::{DARK_LUMA, FRAME_BLEED_PX, MAX_FRAME_FRACTION, is_flat, mean_colour};
 use crate::raster::luma;
@@ -18,10 +19,18 @@ const BAR_FLAT_SHARE: f32 = 0.98;
 const BAR_TEXT_SHARE: f32 = 0.5;
 /// Smallest mean flat share over a whole bar.
 const BAR_MEAN_SHARE: f32 = 0.9;
+/// A white bar's pixels lie within this of its colour, per channel: padding is one colour
+/// (a JPEG's noise on it is a level or two), a bright sky or a snowfield varies more.
+pub const WHITE_TOLERANCE: f32 = 0.02;
+/// The median step (the largest channel's) from a white bar's colour to the first line of the
+/// picture: an edge, not a shading.
+pub const WHITE_EDGE_STEP: f32 = 0.1;
+/// Lines of a white bar next to the picture that a JPEG's ringing may leave unflat (its block).
+pub const JPEG_BLOCK: usize = 8;
 
-/// The widths `[left, top, right, bottom]` (pixels) of the black bars around `image` that are
-/// not the picture: a letterbox (top and bottom), a pillarbox (left and right) or both, found
-/// as follows. From each edge inward, with `c` the mean colour of the outermost line (it must
+/// The widths `[left, top, right, bottom]` (pixels) of the black or white bars around `image`
+/// that are not the picture: a letterbox (top and bottom), a pillarbox (left and right) or
+/// both, found as follows. From each edge inward, with `c` the mean colour of the outermost line (it must
 /// be black, luma < 0.08), the bar runs over the lines whose pixels lie within 0.06 of `c`
 /// (per channel): every line in it at least half such pixels (a line of burned-in subtitles
 /// may cross a bar), all of them together 90 %, and the first line with fewer than half is the
@@ -29,6 +38,14 @@ const BAR_MEAN_SHARE: f32 = 0.9;
 /// photo, not a bar). The bar ends at its last line with at least 98 % such pixels, or at the
 /// picture when at most `2 ·` [`FRAME_BLEED_PX`] lines lie between (the bar's JPEG-ringed
 /// edge). Then [`FRAME_BLEED_PX`] more pixels go with it (the ringing inside the picture).
+///
+/// A white bar (the outermost line's luma above 0.92: the padding an app adds to fit a photo
+/// into a square) is held to more, as a bright sky, a snowfield or fog can be nearly flat too:
+/// its pixels within [`WHITE_TOLERANCE`] of its colour, 98 % of them over the whole bar (no
+/// captions), ending at the first line that steps from it by [`WHITE_EDGE_STEP`] (median; fog
+/// and an overcast sky only shade out of the tolerance) within [`JPEG_BLOCK`] lines of its
+/// last line flat all across (a straight edge, a JPEG's ringing before it; a sky ends along a
+/// skyline), and both bars of a pair of one colour (within [`WHITE_TOLERANCE`]).
 ///
 /// Bars are cropped only in pairs — both top and bottom, or both left and right — and only
 /// when each is wider than [`MAX_FRAME_FRACTION`] of the side: a thinner black line is a frame,
@@ -79,9 +96,16 @@ type Line<'a> = &'a dyn Fn(usize) -> Vec<[f32; 3]>;
 /// The widths of the bars at both ends of `lines` lines (each read by `near(i)` / `far(i)`, the
 /// i-th line from its edge), bleed included; `(0, 0)` unless both are bars.
 fn bar_pair(lines: usize, near: Line, far: Line) -> (usize, usize) {
-    let (a, b) = (bar(lines, near), bar(lines, far));
+    let ((a, colour_a), (b, colour_b)) = (bar(lines, near), bar(lines, far));
     let min = (lines as f32 * MAX_FRAME_FRACTION).floor() as usize;
     if a <= min || b <= min {
+        return (0, 0);
+    }
+    let white = |c: [f32; 3]| luma(c) >= 1.0 - DARK_LUMA;
+    if white(colour_a) != white(colour_b)
+        || (white(colour_a) && !within(colour_a, colour_b, WHITE_TOLERANCE))
+    {
+        // A black bar against a white one, or two whites of different shades: not padding.
         return (0, 0);
     }
     let bleed = |width: usize| (width + FRAME_BLEED_PX).min(lines / 2);
@@ -89,25 +113,75 @@ fn bar_pair(lines: usize, near: Line, far: Line) -> (usize, usize) {
     if a + b >= lines { (0, 0) } else { (a, b) }
 }
 
-/// The width of the bar along one edge, its bleed not included (see [`letterbox_bars`]).
-fn bar(lines: usize, line: Line) -> usize {
+/// True when `c` lies within `tolerance` of `colour` in every channel.
+fn within(c: [f32; 3], colour: [f32; 3], tolerance: f32) -> bool {
+    (0..3).all(|k| (c[k] - colour[k]).abs() <= tolerance)
+}
+
+/// The width of the bar along one edge, its bleed not included, and its colour (see
+/// [`letterbox_bars`]); width 0 when there is none.
+fn bar(lines: usize, line: Line) -> (usize, [f32; 3]) {
     let cap = (lines as f32 * MAX_BAR_FRACTION).floor() as usize;
     let outer = line(0);
     if outer.is_empty() {
-        return 0;
+        return (0, [0.0; 3]);
     }
-    // Bars are black: a flat white or grey band is a sky, a wall or a mat, never cropped.
+    // Bars are black or white: a flat grey or coloured band is a wall, a sky or a mat.
     let colour = mean_colour(&outer);
-    if luma(colour) >= DARK_LUMA {
-        return 0;
+    let white = luma(colour) >= 1.0 - DARK_LUMA;
+    if luma(colour) >= DARK_LUMA && !white {
+        return (0, colour);
+    }
+    if white {
+        return (white_bar_width(cap.min(lines - 1), colour, line), colour);
     }
     let share = |i: usize| {
         let px = line(i);
         let near = px.iter().filter(|&&c| is_flat(c, colour)).count();
         near as f32 / px.len().max(1) as f32
     };
+    (bar_width(cap.min(lines - 1), share), colour)
+}
+
+/// Where a white bar of `colour` ends, `0` for none (see [`letterbox_bars`]), looking at lines
+/// `0..=last`: at the first line whose median step from `colour` (the largest channel's) is
+/// [`WHITE_EDGE_STEP`], within [`JPEG_BLOCK`] lines of the last line flat all across, with 98 %
+/// of the lines' pixels before that within [`WHITE_TOLERANCE`].
+fn white_bar_width(last: usize, colour: [f32; 3], line: Line) -> usize {
+    let (mut flat, mut shares) = (0, Vec::new());
+    for i in 0..=last {
+        let px = line(i);
+        let mut steps: Vec<f32> = px
+            .iter()
+            .map(|c| (0..3).map(|k| (c[k] - colour[k]).abs()).fold(0.0, f32::max))
+            .collect();
+        let near = steps.iter().filter(|&&d| d <= WHITE_TOLERANCE).count();
+        let middle = steps.len() / 2;
+        let (_, median, _) = steps.select_nth_unstable_by(middle, f32::total_cmp);
+        if *median >= WHITE_EDGE_STEP {
+            // The picture: padding meets it at an edge (a fog's or a sky's shading leaves the
+            // tolerance long before it steps this far).
+            let mean = shares[..flat].iter().sum::<f32>() / flat.max(1) as f32;
+            return if flat > 0 && i - flat <= JPEG_BLOCK && mean >= BAR_FLAT_SHARE {
+                i
+            } else {
+                0
+            };
+        }
+        let share = near as f32 / px.len().max(1) as f32;
+        shares.push(share);
+        if share >= BAR_FLAT_SHARE {
+            flat = i + 1;
+        }
+    }
+    0
+}
+
+/// Where a black bar ends, `0` for none, with `share(i)` the flat share of its `i`-th line (see
+/// [`letterbox_bars`]), looking at lines `0..=last`.
+fn bar_width(last: usize, share: impl Fn(usize) -> f32) -> usize {
     let mut shares = Vec::new();
-    for i in 0..=cap.min(lines - 1) {
+    for i in 0..=last {
         let s = share(i);
         if s < BAR_TEXT_SHARE {
             // The picture: the bar ends at the last line that is flat all across, or here when
@@ -222,11 +296,7 @@ mod tests {
         assert_eq!(letterbox_bars(&thin), [0; 4]);
         let just_over = boxed(1000, 500, 1000, 458, [0, 0, 0]);
         assert_eq!(letterbox_bars(&just_over)[1], 21 + FRAME_BLEED_PX);
-        // White or grey bands are skies, walls and mats.
-        assert_eq!(
-            letterbox_bars(&boxed(1280, 720, 1280, 536, [250, 250, 250])),
-            [0; 4]
-        );
+        // Grey bands are walls and mats.
         assert_eq!(
             letterbox_bars(&boxed(1280, 720, 1280, 536, [120, 120, 120])),
             [0; 4]
@@ -259,6 +329,64 @@ mod tests {
             letterbox_bars(&boxed(640, 400, 640, 400, [0, 0, 0])),
             [0; 4]
         );
+    }
+
+    #[test]
+    fn white_padding_is_cropped() {
+        let b = FRAME_BLEED_PX;
+        // A 3:2 photo padded into a square (an app's "no crop"), white with a JPEG's noise.
+        let image = boxed(1080, 1080, 1080, 720, [250, 250, 250]);
+        assert_eq!(letterbox_bars(&image), [0, 180 + b, 0, 180 + b]);
+        // A portrait padded into a landscape frame.
+        let image = boxed(1280, 720, 540, 720, [255, 255, 255]);
+        assert_eq!(letterbox_bars(&image), [370 + b, 0, 370 + b, 0]);
+    }
+
+    #[test]
+    fn bright_bands_that_are_not_padding_stay() {
+        // `boxed`'s picture between two bands, `band(x, y)` giving their colour.
+        let banded = |band: &dyn Fn(u32, u32) -> [u8; 3]| {
+            let mut image = boxed(1280, 720, 1280, 536, [0, 0, 0]).to_rgb8();
+            for y in (0..92).chain(628..720) {
+                for x in 0..1280 {
+                    image.put_pixel(x, y, Rgb(band(x, y)));
+                }
+            }
+            DynamicImage::ImageRgb8(image)
+        };
+        // Fog or an overcast sky above and a snowfield below: bright and smooth, but shading
+        // by more than the padding's few levels.
+        let fog = banded(&|_, y| {
+            let v = 250 - (y.min(719 - y) / 8) as u8;
+            [v, v, v.saturating_add(2)]
+        });
+        assert_eq!(letterbox_bars(&fog), [0; 4]);
+        // A sky blown out to white that ends along a skyline, not a straight edge.
+        let mut skyline = banded(&|_, _| [255, 255, 255]).to_rgb8();
+        for x in 0..1280u32 {
+            let top = 70 + (x * 37 % 23);
+            for y in top..92 {
+                skyline.put_pixel(x, y, Rgb([40, 70, 30]));
+            }
+        }
+        assert_eq!(letterbox_bars(&DynamicImage::ImageRgb8(skyline)), [0; 4]);
+        // White above and black below, or two different whites: not one padding.
+        assert_eq!(
+            letterbox_bars(&banded(&|_, y| if y < 92 { [255; 3] } else { [0; 3] })),
+            [0; 4]
+        );
+        assert_eq!(
+            letterbox_bars(&banded(&|_, y| if y < 92 { [255; 3] } else { [236; 3] })),
+            [0; 4]
+        );
+        // A caption on a white bar: not padding only (a black bar's subtitles are).
+        let mut caption = boxed(1280, 720, 1280, 536, [255, 255, 255]).to_rgb8();
+        for y in 650..670 {
+            for x in (430..850).step_by(2) {
+                caption.put_pixel(x, y, Rgb([20, 20, 20]));
+            }
+        }
+        assert_eq!(letterbox_bars(&DynamicImage::ImageRgb8(caption)), [0; 4]);
     }
 
     #[test]

@@ -16,7 +16,7 @@
 //! (InfNat-Zero's rule, [`Intrinsics::padded`](crate::geometry::Intrinsics::padded)).
 //!
 //! Files: this module holds [`outpaint`]; `layout.rs` the canvas layout, depth slab and sizing
-//! rule, `footprint.rs` the sizing from the camera path, `frame.rs` the photo's frame, `bars.rs` a film still's black bars,
+//! rule, `footprint.rs` the sizing from the camera path, `frame.rs` the photo's frame, `bars.rs` a film still's black bars (or white padding),
 //! `floor.rs` the ground's disparity continued below it, `smooth.rs` the smooth regions
 //! continued into the margin and `seam.rs` the seam blend.
 
@@ -28,7 +28,9 @@ mod layout;
 mod seam;
 mod smooth;
 
-pub use bars::{MAX_BAR_FRACTION, crop_bars, letterbox_bars};
+pub use bars::{
+    JPEG_BLOCK, MAX_BAR_FRACTION, WHITE_EDGE_STEP, WHITE_TOLERANCE, crop_bars, letterbox_bars,
+};
 pub use floor::{FLOOR_BAND, FLOOR_MAX_GROWTH, floor_below};
 pub use footprint::{Footprint, canvas_from_views, footprint_from_views};
 pub use frame::{FRAME_BLEED_PX, MAX_FRAME_FRACTION, MAX_RIM_FRACTION, frame_border, frame_mask};
