@@ -387,6 +387,13 @@ mod tests {
             }
         }
         assert_eq!(letterbox_bars(&DynamicImage::ImageRgb8(caption)), [0; 4]);
+        // All white, and white past the widest bar.
+        let white = DynamicImage::ImageRgb8(RgbImage::from_pixel(300, 200, Rgb([255; 3])));
+        assert_eq!(letterbox_bars(&white), [0; 4]);
+        assert_eq!(
+            letterbox_bars(&boxed(400, 400, 400, 100, [255, 255, 255])),
+            [0; 4]
+        );
     }
 
     #[test]
