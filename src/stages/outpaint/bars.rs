@@ -2,7 +2,7 @@
 //! padding an app adds to fit a photo into a square, cropped before the scene is built
 //! ([`letterbox_bars`]).
 
-use super::frame::{DARK_LUMA, FRAME_BLEED_PX, MAX_FRAME_FRACTION, is_flat, mean_colour};
+use super::frame::{DARK_LUMA, FRAME_BLEED_PX, MAX_FRAME_FRACTION, is_flat, mean_colour, within};
 use crate::raster::luma;
 use image::{DynamicImage, GenericImageView};
 
@@ -30,8 +30,8 @@ pub const JPEG_BLOCK: usize = 8;
 
 /// The widths `[left, top, right, bottom]` (pixels) of the black or white bars around `image`
 /// that are not the picture: a letterbox (top and bottom), a pillarbox (left and right) or
-/// both, found as follows. From each edge inward, with `c` the mean colour of the outermost line (it must
-/// be black, luma < 0.08), the bar runs over the lines whose pixels lie within 0.06 of `c`
+/// both, found as follows. From each edge inward, with `c` the mean colour of the outermost
+/// line (black: luma < 0.08), the bar runs over the lines whose pixels lie within 0.06 of `c`
 /// (per channel): every line in it at least half such pixels (a line of burned-in subtitles
 /// may cross a bar), all of them together 90 %, and the first line with fewer than half is the
 /// picture, within [`MAX_BAR_FRACTION`] of the side (a black band that runs further is a dark
@@ -101,9 +101,8 @@ fn bar_pair(lines: usize, near: Line, far: Line) -> (usize, usize) {
     if a <= min || b <= min {
         return (0, 0);
     }
-    let white = |c: [f32; 3]| luma(c) >= 1.0 - DARK_LUMA;
-    if white(colour_a) != white(colour_b)
-        || (white(colour_a) && !within(colour_a, colour_b, WHITE_TOLERANCE))
+    if is_white(colour_a) != is_white(colour_b)
+        || (is_white(colour_a) && !within(colour_a, colour_b, WHITE_TOLERANCE))
     {
         // A black bar against a white one, or two whites of different shades: not padding.
         return (0, 0);
@@ -113,9 +112,10 @@ fn bar_pair(lines: usize, near: Line, far: Line) -> (usize, usize) {
     if a + b >= lines { (0, 0) } else { (a, b) }
 }
 
-/// True when `c` lies within `tolerance` of `colour` in every channel.
-fn within(c: [f32; 3], colour: [f32; 3], tolerance: f32) -> bool {
-    (0..3).all(|k| (c[k] - colour[k]).abs() <= tolerance)
+/// Whether a bar's colour is white (luma above 0.92, as [`super::frame_mask`] calls a frame
+/// white).
+fn is_white(colour: [f32; 3]) -> bool {
+    luma(colour) >= 1.0 - DARK_LUMA
 }
 
 /// The width of the bar along one edge, its bleed not included, and its colour (see
@@ -128,11 +128,10 @@ fn bar(lines: usize, line: Line) -> (usize, [f32; 3]) {
     }
     // Bars are black or white: a flat grey or coloured band is a wall, a sky or a mat.
     let colour = mean_colour(&outer);
-    let white = luma(colour) >= 1.0 - DARK_LUMA;
-    if luma(colour) >= DARK_LUMA && !white {
+    if luma(colour) >= DARK_LUMA && !is_white(colour) {
         return (0, colour);
     }
-    if white {
+    if is_white(colour) {
         return (white_bar_width(cap.min(lines - 1), colour, line), colour);
     }
     let share = |i: usize| {

@@ -24,7 +24,12 @@ pub(super) fn mean_colour(line: &[[f32; 3]]) -> [f32; 3] {
 
 /// True when `c` lies within [`FLAT_TOLERANCE`] of `colour` in every channel.
 pub(super) fn is_flat(c: [f32; 3], colour: [f32; 3]) -> bool {
-    (0..3).all(|k| (c[k] - colour[k]).abs() <= FLAT_TOLERANCE)
+    within(c, colour, FLAT_TOLERANCE)
+}
+
+/// True when `c` lies within `tolerance` of `colour` in every channel.
+pub(super) fn within(c: [f32; 3], colour: [f32; 3], tolerance: f32) -> bool {
+    (0..3).all(|k| (c[k] - colour[k]).abs() <= tolerance)
 }
 
 /// The widths `[left, top, right, bottom]` of a flat black or white frame around `image` (a

@@ -7,12 +7,20 @@ use super::*;
 /// grey clouds, haze: `(max − min)/max ≤ 0.35`), or bright (luma ≥ 0.65: a sunset glow). A
 /// saturated, darker red, orange or brown (an autumn tree, a kite, a roof) is not sky.
 pub fn sky_coloured(c: Rgb) -> bool {
+    let blue = c[2] >= c[0].max(c[1]) - 0.02;
+    !vegetation(c) && (blue || saturation(c) <= 0.35 || luma(c) >= 0.65)
+}
+
+/// `(max − min)/max` over the channels (0 for black).
+fn saturation(c: Rgb) -> f32 {
     let max = c[0].max(c[1]).max(c[2]);
     let min = c[0].min(c[1]).min(c[2]);
-    let saturation = if max > 1e-3 { (max - min) / max } else { 0.0 };
-    let vegetation = c[1] > c[0] + 0.03 && c[1] > c[2] + 0.03;
-    let blue = c[2] >= c[0].max(c[1]) - 0.02;
-    !vegetation && (blue || saturation <= 0.35 || luma(c) >= 0.65)
+    if max > 1e-3 { (max - min) / max } else { 0.0 }
+}
+
+/// Green above both red and blue: leaves and grass.
+fn vegetation(c: Rgb) -> bool {
+    c[1] > c[0] + 0.03 && c[1] > c[2] + 0.03
 }
 
 /// Saturation up to which a warm colour can be a cloud lit by a low sun ([`sunlit`]).
@@ -22,11 +30,7 @@ pub const SUNLIT_MAX_SATURATION: f32 = 0.6;
 /// [`SUNLIT_MAX_SATURATION`] (an orange or pink cloud, a brown cloud's underside; a red
 /// autumn tree or a kite is more saturated).
 pub fn sunlit(c: Rgb) -> bool {
-    let max = c[0].max(c[1]).max(c[2]);
-    let min = c[0].min(c[1]).min(c[2]);
-    let saturation = if max > 1e-3 { (max - min) / max } else { 0.0 };
-    let vegetation = c[1] > c[0] + 0.03 && c[1] > c[2] + 0.03;
-    !vegetation && saturation <= SUNLIT_MAX_SATURATION
+    !vegetation(c) && saturation(c) <= SUNLIT_MAX_SATURATION
 }
 
 /// The candidates 4-connected to a candidate of the top row.
