@@ -2129,6 +2129,45 @@ mod tests {
     }
 
     #[test]
+    fn a_glow_does_not_open_the_sky_onto_what_lies_below_the_horizon() {
+        let (w, h) = (160, 100);
+        let mut img = landscape(w, h, 50);
+        // At the left, under the blue sky, a soft orange glow from row 18 to the horizon (row
+        // 50), and below it pale, smooth water (a sky's colour) down to the bottom, walled off
+        // from the sky at the right by a textured dark strip: only the glow joins the water to
+        // the sky.
+        let glow = [0.85, 0.6, 0.35];
+        for y in 18..h {
+            for x in 0..60 {
+                let sky = img.at(x, y);
+                // The glow shades into the water over rows 46–52, as a haze does.
+                let alpha = ((y - 17) as f32 / 10.0).min(1.0);
+                let water = ((y as f32 - 46.0) / 6.0).clamp(0.0, 1.0);
+                let c: Rgb = std::array::from_fn(|c| {
+                    let over = glow[c] + ([0.62, 0.72, 0.85][c] - glow[c]) * water;
+                    sky[c] + (over - sky[c]) * alpha
+                });
+                img.set(x, y, c);
+            }
+            for x in 60..64 {
+                let n = hash(x, y) * 0.5;
+                img.set(x, y, [0.1 + n, 0.1 + n, 0.1 + n]);
+            }
+        }
+        let a = estimator()
+            .analyse(&img, &intrinsics(w, h), &Progress::none())
+            .unwrap();
+        let e = a.estimate;
+        check_sane(&e, w, h);
+        // Had the water joined the sky, the sky would run to the bottom of the picture and be
+        // taken for a backdrop: all of it dropped.
+        assert!(e.sky.at(120, 10) > 0.5, "the sky stays sky");
+        assert!(e.sky.at(30, 40) > 0.5, "the glow is sky");
+        assert!(e.sky.at(30, 80) < 0.5, "the water is not");
+        assert!((a.horizon - 0.5).abs() < 0.03, "horizon {}", a.horizon);
+    }
+
+    #[test]
     fn a_sunsets_lit_clouds_are_sky_on_a_real_photo() {
         // evening_glow at 320 × 200: the orange underside of the dark cloud band (120, 48) and
         // the brown cloud at the right (270, 37) were left out of the sky, so the motion

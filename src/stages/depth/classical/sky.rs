@@ -53,9 +53,10 @@ fn flood_from_top(candidate: &MaskRaster) -> GrayRaster {
 /// `sky_max_texture`) or much brighter than the image (luma ≥ `sky_bright_factor` × median
 /// luma: sky seen through branches, bright clouds). Then, when that sky gives a horizon
 /// ([`horizon_from_sky`]), the flood runs again with the light and smooth pixels above the
-/// horizon that are [`sunlit`] added to the candidates: a sunset's orange, pink or brown cloud
-/// (too saturated or too dark for [`sky_coloured`]) is sky, while below the horizon a warm,
-/// smooth field or wall still is not. A "sky" darker than the rest of the picture is none (a
+/// horizon that are [`sunlit`] added to the candidates, and what it reaches above the horizon
+/// joins the sky: a sunset's orange, pink or brown cloud (too saturated or too dark for
+/// [`sky_coloured`]) is sky, while below the horizon a warm, smooth field or wall, and pale
+/// water that only a glow joins to the sky, still are not. A "sky" darker than the rest of the picture is none (a
 /// dark ceiling, the tops of cups seen from above).
 pub(super) fn sky_mask(
     work: &RgbRaster,
@@ -75,13 +76,19 @@ pub(super) fn sky_mask(
     let mut sky = flood_from_top(&candidate);
     if let Some(horizon) = horizon_from_sky(&sky) {
         // Above the horizon that sky gives, a smooth cloud lit by a low sun (orange, pink,
-        // brown) is sky too.
+        // brown) is sky too. Only there: what the clouds connect to below the horizon (pale
+        // water beyond a glowing band) stays as the strict flood left it.
         let above = horizon * (h - 1) as f32;
         let lit = Raster::from_fn(w, h, |x, y| {
             candidate.at(x, y)
                 || ((y as f32) < above && smooth_and_light(x, y) && sunlit(work.at(x, y)))
         });
-        sky = flood_from_top(&lit);
+        let lit_sky = flood_from_top(&lit);
+        for (i, s) in sky.data_mut().iter_mut().enumerate() {
+            if ((i / w) as f32) < above {
+                *s = s.max(lit_sky.data()[i]);
+            }
+        }
     }
     // The texture blur makes the last rows above a skyline look textured: grow the sky by up
     // to 3 px into bright neighbours of nearly the same colour.
