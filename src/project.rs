@@ -30,8 +30,9 @@ pub struct Project {
     /// The input photo. Relative paths are relative to the project file's folder (or to the
     /// working directory for a project that has not been saved).
     pub input: PathBuf,
-    /// What of the photo is the picture (a film still's black bars are not). A project file
-    /// without this section keeps the whole photo, as every project did before it existed.
+    /// What of the photo is the picture (not a film still's black bars, nor an app's white
+    /// padding). A project file without this section keeps the whole photo, as every project
+    /// did before it existed.
     #[serde(default = "PhotoSettings::whole")]
     pub photo: PhotoSettings,
     /// Output frames.
@@ -371,7 +372,7 @@ impl Project {
     }
 
     /// Moves the edits placed on the picture from one crop of a `photo`-sized photo to
-    /// another (`from`, `to`: the black bars cropped, `[left, top, right, bottom]` photo
+    /// another (`from`, `to`: the bars cropped, `[left, top, right, bottom]` photo
     /// pixels), so that each stays on the same photo pixel: image-relative points (depth
     /// targets and their radii, pop-up clicks and handles, the horizons) are re-expressed in
     /// the new picture, and pixel coordinates (depth strokes, motion) are moved by the crop's

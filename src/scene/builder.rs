@@ -43,7 +43,7 @@ pub struct SceneBuilder {
     decoded: Option<(u64, Arc<image::DynamicImage>)>,
     /// Headers of the inputs, by input key.
     headers: Vec<(u64, crate::image_io::ImageHeader)>,
-    /// The black bars found around the inputs (`[left, top, right, bottom]` photo pixels), by
+    /// The bars (black or white) found around the inputs (`[left, top, right, bottom]` photo pixels), by
     /// input path.
     bars: Vec<(u64, [usize; 4])>,
     /// Proxy depths for the path's magnification, by photo and depth settings.
@@ -338,7 +338,7 @@ impl SceneBuilder {
     }
 
     /// The decoded photo of input key `key` (decoded once, kept while it is the last one),
-    /// its black bars cropped when `project.photo.crop_bars` says so. The bars are looked for
+    /// its bars cropped when `project.photo.crop_bars` says so. The bars are looked for
     /// either way ([`Self::photo_bars`]).
     fn decoded_photo(&mut self, key: u64, project: &Project) -> Result<Arc<image::DynamicImage>> {
         if let Some((k, image)) = &self.decoded
@@ -368,22 +368,21 @@ impl SceneBuilder {
         Ok(image)
     }
 
-    /// The black bars of the photo of input key `key`, `(found, cropped)`: found on its
+    /// The bars of the photo of input key `key`, `(found, cropped)`: found on its
     /// decoded pixels the first time, cropped when `project.photo.crop_bars` (the editor
     /// offers the switch with what it would crop).
     fn photo_bars(&mut self, key: u64, project: &Project) -> Result<([usize; 4], [usize; 4])> {
         let path_key = key_of(0, &project.input);
-        let found = match self.bars.iter().find(|e| e.0 == path_key) {
-            Some(e) => e.1,
-            None => {
-                self.decoded = None;
-                self.decoded_photo(key, project)?;
-                self.bars
-                    .iter()
-                    .find(|e| e.0 == path_key)
-                    .map_or([0; 4], |e| e.1)
-            }
-        };
+        if !self.bars.iter().any(|e| e.0 == path_key) {
+            // Decoding looks for them.
+            self.decoded = None;
+            self.decoded_photo(key, project)?;
+        }
+        let found = self
+            .bars
+            .iter()
+            .find(|e| e.0 == path_key)
+            .map_or([0; 4], |e| e.1);
         Ok((
             found,
             if project.photo.crop_bars {

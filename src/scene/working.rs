@@ -82,12 +82,12 @@ pub enum WorkingReason {
 /// The working size of a scene and why.
 #[derive(Clone, Debug, PartialEq)]
 pub struct WorkingSize {
-    /// The photo's own size (its picture's: without the black bars cropped from it).
+    /// The photo's own size (its picture's: without the bars cropped from it).
     pub photo: (usize, usize),
-    /// The black bars cropped from the photo, `[left, top, right, bottom]` in its pixels
+    /// The bars (black or white) cropped from the photo, `[left, top, right, bottom]` in its pixels
     /// (`project.photo.crop_bars`); all zero when none were.
     pub bars: [usize; 4],
-    /// The black bars found around the photo, cropped or not (what turning
+    /// The bars found around the photo, cropped or not (what turning
     /// `photo.crop_bars` over would crop).
     pub found_bars: [usize; 4],
     /// The size every stage runs at.
@@ -116,7 +116,7 @@ impl WorkingSize {
         self.size == self.photo
     }
 
-    /// The black bars cropped from the photo, as words (`top 92 px, bottom 92 px`); `None`
+    /// The bars cropped from the photo, as words (`top 92 px, bottom 92 px`); `None`
     /// when none were.
     pub fn bars_cropped(&self) -> Option<String> {
         (self.bars != [0; 4]).then(|| Self::sides(self.bars))
@@ -199,7 +199,7 @@ pub fn budget_mib(settings: &WorkingSettings) -> u64 {
 /// Estimated peak bytes of building a scene at `working` pixels from a photo whose decoding
 /// takes `decode_bytes`.
 ///
-/// (For a photo whose black bars are cropped, `decode_bytes` is
+/// (For a photo whose bars are cropped, `decode_bytes` is
 /// [`cropped_decode_bytes`]: the crop is a copy made while the decoded photo is held.)
 pub fn build_bytes(working: (usize, usize), decode_bytes: u64) -> u64 {
     (working.0 as u64 * working.1 as u64).saturating_mul(BUILD_BYTES_PER_PIXEL) + decode_bytes
@@ -338,7 +338,7 @@ pub fn choose_working_size(
     })
 }
 
-/// Peak bytes of decoding a `photo`-sized photo of `decode_bytes` and cropping its black bars
+/// Peak bytes of decoding a `photo`-sized photo of `decode_bytes` and cropping its bars
 /// to `picture`: the decoded photo and the cropped copy, held together for a moment.
 pub fn cropped_decode_bytes(
     decode_bytes: u64,

@@ -306,7 +306,7 @@ pub fn import_depth(
     import_depth_of_picture(path, kind, None, width, height)
 }
 
-/// [`import_depth`] for the picture of a photo whose black bars were cropped (`bars`: `[left,
+/// [`import_depth`] for the picture of a photo whose bars were cropped (`bars`: `[left,
 /// top, right, bottom]` as fractions of the photo's sides): a map with the whole photo's
 /// aspect is cropped alike before it is resampled; one with the picture's own aspect (within
 /// 1 %, made on the cropped picture) is taken as it is. Each case says so in the warnings.
@@ -388,7 +388,7 @@ fn crop_to_picture(
     let near = |a: f64, b: f64| (a / b - 1.0).abs() <= 0.01;
     if near(aspect, picture_aspect) && !near(aspect, photo_aspect) {
         warnings.push(format!(
-            "the depth map is {w}×{h}, the shape of the picture inside the photo's black bars: \
+            "the depth map is {w}×{h}, the shape of the picture inside the photo's bars: \
              taken as the picture's"
         ));
         return depth;
@@ -398,7 +398,7 @@ fn crop_to_picture(
     let x1 = (((1.0 - right) * w as f32).round() as usize).clamp(x0 + 1, w);
     let y1 = (((1.0 - bottom) * h as f32).round() as usize).clamp(y0 + 1, h);
     warnings.push(format!(
-        "the depth map was cropped to {}×{} at ({x0}, {y0}) like the photo's black bars",
+        "the depth map was cropped to {}×{} at ({x0}, {y0}) like the photo's bars",
         x1 - x0,
         y1 - y0
     ));

@@ -67,7 +67,7 @@ pub struct DepthImport {
     pub path: std::path::PathBuf,
     /// What its values mean.
     pub kind: io::DepthFileKind,
-    /// The black bars cropped from the photo (`[left, top, right, bottom]` as fractions of
+    /// The bars (black or white) cropped from the photo (`[left, top, right, bottom]` as fractions of
     /// its sides; set by the scene builder, never saved): a map of the whole photo is cropped
     /// alike ([`io::import_depth_of_picture`]).
     #[serde(skip)]

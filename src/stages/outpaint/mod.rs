@@ -16,9 +16,10 @@
 //! (InfNat-Zero's rule, [`Intrinsics::padded`](crate::geometry::Intrinsics::padded)).
 //!
 //! Files: this module holds [`outpaint`]; `layout.rs` the canvas layout, depth slab and sizing
-//! rule, `footprint.rs` the sizing from the camera path, `frame.rs` the photo's frame, `bars.rs` a film still's black bars (or white padding),
-//! `floor.rs` the ground's disparity continued below it, `smooth.rs` the smooth regions
-//! continued into the margin and `seam.rs` the seam blend.
+//! rule, `footprint.rs` the sizing from the camera path, `frame.rs` the photo's frame,
+//! `bars.rs` a film still's black bars (or white padding), `floor.rs` the ground's disparity
+//! continued below it, `smooth.rs` the smooth regions continued into the margin and `seam.rs`
+//! the seam blend.
 
 mod bars;
 mod floor;
