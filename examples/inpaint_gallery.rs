@@ -83,6 +83,7 @@ fn main() -> anyhow::Result<()> {
                     allowed_source: None,
                     guide: None,
                     seed: 1,
+                    outpaint: false,
                 };
                 let filled = inpainter.inpaint(&request, &Progress::none())?;
                 write_rgb_png(&out.join(format!("{stem}_{tag}_{name}.png")), &filled.image)?;

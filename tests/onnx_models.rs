@@ -448,6 +448,7 @@ fn request<'a>(image: &'a RgbRaster, hole: &'a MaskRaster) -> InpaintRequest<'a>
         allowed_source: None,
         guide: None,
         seed: 7,
+        outpaint: false,
     }
 }
 

@@ -101,6 +101,7 @@ pub(crate) fn inpaint(args: InpaintArgs, cancel: Arc<AtomicBool>) -> anyhow::Res
             allowed_source: None,
             guide: None,
             seed: 0,
+            outpaint: false,
         };
         let filled = inpainter.inpaint(&request, &progress);
         bar.finish_and_clear();
@@ -128,6 +129,7 @@ pub(crate) fn inpaint(args: InpaintArgs, cancel: Arc<AtomicBool>) -> anyhow::Res
             allowed_source: None,
             guide: None,
             seed: args.seed,
+            outpaint: false,
         };
         let filled = inpainter.inpaint(&request, &progress);
         bar.finish_and_clear();

@@ -129,6 +129,7 @@ fn complete_canvas(
             allowed_source: Some(&allowed),
             guide: Some(&disparity),
             seed,
+            outpaint: true,
         },
         progress,
     )?;

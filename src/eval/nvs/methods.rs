@@ -200,6 +200,7 @@ pub(super) fn run_per_frame(
                 allowed_source: None,
                 guide: Some(&disparity),
                 seed: options.seed.wrapping_add(s as u64),
+                outpaint: false,
             },
             &sub,
         )?;

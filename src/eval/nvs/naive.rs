@@ -120,6 +120,7 @@ pub(super) fn fill_holes(
                 allowed_source: None,
                 guide: None,
                 seed,
+                outpaint: false,
             },
             progress,
         )?

@@ -304,6 +304,7 @@ pub fn bench_inpaint(
                     allowed_source: None,
                     guide: None,
                     seed: options.seed,
+                    outpaint: kind == HoleKind::BorderStrip,
                 };
                 let mut times = Vec::with_capacity(repeats);
                 let mut filled = None;

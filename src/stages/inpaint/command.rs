@@ -81,6 +81,7 @@ pub fn inpaint_command(
         allowed_source: None,
         guide: None,
         seed,
+        outpaint: false,
     };
     Ok(PatchMatchInpainter::preset(preset)
         .inpaint(&request, progress)?

@@ -689,6 +689,7 @@ mod pipeline_tests {
                 allowed_source: None,
                 guide: None,
                 seed: 0,
+                outpaint: false,
             };
             let out = fill.inpaint(&request, &Progress::none()).unwrap().image;
             let mut changed = 0;

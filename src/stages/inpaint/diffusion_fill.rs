@@ -643,6 +643,7 @@ mod fixture_tests {
             allowed_source: None,
             guide: Some(&guide),
             seed: 0,
+            outpaint: false,
         };
         let out = fill.inpaint(&request, &Progress::none()).unwrap();
         let g = out.guide.unwrap();
@@ -695,6 +696,7 @@ mod fixture_tests {
             allowed_source: None,
             guide: None,
             seed: 0,
+            outpaint: false,
         };
         assert!(fill.inpaint(&narrow_request, &Progress::none()).is_err());
         let fill = fill.with_fallback(Box::new(|| {

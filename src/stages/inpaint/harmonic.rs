@@ -331,6 +331,7 @@ mod tests {
             allowed_source: None,
             guide: Some(&guide),
             seed: 0,
+            outpaint: false,
         };
         let out = HarmonicInpainter
             .inpaint(&request, &Progress::none())
@@ -363,6 +364,7 @@ mod tests {
             allowed_source: None,
             guide: None,
             seed: 0,
+            outpaint: false,
         };
         let full = HarmonicInpainter
             .inpaint(&request, &Progress::none())
@@ -399,6 +401,7 @@ mod tests {
             allowed_source: None,
             guide: None,
             seed: 0,
+            outpaint: false,
         };
         let out = HarmonicInpainter
             .inpaint(&request, &Progress::none())
@@ -429,6 +432,7 @@ mod tests {
             allowed_source: Some(&allowed),
             guide: None,
             seed: 0,
+            outpaint: false,
         };
         let out = HarmonicInpainter
             .inpaint(&request, &Progress::none())

@@ -47,6 +47,12 @@ pub struct InpaintRequest<'a> {
     pub guide: Option<&'a GrayRaster>,
     /// Seed for every random choice: the same request and seed give the same bytes.
     pub seed: u64,
+    /// The hole is a canvas margin around a photo (outpainting), open towards the image's
+    /// border. An exemplar fill then starts each row of the hole that holds known pixels from
+    /// the row's nearest known pixel, instead of the membrane: nothing bounds a side margin on
+    /// its far side, and the membrane's average of its one border blurs away the horizontal
+    /// bands a landscape is made of (a ridge, a shore, a lake). Other fills ignore it.
+    pub outpaint: bool,
 }
 
 /// The completed image and, when a guide was given, the completed guide.

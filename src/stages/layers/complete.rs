@@ -255,6 +255,7 @@ fn complete_layers(
                 allowed_source: Some(&allowed),
                 guide: Some(known_depth),
                 seed: layer_seed(seed, k),
+                outpaint: false,
             };
             let result = inpainter.inpaint(&request, &sub)?;
             let guide = result.guide.ok_or_else(|| {

@@ -37,7 +37,7 @@ pub use footprint::{Footprint, canvas_from_views, footprint_from_views};
 pub use frame::{FRAME_BLEED_PX, MAX_FRAME_FRACTION, MAX_RIM_FRACTION, frame_border, frame_mask};
 pub use layout::{CanvasLayout, CanvasOptions, CanvasSizing, DepthRange, Placement};
 pub use seam::{blend_seam, blend_seam_sketch, seam_band, seam_step};
-pub use smooth::{SMOOTH_CELL_PX, SMOOTH_RESIDUAL, continue_smooth_regions};
+pub use smooth::{SMOOTH_CELL_PX, SMOOTH_REGION_STEP, SMOOTH_RESIDUAL, continue_smooth_regions};
 
 use crate::error::{Error, Result};
 use crate::progress::Progress;
@@ -93,6 +93,7 @@ pub fn outpaint_unblended(
         allowed_source: Some(&allowed),
         guide: None,
         seed,
+        outpaint: true,
     };
     progress.report(0.0, "outpainting");
     let mut filled = inpainter.inpaint(&request, progress)?;
@@ -183,6 +184,59 @@ mod tests {
                 );
                 // The photo itself, kite included, is unchanged.
                 assert!(red(canvas.at(30 + layout.left_pad, 14 + layout.top_pad)));
+            }
+        }
+    }
+
+    #[test]
+    fn a_side_margin_continues_the_bands_of_a_landscape() {
+        use crate::stages::inpaint::{InpaintPreset, PatchMatchInpainter};
+        // Sky, a thin dark ridge, a lake and gravel, each with some grain, on a canvas that
+        // adds wide margins at the sides (an orbit's canvas).
+        let grain = |x: usize, y: usize| {
+            let n = (x as u32).wrapping_mul(73_856_093) ^ (y as u32).wrapping_mul(19_349_663);
+            (n.wrapping_mul(2_654_435_761) >> 24) as f32 / 255.0 - 0.5
+        };
+        let bands: [(std::ops::Range<usize>, [f32; 3], f32); 4] = [
+            (0..30, [0.55, 0.7, 0.9], 0.02),
+            (30..36, [0.12, 0.18, 0.12], 0.04),
+            (36..50, [0.35, 0.45, 0.55], 0.03),
+            (50..80, [0.5, 0.42, 0.35], 0.2),
+        ];
+        let photo = RgbRaster::from_fn(120, 80, |x, y| {
+            let (_, c, g) = bands.iter().find(|b| b.0.contains(&y)).unwrap();
+            c.map(|v| v + g * grain(x, y))
+        });
+        let layout = CanvasLayout {
+            left_pad: 90,
+            top_pad: 10,
+            width: 300,
+            height: 100,
+        };
+        let inpainter = PatchMatchInpainter::preset(InpaintPreset::Preview);
+        let (canvas, _) = outpaint(&photo, &layout, &inpainter, 5, &Progress::none()).unwrap();
+        // Every band reaches the canvas's outer columns on its own rows (a row or two of
+        // slack at each band's edges).
+        for (rows, colour, _) in &bands {
+            for (x0, x1) in [(0, 20), (280, 300)] {
+                let (mut sum, mut n) = ([0.0f32; 3], 0.0f32);
+                for y in rows.start + 2..rows.end - 2 {
+                    for x in x0..x1 {
+                        let v = canvas.at(x, y + layout.top_pad);
+                        for k in 0..3 {
+                            sum[k] += v[k];
+                        }
+                        n += 1.0;
+                    }
+                }
+                let mean = sum.map(|v| v / n);
+                let off = (0..3)
+                    .map(|k| (mean[k] - colour[k]).abs())
+                    .fold(0.0, f32::max);
+                assert!(
+                    off < 0.06,
+                    "rows {rows:?}, columns {x0}..{x1}: {mean:?} against {colour:?}"
+                );
             }
         }
     }

@@ -18,6 +18,10 @@ pub(super) const SMOOTH_TAPER_CELLS: f32 = 8.0;
 pub(super) const SMOOTH_SPREAD: f32 = 0.5;
 /// Largest half-width of that window, cells.
 pub(super) const SMOOTH_SPREAD_MAX_CELLS: isize = 12;
+/// Colour difference (largest channel) between two source cells' known means at which a source
+/// no longer counts in the other's window: the window blends one region's planes (a sky's
+/// gradient), never a neighbouring band's (the lake below a sky, a ridge between them).
+pub const SMOOTH_REGION_STEP: f32 = 0.1;
 
 /// Continues the low frequencies of smooth regions (a sky's colour ramp, fog, calm water) into a
 /// filled hole: exemplar synthesis copies patches, and a ramp outpainted from copies turns into a
@@ -28,7 +32,9 @@ pub(super) const SMOOTH_SPREAD_MAX_CELLS: isize = 12;
 /// a smoothness weight (RMS residual `r` below [`SMOOTH_RESIDUAL`]: `1 − r/SMOOTH_RESIDUAL`, else
 /// 0). A hole cell `q` blends, weighted, the planes of the source cells of the hole cells within
 /// `SMOOTH_SPREAD` × its distance from its own source (at most `SMOOTH_SPREAD_MAX_CELLS`), each
-/// extrapolated to `q` and tapered (`SMOOTH_TAPER_CELLS`): one column following one source
+/// extrapolated to `q`, tapered (`SMOOTH_TAPER_CELLS`) and weighted down linearly with its
+/// known colour's difference from `q`'s own source's, to nothing at [`SMOOTH_REGION_STEP`]
+/// (a side margin's lake rows are not pulled towards the sky above them): one column following one source
 /// would carry that source's slope out, and columns with different slopes would drift apart into
 /// streaks. The cell's mean of the fill is moved onto that target by the window's mean weight;
 /// the correction is interpolated bilinearly between cell centres and added to the hole pixels,
@@ -74,7 +80,8 @@ pub fn continue_smooth_regions(filled: &mut RgbRaster, hole: &MaskRaster) {
     if !is_known.iter().any(|&k| k) || is_known.iter().all(|&k| k) {
         return;
     }
-    // Nearest known cell of every cell (breadth first, 8-neighbours).
+    // Nearest known cell of every cell: breadth first (8-neighbours) for the reachable ones,
+    // then made Euclidean by raster sweeps (`euclidean_nearest`).
     let mut nearest = vec![u32::MAX; cw * ch];
     let mut queue = std::collections::VecDeque::new();
     for (i, &k) in is_known.iter().enumerate() {
@@ -95,6 +102,7 @@ pub fn continue_smooth_regions(filled: &mut RgbRaster, hole: &MaskRaster) {
             }
         }
     }
+    euclidean_nearest(&mut nearest, cw, ch);
     // Plane fits, memoised per source cell: (value, gradient x, gradient y, weight).
     let mut fits: Vec<Option<Option<PlaneFit>>> = vec![None; cw * ch];
     let mut fit_of =
@@ -113,7 +121,7 @@ pub fn continue_smooth_regions(filled: &mut RgbRaster, hole: &MaskRaster) {
         let own = nearest[q] as usize;
         let distance = ((own % cw) as f32 - qx as f32).hypot((own / cw) as f32 - qy as f32);
         let radius = ((distance * SMOOTH_SPREAD).round() as isize).min(SMOOTH_SPREAD_MAX_CELLS);
-        let (mut sum, mut total, mut count) = ([0.0f32; 3], 0.0f32, 0usize);
+        let (mut sum, mut total, mut count) = ([0.0f32; 3], 0.0f32, 0.0f32);
         for y in (qy - radius).max(0)..=(qy + radius).min(ch as isize - 1) {
             for x in (qx - radius).max(0)..=(qx + radius).min(cw as isize - 1) {
                 let r = y as usize * cw + x as usize;
@@ -121,10 +129,18 @@ pub fn continue_smooth_regions(filled: &mut RgbRaster, hole: &MaskRaster) {
                     continue;
                 }
                 let p = nearest[r] as usize;
-                count += 1;
+                let step = (0..3)
+                    .map(|k| (known_mean[p][k] - known_mean[own][k]).abs())
+                    .fold(0.0f32, f32::max);
+                let same = (1.0 - step / SMOOTH_REGION_STEP).max(0.0);
+                if same <= 0.0 {
+                    continue;
+                }
+                count += same;
                 let Some((value, gx, gy, weight)) = fit_of(p) else {
                     continue;
                 };
+                let weight = weight * same;
                 let (dx, dy) = (qx as f32 - (p % cw) as f32, qy as f32 - (p / cw) as f32);
                 let taper = SMOOTH_TAPER_CELLS / (SMOOTH_TAPER_CELLS + dx.hypot(dy));
                 for k in 0..3 {
@@ -137,7 +153,7 @@ pub fn continue_smooth_regions(filled: &mut RgbRaster, hole: &MaskRaster) {
             continue;
         }
         // The window's mean smoothness weight (a rough source counts 0) scales the move.
-        let weight = total / count.max(1) as f32;
+        let weight = total / count.max(1.0);
         for k in 0..3 {
             let target = (sum[k] / total).clamp(0.0, 1.0);
             correction[q][k] = weight * (target - fill_mean[q][k]);
@@ -159,6 +175,56 @@ pub fn continue_smooth_regions(filled: &mut RgbRaster, hole: &MaskRaster) {
             for k in 0..3 {
                 px[k] = (px[k] + dv[k]).clamp(0.0, 1.0);
             }
+        }
+    }
+}
+
+/// Makes `nearest` (per cell of a `cw × ch` grid, the index of a known cell, `u32::MAX` where
+/// none) Euclidean: raster sweeps forward and back, each cell taking a neighbour's known cell
+/// when that one is nearer to it, until nothing changes (dead reckoning, Grevera 2004). A
+/// breadth-first search alone finds a cell at the least chessboard distance, which is a tie
+/// over a whole diagonal fan: a side margin's cells then all took a cell of the sky above
+/// instead of their own row's.
+fn euclidean_nearest(nearest: &mut [u32], cw: usize, ch: usize) {
+    const MAX_SWEEPS: usize = 8;
+    let d2 = |i: usize, p: u32| -> u64 {
+        let (x, y) = ((i % cw) as i64, (i / cw) as i64);
+        let (px, py) = ((p as usize % cw) as i64, (p as usize / cw) as i64);
+        ((x - px).pow(2) + (y - py).pow(2)) as u64
+    };
+    let relax = |i: usize, nearest: &mut [u32]| -> bool {
+        let (x, y) = (i % cw, i / cw);
+        let mut best = nearest[i];
+        let mut best_d = if best == u32::MAX {
+            u64::MAX
+        } else {
+            d2(i, best)
+        };
+        for ny in y.saturating_sub(1)..(y + 2).min(ch) {
+            for nx in x.saturating_sub(1)..(x + 2).min(cw) {
+                let p = nearest[ny * cw + nx];
+                if p != u32::MAX && p != best {
+                    let d = d2(i, p);
+                    if d < best_d || (d == best_d && p < best) {
+                        (best, best_d) = (p, d);
+                    }
+                }
+            }
+        }
+        let changed = best != nearest[i];
+        nearest[i] = best;
+        changed
+    };
+    for _ in 0..MAX_SWEEPS {
+        let mut changed = false;
+        for i in 0..cw * ch {
+            changed |= relax(i, nearest);
+        }
+        for i in (0..cw * ch).rev() {
+            changed |= relax(i, nearest);
+        }
+        if !changed {
+            break;
         }
     }
 }
@@ -283,6 +349,7 @@ mod tests {
                     allowed_source: None,
                     guide: None,
                     seed: 1,
+                    outpaint: true,
                 },
                 &Progress::none(),
             )
@@ -336,6 +403,27 @@ mod tests {
         // And the continuation did act: the mean level follows the ramp's mean (flat here).
         let mean: f32 = (0..w).map(|x| image.at(x, h - 1)[0]).sum::<f32>() / w as f32;
         assert!((mean - 0.5).abs() < 0.02, "{mean}");
+    }
+
+    #[test]
+    fn a_side_margin_keeps_each_band_its_own_colour() {
+        // A sky over a lake, both flat, with a wide margin at the left already filled right
+        // (each band continued along its rows): the correction must leave it so. Each margin
+        // cell's nearest known cell is its own row's (a breadth-first search ties a whole
+        // diagonal fan and took the sky's for the lake's rows), and a window blends one band's
+        // planes, not the sky's into the lake's.
+        let (sky, lake) = ([0.55, 0.7, 0.9], [0.25, 0.35, 0.4]);
+        let truth = RgbRaster::from_fn(240, 96, |_, y| if y < 48 { sky } else { lake });
+        let hole = MaskRaster::from_fn(240, 96, |x, _| x < 120);
+        let mut filled = truth.clone();
+        continue_smooth_regions(&mut filled, &hole);
+        for y in [0, 20, 40, 56, 72, 95] {
+            for x in [0, 30, 60, 100] {
+                let (got, want) = (filled.at(x, y), truth.at(x, y));
+                let off = (0..3).map(|k| (got[k] - want[k]).abs()).fold(0.0, f32::max);
+                assert!(off < 0.02, "({x}, {y}): {got:?} against {want:?}");
+            }
+        }
     }
 
     #[test]

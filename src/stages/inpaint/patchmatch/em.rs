@@ -2,7 +2,7 @@
 //! the k-NN vote at the end of a level, and the hand-over to the finer level.
 
 use super::cost::{Field, Problem};
-use super::init::{onion_peel, upsample};
+use super::init::{onion_peel, stretch_rows, upsample};
 use super::knn::{candidate_weights, knn_candidates, vote_candidates, voted_candidates_value};
 use super::occurrence::Occurrence;
 use super::poisson::poisson_correct;
@@ -17,10 +17,12 @@ use crate::stages::inpaint::harmonic::membrane_fill;
 
 /// Runs the whole coarse-to-fine completion; returns the finest level's pixels and, with
 /// `trace`, per pixel the source centre of the best match of the target patch centred there
-/// (`NONE` where none; empty without `trace`).
+/// (`NONE` where none; empty without `trace`). With `outpaint` the coarsest level's rows that
+/// hold known pixels start from the stretched edge ([`stretch_rows`]) instead of the membrane.
 pub(super) fn complete(
     finest: Level,
     params: &PatchMatchParams,
+    outpaint: bool,
     seed: u64,
     trace: bool,
     progress: &Progress,
@@ -62,10 +64,14 @@ pub(super) fn complete(
         let key = |pass: usize| (l as u64, pass as u64);
         let mut field = match coarser.take() {
             None => {
-                // Coarsest: membrane fill of everything that is not a source (the fallback),
-                // then onion peeling of the domain; the field starts from the peeled matches.
+                // Coarsest: membrane fill of everything that is not a source (the fallback; a
+                // margin's rows beside the photo then the stretched edge), then onion peeling
+                // of the domain; the field starts from the peeled matches.
                 let unknown: Vec<bool> = level.source.iter().map(|&s| !s).collect();
                 membrane_fill(&mut level.pixels, level.w, level.h, &unknown, progress)?;
+                if outpaint {
+                    stretch_rows(&mut level.pixels, level.w, level.h, &unknown);
+                }
                 let peeled = if params.onion_peel {
                     onion_peel(&problem, &mut level, seed, l as u64, progress)?
                 } else {

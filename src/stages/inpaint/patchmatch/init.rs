@@ -1,5 +1,6 @@
-//! Starting points of a level: onion-peel initialisation of the coarsest level (Newson et al.
-//! 2017) and the upsampled field and pixels of a finer one.
+//! Starting points of a level: the stretched start of an outpainted side margin, onion-peel
+//! initialisation of the coarsest level (Newson et al. 2017) and the upsampled field and pixels
+//! of a finer one.
 
 use super::cost::{Field, Problem};
 use super::pyramid::Level;
@@ -8,6 +9,42 @@ use crate::error::Result;
 use crate::progress::Progress;
 use crate::stages::inpaint::common::KeyedRng;
 use rayon::prelude::*;
+
+/// The start of an outpainted margin beside the photo: every `unknown` pixel of a row that holds
+/// known pixels takes the value of the row's nearest known pixel (the left one on a tie); rows
+/// without any are left as they are (the membrane above and below the photo). Around a photo on
+/// a canvas this stretches the photo's side edges outwards, so a side margin starts with every
+/// band of a landscape (a ridge, a shore, a lake) on its own rows.
+pub(super) fn stretch_rows<const N: usize>(
+    pixels: &mut [[f32; N]],
+    w: usize,
+    h: usize,
+    unknown: &[bool],
+) {
+    debug_assert_eq!(pixels.len(), w * h);
+    debug_assert_eq!(unknown.len(), w * h);
+    let mut known = Vec::with_capacity(w);
+    for y in 0..h {
+        known.clear();
+        known.extend((0..w).filter(|&x| !unknown[y * w + x]));
+        if known.is_empty() {
+            continue;
+        }
+        for x in 0..w {
+            if !unknown[y * w + x] {
+                continue;
+            }
+            let k = known.partition_point(|&k| k < x);
+            let nearest = match (k.checked_sub(1).map(|j| known[j]), known.get(k)) {
+                (Some(a), Some(&b)) if b - x < x - a => b,
+                (Some(a), _) => a,
+                (None, Some(&b)) => b,
+                (None, None) => continue,
+            };
+            pixels[y * w + x] = pixels[y * w + nearest];
+        }
+    }
+}
 
 /// Onion-peel initialisation of the coarsest level (Newson et al. 2017): the domain is filled
 /// ring by ring from its border inwards. Each ring pixel looks for the source patch closest to

@@ -5,8 +5,9 @@
 //! pixel within about one patch radius of known pixels), as long as a coarser level keeps
 //! enough source patches (with many holes, the grown coarse hole mask swallows them).
 //!
-//! Coarsest level: the hole starts from the membrane fill and, in the `draft` preset, is then
-//! onion-peeled: filled ring by ring from its border inwards, each pixel copied from its best
+//! Coarsest level: the hole starts from the membrane fill (the rows of an outpainted margin
+//! beside the photo, [`InpaintRequest::outpaint`], from the photo's edge stretched outwards
+//! along them instead) and, in the `draft` preset, is then onion-peeled: filled ring by ring from its border inwards, each pixel copied from its best
 //! match over the known part of its patch. Finer levels start from the coarser
 //! nearest-neighbour field (NNF), scaled up and voted with the finer source pixels.
 //!
@@ -393,7 +394,7 @@ impl PatchMatchInpainter {
             hole: request.hole.data().to_vec(),
             source,
         };
-        let (pixels, best) = complete(finest, p, request.seed, trace, progress)?;
+        let (pixels, best) = complete(finest, p, request.outpaint, request.seed, trace, progress)?;
         let map = if trace {
             copy_map(request.hole, &best, p.patch_size)
         } else {
@@ -421,6 +422,7 @@ mod tests {
             allowed_source: None,
             guide: None,
             seed: 7,
+            outpaint: false,
         }
     }
 
@@ -618,6 +620,7 @@ mod tests {
             allowed_source: None,
             guide: Some(&guide),
             seed: 42,
+            outpaint: false,
         };
         let inpainter = PatchMatchInpainter::preset(InpaintPreset::Preview);
         let run = |threads: usize| {
@@ -793,6 +796,28 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_margins_start_stretches_the_edge_along_its_rows() {
+        use super::init::stretch_rows;
+        // Known: two pixels of the middle row (1.0 at x = 1, 3.0 at x = 3).
+        let unknown: Vec<bool> = (0..15).map(|i| i != 6 && i != 8).collect();
+        let mut pixels = vec![[-1.0f32]; 15];
+        pixels[6] = [1.0];
+        pixels[8] = [3.0];
+        stretch_rows(&mut pixels, 5, 3, &unknown);
+        // The middle row: each pixel its nearest known one, the left on the tie at x = 2; the
+        // rows above and below hold nothing known and keep their values.
+        let got =
+            |y: usize| -> Vec<f32> { pixels[y * 5..y * 5 + 5].iter().map(|p| p[0]).collect() };
+        assert_eq!(got(1), [1.0, 1.0, 1.0, 3.0, 3.0]);
+        assert_eq!(got(0), [-1.0; 5]);
+        assert_eq!(got(2), [-1.0; 5]);
+        // Nothing known: nothing changes.
+        let mut same = vec![[0.5f32]; 6];
+        stretch_rows(&mut same, 3, 2, &[true; 6]);
+        assert_eq!(same, vec![[0.5f32]; 6]);
     }
 
     #[test]
