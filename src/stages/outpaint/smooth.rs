@@ -19,8 +19,9 @@ pub(super) const SMOOTH_SPREAD: f32 = 0.5;
 /// Largest half-width of that window, cells.
 pub(super) const SMOOTH_SPREAD_MAX_CELLS: isize = 12;
 /// Colour difference (largest channel) between two source cells' known means at which a source
-/// no longer counts in the other's window: the window blends one region's planes (a sky's
-/// gradient), never a neighbouring band's (the lake below a sky, a ridge between them).
+/// no longer counts in the other's window (its weight falls linearly to nothing here): the
+/// window blends one region's planes (a sky's gradient), not a neighbouring band's (the lake
+/// below a sky, a ridge between them).
 pub const SMOOTH_REGION_STEP: f32 = 0.1;
 
 /// Continues the low frequencies of smooth regions (a sky's colour ramp, fog, calm water) into a
@@ -33,13 +34,14 @@ pub const SMOOTH_REGION_STEP: f32 = 0.1;
 /// 0). A hole cell `q` blends, weighted, the planes of the source cells of the hole cells within
 /// `SMOOTH_SPREAD` × its distance from its own source (at most `SMOOTH_SPREAD_MAX_CELLS`), each
 /// extrapolated to `q`, tapered (`SMOOTH_TAPER_CELLS`) and weighted down linearly with its
-/// known colour's difference from `q`'s own source's, to nothing at [`SMOOTH_REGION_STEP`]
-/// (a side margin's lake rows are not pulled towards the sky above them): one column following one source
-/// would carry that source's slope out, and columns with different slopes would drift apart into
-/// streaks. The cell's mean of the fill is moved onto that target by the window's mean weight;
-/// the correction is interpolated bilinearly between cell centres and added to the hole pixels,
-/// so the fill keeps its texture (its high frequencies) and known pixels are unchanged. Textured
-/// borders (foliage, rocks) get no correction.
+/// known colour's difference from `q`'s own source's, to nothing at [`SMOOTH_REGION_STEP`] (a
+/// side margin's lake rows are not pulled towards the sky above them); `q`'s own source is its
+/// Euclidean nearest known cell. One column following one source would carry that source's
+/// slope out, and columns with different slopes would drift apart into streaks. The cell's
+/// mean of the fill is moved onto that target by the window's mean weight; the correction is
+/// interpolated bilinearly between cell centres and added to the hole pixels, so the fill keeps
+/// its texture (its high frequencies) and known pixels are unchanged. Textured borders
+/// (foliage, rocks) get no correction.
 pub fn continue_smooth_regions(filled: &mut RgbRaster, hole: &MaskRaster) {
     let (w, h) = filled.size();
     if !filled.same_size(hole) || w == 0 || h == 0 {

@@ -7,9 +7,10 @@
 //!
 //! Coarsest level: the hole starts from the membrane fill (the rows of an outpainted margin
 //! beside the photo, [`InpaintRequest::outpaint`], from the photo's edge stretched outwards
-//! along them instead) and, in the `draft` preset, is then onion-peeled: filled ring by ring from its border inwards, each pixel copied from its best
-//! match over the known part of its patch. Finer levels start from the coarser
-//! nearest-neighbour field (NNF), scaled up and voted with the finer source pixels.
+//! along them instead) and, in the `draft` preset, is then onion-peeled: filled ring by ring
+//! from its border inwards, each pixel copied from its best match over the known part of its
+//! patch. Finer levels start from the coarser nearest-neighbour field (NNF), scaled up and voted
+//! with the finer source pixels.
 //!
 //! EM iteration: PatchMatch passes improve the NNF (propagation from the scan-order
 //! neighbours, random search at halving radii, one candidate drawn from the whole source), then
