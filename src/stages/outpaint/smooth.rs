@@ -82,28 +82,10 @@ pub fn continue_smooth_regions(filled: &mut RgbRaster, hole: &MaskRaster) {
     if !is_known.iter().any(|&k| k) || is_known.iter().all(|&k| k) {
         return;
     }
-    // Nearest known cell of every cell: breadth first (8-neighbours) for the reachable ones,
-    // then made Euclidean by raster sweeps (`euclidean_nearest`).
-    let mut nearest = vec![u32::MAX; cw * ch];
-    let mut queue = std::collections::VecDeque::new();
-    for (i, &k) in is_known.iter().enumerate() {
-        if k {
-            nearest[i] = i as u32;
-            queue.push_back(i);
-        }
-    }
-    while let Some(i) = queue.pop_front() {
-        let (x, y) = (i % cw, i / cw);
-        for ny in y.saturating_sub(1)..(y + 2).min(ch) {
-            for nx in x.saturating_sub(1)..(x + 2).min(cw) {
-                let j = ny * cw + nx;
-                if nearest[j] == u32::MAX {
-                    nearest[j] = nearest[i];
-                    queue.push_back(j);
-                }
-            }
-        }
-    }
+    // Euclidean nearest known cell of every cell.
+    let mut nearest: Vec<u32> = (0..cw * ch)
+        .map(|i| if is_known[i] { i as u32 } else { u32::MAX })
+        .collect();
     euclidean_nearest(&mut nearest, cw, ch);
     // Plane fits, memoised per source cell: (value, gradient x, gradient y, weight).
     let mut fits: Vec<Option<Option<PlaneFit>>> = vec![None; cw * ch];
@@ -181,12 +163,13 @@ pub fn continue_smooth_regions(filled: &mut RgbRaster, hole: &MaskRaster) {
     }
 }
 
-/// Makes `nearest` (per cell of a `cw × ch` grid, the index of a known cell, `u32::MAX` where
-/// none) Euclidean: raster sweeps forward and back, each cell taking a neighbour's known cell
-/// when that one is nearer to it, until nothing changes (dead reckoning, Grevera 2004). A
-/// breadth-first search alone finds a cell at the least chessboard distance, which is a tie
-/// over a whole diagonal fan: a side margin's cells then all took a cell of the sky above
-/// instead of their own row's.
+/// Fills `nearest` (per cell of a `cw × ch` grid, the index of a known cell, `u32::MAX` where
+/// none yet) with each cell's Euclidean nearest known cell: raster sweeps forward and back, each
+/// cell taking a neighbour's known cell when that one is nearer to it, until nothing changes
+/// (dead reckoning, Grevera 2004; one pair of sweeps reaches every cell of the grid). Not a
+/// breadth-first search: that finds the least *chessboard* distance, a tie over a whole
+/// diagonal fan, and a side margin's cells then all took a cell of the sky above instead of
+/// their own row's.
 fn euclidean_nearest(nearest: &mut [u32], cw: usize, ch: usize) {
     const MAX_SWEEPS: usize = 8;
     let d2 = |i: usize, p: u32| -> u64 {
