@@ -149,8 +149,11 @@ const OCCURRENCE_PHASES: usize = 4;
 /// (plus [`OCCURRENCE_FLOOR`]): the penalty only moves a match onto a source that matches
 /// nearly as well (at most `1 + OCCURRENCE_RELATIVE` times the cost), never from a
 /// near-perfect match (a flat grey margin continuing a flat grey wall) onto a clearly worse one
-/// (darker, glittering metal; `wild/grey.jpg`'s fly-out).
-const OCCURRENCE_RELATIVE: f32 = 3.0;
+/// (darker, glittering metal; `wild/grey.jpg`'s fly-out). At 3 (up to four times the cost)
+/// the outer part of an orbit's wide side margin drifted from the lake and ridge it continues
+/// to the flat dark cloud above them: a few targets moved onto the cloud, the vote made their
+/// pixels cloud-like, and the cloud then matched them best outright, level after level.
+const OCCURRENCE_RELATIVE: f32 = 1.0;
 /// The occurrence penalty a candidate always pays (when due), per patch pixel, whatever its
 /// cost: a little more than the cost of a 1 % grain in every colour channel.
 const OCCURRENCE_FLOOR: f32 = 3e-3;

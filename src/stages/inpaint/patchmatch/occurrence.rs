@@ -129,3 +129,45 @@ impl Occurrence {
         penalty.min(self.floor)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One 3×3-pixel cell used `uses` times over, with `per_use` 1 and a floor of 0.01.
+    fn crowded(uses: f32) -> Occurrence {
+        Occurrence {
+            per_use: 1.0,
+            floor: 0.01,
+            side: 3,
+            cw: 1,
+            fair: 1.0,
+            counts: vec![uses * 9.0],
+            memory: vec![0.0],
+        }
+    }
+
+    #[test]
+    fn the_charge_is_the_excess_capped_by_the_matching_cost() {
+        let occ = crowded(5.0);
+        let delta = [0.0f32];
+        // Used 5 times against a fair share of 1: a penalty of 4.
+        let penalty = occ.penalty(0, 3, &delta);
+        assert!((penalty - 4.0).abs() < 1e-6, "{penalty}");
+        // A cheap match pays at most its cost (OCCURRENCE_RELATIVE = 1) plus the floor ...
+        assert!((occ.charge(penalty, 0.5) - (0.5 * OCCURRENCE_RELATIVE + 0.01)).abs() < 1e-6);
+        // ... so an uncrowded rival replaces it only below twice its cost: a rival of 0.9
+        // does, a rival of 1.1 does not.
+        let crowded_total = 0.5 + occ.charge(penalty, 0.5);
+        assert!(
+            0.9 < crowded_total && crowded_total < 1.1,
+            "{crowded_total}"
+        );
+        // A costly match pays the whole penalty.
+        assert_eq!(occ.charge(penalty, 100.0), penalty);
+        // Uncrowded: nothing to pay; the floor bounds the early exit.
+        let fair = crowded(1.0);
+        assert_eq!(fair.penalty(0, 3, &delta), 0.0);
+        assert_eq!(occ.least_charge(penalty), 0.01);
+    }
+}
