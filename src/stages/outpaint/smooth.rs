@@ -23,6 +23,16 @@ pub(super) const SMOOTH_SPREAD_MAX_CELLS: isize = 12;
 /// window blends one region's planes (a sky's gradient), not a neighbouring band's (the lake
 /// below a sky, a ridge between them).
 pub const SMOOTH_REGION_STEP: f32 = 0.1;
+/// Cells further into the photo, along the line from a hole cell through its nearest known
+/// cell, whose colours (with that cell's) decide by their median which region the hole cell
+/// continues: a thin thing touching the edge (a grass tip, a wire) is not a band along the
+/// rows it touches.
+pub(super) const SMOOTH_RUN_CELLS: usize = 4;
+/// Scale of the reweighting of [`continue_smooth_regions`]' plane fits (colour units): a cell
+/// off the plane by this counts half, by four times this a seventeenth.
+pub(super) const SMOOTH_ROBUST_SCALE: f32 = 0.01;
+/// Reweighted rounds after the plain least-squares plane fit.
+pub(super) const SMOOTH_ROBUST_ROUNDS: usize = 3;
 
 /// Continues the low frequencies of smooth regions (a sky's colour ramp, fog, calm water) into a
 /// filled hole: exemplar synthesis copies patches, and a ramp outpainted from copies turns into a
@@ -31,12 +41,17 @@ pub const SMOOTH_REGION_STEP: f32 = 0.1;
 /// On cells of [`SMOOTH_CELL_PX`]² pixels: every hole cell's nearest known cell `p` gets a plane
 /// fitted to the known cells within `SMOOTH_FIT_CELLS` of it (per channel, least squares), with
 /// a smoothness weight (RMS residual `r` below [`SMOOTH_RESIDUAL`]: `1 − r/SMOOTH_RESIDUAL`, else
-/// 0). A hole cell `q` blends, weighted, the planes of the source cells of the hole cells within
-/// `SMOOTH_SPREAD` × its distance from its own source (at most `SMOOTH_SPREAD_MAX_CELLS`), each
-/// extrapolated to `q`, tapered (`SMOOTH_TAPER_CELLS`) and weighted down linearly with its
-/// known colour's difference from `q`'s own source's, to nothing at [`SMOOTH_REGION_STEP`] (a
-/// side margin's lake rows are not pulled towards the sky above them); `q`'s own source is its
-/// Euclidean nearest known cell. One column following one source would carry that source's
+/// 0); the plane itself is reweighted (`SMOOTH_ROBUST_ROUNDS` rounds of Cauchy weights
+/// `1/(1 + (e/SMOOTH_ROBUST_SCALE)²)`, `e` a cell's largest channel residual), so that a thin
+/// thing crossing the neighbourhood does not tilt it. A hole cell `q` blends, weighted, the
+/// planes of the source cells of the hole cells within `SMOOTH_SPREAD` × its distance from its
+/// own source (at most `SMOOTH_SPREAD_MAX_CELLS`), each extrapolated to `q`, tapered
+/// (`SMOOTH_TAPER_CELLS`) and weighted down linearly with its known colour's difference from
+/// the colour of the region `q` continues, to nothing at [`SMOOTH_REGION_STEP`] (a side
+/// margin's lake rows are not pulled towards the sky above them). `q`'s own source is its
+/// Euclidean nearest known cell; the region's colour is the median along the line from `q`
+/// through it, `SMOOTH_RUN_CELLS` cells into the photo (a grass tip that touches the edge is not
+/// a band across the margin). One column following one source would carry that source's
 /// slope out, and columns with different slopes would drift apart into streaks. The cell's
 /// mean of the fill is moved onto that target by the window's mean weight; the correction is
 /// interpolated bilinearly between cell centres and added to the hole pixels, so the fill keeps
@@ -104,6 +119,7 @@ pub fn continue_smooth_regions(filled: &mut RgbRaster, hole: &MaskRaster) {
         let (qx, qy) = ((q % cw) as isize, (q / cw) as isize);
         let own = nearest[q] as usize;
         let distance = ((own % cw) as f32 - qx as f32).hypot((own / cw) as f32 - qy as f32);
+        let reference = run_colour(&known_mean, &is_known, (cw, ch), (qx, qy), own);
         let radius = ((distance * SMOOTH_SPREAD).round() as isize).min(SMOOTH_SPREAD_MAX_CELLS);
         let (mut sum, mut total, mut count) = ([0.0f32; 3], 0.0f32, 0.0f32);
         for y in (qy - radius).max(0)..=(qy + radius).min(ch as isize - 1) {
@@ -114,7 +130,7 @@ pub fn continue_smooth_regions(filled: &mut RgbRaster, hole: &MaskRaster) {
                 }
                 let p = nearest[r] as usize;
                 let step = (0..3)
-                    .map(|k| (known_mean[p][k] - known_mean[own][k]).abs())
+                    .map(|k| (known_mean[p][k] - reference[k]).abs())
                     .fold(0.0f32, f32::max);
                 let same = (1.0 - step / SMOOTH_REGION_STEP).max(0.0);
                 if same <= 0.0 {
@@ -161,6 +177,54 @@ pub fn continue_smooth_regions(filled: &mut RgbRaster, hole: &MaskRaster) {
             }
         }
     }
+}
+
+/// The colour of the region a hole cell at `q` continues: the per-channel median of the known
+/// cells on the line from `q` through its nearest known cell `own`, from `own` to
+/// [`SMOOTH_RUN_CELLS`] cells beyond it (into the photo). A band that runs along the line
+/// (a lake's rows beside a side margin) gives its own colour; a thin thing that only touches
+/// the edge there (a grass tip against the sky) gives the colour around it.
+fn run_colour(
+    mean: &[[f32; 3]],
+    known: &[bool],
+    (cw, ch): (usize, usize),
+    (qx, qy): (isize, isize),
+    own: usize,
+) -> [f32; 3] {
+    let (ox, oy) = ((own % cw) as f32, (own / cw) as f32);
+    let (dx, dy) = (ox - qx as f32, oy - qy as f32);
+    let length = dx.hypot(dy);
+    if length <= 0.0 {
+        return mean[own];
+    }
+    let (ux, uy) = (dx / length, dy / length);
+    let mut run: Vec<[f32; 3]> = Vec::with_capacity(SMOOTH_RUN_CELLS + 1);
+    for t in 0..=SMOOTH_RUN_CELLS {
+        let (x, y) = (
+            (ox + ux * t as f32).round() as isize,
+            (oy + uy * t as f32).round() as isize,
+        );
+        if x < 0 || y < 0 || x >= cw as isize || y >= ch as isize {
+            break;
+        }
+        let i = y as usize * cw + x as usize;
+        if known[i] {
+            run.push(mean[i]);
+        }
+    }
+    if run.is_empty() {
+        return mean[own];
+    }
+    [0, 1, 2].map(|k| {
+        let mut v: Vec<f32> = run.iter().map(|c| c[k]).collect();
+        v.sort_by(f32::total_cmp);
+        let n = v.len();
+        if n % 2 == 1 {
+            v[n / 2]
+        } else {
+            0.5 * (v[n / 2 - 1] + v[n / 2])
+        }
+    })
 }
 
 /// Fills `nearest` (per cell of a `cw × ch` grid, the index of a known cell, `u32::MAX` where
@@ -242,39 +306,44 @@ fn plane_fit(
     if samples.len() < 6 {
         return None;
     }
-    // Normal equations of v = a + b·x + c·y.
-    let n = samples.len() as f64;
-    let (mut sx, mut sy, mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for &(x, y, _) in &samples {
-        sx += x;
-        sy += y;
-        sxx += x * x;
-        syy += y * y;
-        sxy += x * y;
-    }
-    let m = glam::DMat3::from_cols_array(&[n, sx, sy, sx, sxx, sxy, sy, sxy, syy]);
-    if m.determinant().abs() < 1e-9 {
-        return None;
-    }
-    let inv = m.inverse();
+    // Least squares, then reweighted (Cauchy, scale `SMOOTH_ROBUST_SCALE`): the plane of the
+    // neighbourhood's main surface, not pulled by a thin thing crossing it (a grass tip in a
+    // sky). The smoothness weight is the plain fit's: a neighbourhood with such a thing in it
+    // is less smooth, whatever its main surface.
+    let mut weights = vec![1.0f64; samples.len()];
     let (mut value, mut gx, mut gy) = ([0.0f32; 3], [0.0f32; 3], [0.0f32; 3]);
-    let mut squared = 0.0f64;
-    for k in 0..3 {
-        let (mut sv, mut sxv, mut syv) = (0.0, 0.0, 0.0);
-        for &(x, y, v) in &samples {
-            let v = v[k] as f64;
-            sv += v;
-            sxv += x * v;
-            syv += y * v;
+    let mut rms = 0.0f32;
+    for round in 0..=SMOOTH_ROBUST_ROUNDS {
+        let (mut m, mut rhs) = (glam::DMat3::ZERO, [glam::DVec3::ZERO; 3]);
+        for (&(x, y, v), &wt) in samples.iter().zip(&weights) {
+            let a = glam::DVec3::new(1.0, x, y);
+            m += glam::DMat3::from_cols(a * a.x, a * a.y, a * a.z) * wt;
+            for k in 0..3 {
+                rhs[k] += a * (wt * v[k] as f64);
+            }
         }
-        let coef = inv * glam::DVec3::new(sv, sxv, syv);
-        for &(x, y, v) in &samples {
-            let e = v[k] as f64 - (coef.x + coef.y * x + coef.z * y);
-            squared += e * e;
+        if m.determinant().abs() < 1e-9 {
+            return None;
         }
-        (value[k], gx[k], gy[k]) = (coef.x as f32, coef.y as f32, coef.z as f32);
+        let inv = m.inverse();
+        let coef = rhs.map(|r| inv * r);
+        let (mut squared, n) = (0.0f64, samples.len() as f64);
+        for ((x, y, v), wt) in samples.iter().zip(weights.iter_mut()) {
+            let mut worst = 0.0f64;
+            for (k, c) in coef.iter().enumerate() {
+                let e = v[k] as f64 - (c.x + c.y * x + c.z * y);
+                squared += e * e;
+                worst = worst.max(e.abs());
+            }
+            *wt = 1.0 / (1.0 + (worst / SMOOTH_ROBUST_SCALE as f64).powi(2));
+        }
+        if round == 0 {
+            rms = (squared / (3.0 * n)).sqrt() as f32;
+        }
+        for k in 0..3 {
+            (value[k], gx[k], gy[k]) = (coef[k].x as f32, coef[k].y as f32, coef[k].z as f32);
+        }
     }
-    let rms = (squared / (3.0 * n)).sqrt() as f32;
     let weight = (1.0 - rms / SMOOTH_RESIDUAL).clamp(0.0, 1.0);
     (weight > 0.0).then_some((value, gx, gy, weight))
 }
@@ -455,5 +524,97 @@ mod tests {
                 .iter()
                 .all(|c| c.iter().all(|v| (0.0..=1.0).contains(v)))
         );
+    }
+
+    #[test]
+    fn a_thin_thing_touching_the_edge_is_not_continued_as_a_band() {
+        // A sky ramp with a blurred stem crossing the photo's left edge at a slant (a grass
+        // tip against the sky): the margin at the left was filled with sky (what the
+        // exemplar fill gives there). The rows the stem touches must stay sky: the stem is
+        // no band along them (a few cells in from the edge the row is sky again), and
+        // continuing its edge cells' plane drew a grey band across the whole margin.
+        let sky = |y: usize| [0.53, 0.6 + 0.0005 * y as f32, 0.76];
+        let stem = [0.53, 0.52, 0.57];
+        let (w, h, margin) = (400, 160, 200);
+        let stem_at = |x: usize, y: usize| {
+            // A slanted line, x = margin − 4 + (y − 60)/2 for y in 60..100, soft over ±6 px.
+            if !(60..100).contains(&y) || x < margin {
+                return 0.0;
+            }
+            let centre = margin as f32 + (y as f32 - 60.0) * 0.5 - 4.0;
+            (1.0 - ((x as f32 - centre).abs() / 6.0)).clamp(0.0, 1.0)
+        };
+        let truth = RgbRaster::from_fn(w, h, |x, y| {
+            let (s, t) = (sky(y), stem_at(x, y));
+            [0, 1, 2].map(|k| (1.0 - t) * s[k] + t * stem[k])
+        });
+        let hole = MaskRaster::from_fn(w, h, |x, _| x < margin);
+        let mut filled = RgbRaster::from_fn(
+            w,
+            h,
+            |x, y| {
+                if x < margin { sky(y) } else { truth.at(x, y) }
+            },
+        );
+        continue_smooth_regions(&mut filled, &hole);
+        let mut worst = 0.0f32;
+        for y in 56..104 {
+            for x in 0..margin - 16 {
+                let (got, want) = (filled.at(x, y), sky(y));
+                let off = (0..3).map(|k| (got[k] - want[k]).abs()).fold(0.0, f32::max);
+                worst = worst.max(off);
+            }
+        }
+        assert!(
+            worst < 0.02,
+            "the margin beside the stem is off the sky by {worst}"
+        );
+    }
+
+    #[test]
+    fn the_plane_fit_is_the_main_surfaces_and_its_weight_the_plain_fits() {
+        // A 9 × 9 grid of cells on the plane v = 0.5 + 0.01·x − 0.02·y (every channel), five
+        // cells on a diagonal line 0.15 darker. The reweighted plane is the surface's within
+        // 10⁻³ (a plain least-squares fit is 0.012 off at the centre).
+        let (cw, ch) = (9usize, 9usize);
+        let plane = |x: usize, y: usize| 0.5 + 0.01 * x as f32 - 0.02 * y as f32;
+        let on_line = |x: usize, y: usize| x == y + 2 && (2..7).contains(&x);
+        let mean: Vec<[f32; 3]> = (0..cw * ch)
+            .map(|i| {
+                let (x, y) = (i % cw, i / cw);
+                let v = plane(x, y) - if on_line(x, y) { 0.15 } else { 0.0 };
+                [v; 3]
+            })
+            .collect();
+        let known = vec![true; cw * ch];
+        let p = 4 * cw + 4;
+        let (value, gx, gy, weight) = plane_fit(&mean, &known, cw, ch, p).unwrap();
+        for k in 0..3 {
+            assert!((value[k] - plane(4, 4)).abs() < 1e-3, "{value:?}");
+            assert!((gx[k] - 0.01).abs() < 1e-3 && (gy[k] + 0.02).abs() < 1e-3);
+        }
+        // The weight is the plain fit's: the line's cells (5 of 49 in the 7 × 7 neighbourhood,
+        // one a quarter of the way off) make the neighbourhood rough.
+        assert!(weight < 0.5, "{weight}");
+        // Without the line: the exact plane, weight 1.
+        let clean: Vec<[f32; 3]> = (0..cw * ch).map(|i| [plane(i % cw, i / cw); 3]).collect();
+        let (value, _, _, weight) = plane_fit(&clean, &known, cw, ch, p).unwrap();
+        assert!((value[0] - plane(4, 4)).abs() < 1e-5 && (weight - 1.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn the_region_colour_is_the_median_along_the_line_into_the_photo() {
+        // A row of cells: hole at x < 3, known from x = 3: one odd cell at the edge (x = 3),
+        // then the band's colour. From a hole cell on the row the line runs along it: the
+        // median of x = 3..=7 is the band's. A cell whose band runs on gives its own colour.
+        let (cw, ch) = (10usize, 1usize);
+        let (odd, band) = ([0.9, 0.1, 0.1], [0.2, 0.4, 0.6]);
+        let mean: Vec<[f32; 3]> = (0..cw).map(|x| if x == 3 { odd } else { band }).collect();
+        let known: Vec<bool> = (0..cw).map(|x| x >= 3).collect();
+        assert_eq!(run_colour(&mean, &known, (cw, ch), (0, 0), 3), band);
+        let striped: Vec<[f32; 3]> = (0..cw).map(|x| if x < 6 { odd } else { band }).collect();
+        assert_eq!(run_colour(&striped, &known, (cw, ch), (1, 0), 3), odd);
+        // At the grid's edge the run is shorter; a hole cell on its own source gives that.
+        assert_eq!(run_colour(&mean, &known, (cw, ch), (3, 0), 3), odd);
     }
 }
