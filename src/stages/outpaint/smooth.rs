@@ -179,8 +179,8 @@ pub fn continue_smooth_regions(filled: &mut RgbRaster, hole: &MaskRaster) {
     }
 }
 
-/// The colour of the region a hole cell at `q` continues: the per-channel median of the known
-/// cells on the line from `q` through its nearest known cell `own`, from `own` to
+/// The colour of the region a hole cell at `q` continues: the per-channel median
+/// ([`crate::raster::quantile`]) of the known cells on the line from `q` through its nearest known cell `own`, from `own` to
 /// [`SMOOTH_RUN_CELLS`] cells beyond it (into the photo). A band that runs along the line
 /// (a lake's rows beside a side margin) gives its own colour; a thin thing that only touches
 /// the edge there (a grass tip against the sky) gives the colour around it.
@@ -212,18 +212,9 @@ fn run_colour(
             run.push(mean[i]);
         }
     }
-    if run.is_empty() {
-        return mean[own];
-    }
     [0, 1, 2].map(|k| {
-        let mut v: Vec<f32> = run.iter().map(|c| c[k]).collect();
-        v.sort_by(f32::total_cmp);
-        let n = v.len();
-        if n % 2 == 1 {
-            v[n / 2]
-        } else {
-            0.5 * (v[n / 2 - 1] + v[n / 2])
-        }
+        let channel: Vec<f32> = run.iter().map(|c| c[k]).collect();
+        crate::raster::quantile(&channel, 0.5).unwrap_or(mean[own][k])
     })
 }
 
@@ -593,8 +584,8 @@ mod tests {
             assert!((value[k] - plane(4, 4)).abs() < 1e-3, "{value:?}");
             assert!((gx[k] - 0.01).abs() < 1e-3 && (gy[k] + 0.02).abs() < 1e-3);
         }
-        // The weight is the plain fit's: the line's cells (5 of 49 in the 7 × 7 neighbourhood,
-        // one a quarter of the way off) make the neighbourhood rough.
+        // The weight is the plain fit's: the line's cells (5 of the 49 in the 7 × 7
+        // neighbourhood) make the neighbourhood rough.
         assert!(weight < 0.5, "{weight}");
         // Without the line: the exact plane, weight 1.
         let clean: Vec<[f32; 3]> = (0..cw * ch).map(|i| [plane(i % cw, i / cw); 3]).collect();
@@ -614,7 +605,7 @@ mod tests {
         assert_eq!(run_colour(&mean, &known, (cw, ch), (0, 0), 3), band);
         let striped: Vec<[f32; 3]> = (0..cw).map(|x| if x < 6 { odd } else { band }).collect();
         assert_eq!(run_colour(&striped, &known, (cw, ch), (1, 0), 3), odd);
-        // At the grid's edge the run is shorter; a hole cell on its own source gives that.
+        // A hole cell at its own source (no line to follow) gives that source's colour.
         assert_eq!(run_colour(&mean, &known, (cw, ch), (3, 0), 3), odd);
     }
 }
